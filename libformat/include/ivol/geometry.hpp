@@ -1,0 +1,56 @@
+// Volume sizes, boxes and the octree's level arithmetic (spec §6.2, §8.1).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "ivol/encoding.hpp"
+
+namespace ivol {
+
+using Dims = std::array<std::uint32_t, 3>;  // voxels along x, y, z
+
+enum class Axis { X = 0, Y = 1, Z = 2 };
+
+// A half-open box of voxels [lo, hi) in the coordinates of one level of detail.
+struct Box {
+  std::array<std::uint32_t, 3> lo{0, 0, 0};
+  std::array<std::uint32_t, 3> hi{0, 0, 0};
+  std::uint64_t voxel_count() const;
+  bool empty() const;
+  std::string to_string() const;
+};
+
+// Smallest D with 2^D >= the largest dimension.
+unsigned depth_for(const Dims& dims);
+std::uint64_t voxel_count(const Dims& dims);
+// Dimensions of level of detail `lod` (ceil(size / 2^lod) per axis).
+Dims lod_dims(const Dims& dims, unsigned lod);
+// The box covering the whole volume at level of detail `lod`.
+Box full_box(const Dims& dims, unsigned lod = 0);
+// One slice, perpendicular to `axis`, at full resolution.
+Box slice_box(const Dims& dims, Axis axis, std::uint32_t index);
+
+// Everything needed to decode the arrays: what the index's fixed part and level
+// table say (§6.1, §6.2), with the derived ranges.
+struct VolumeLayout {
+  Dims dims{1, 1, 1};
+  unsigned depth = 0;
+  ValueEncoding encoding = ValueEncoding::Binary16;
+  double value_scale = 1.0;
+  double value_offset = 0.0;
+  std::vector<std::uint64_t> inner_count;  // depth + 1 entries
+
+  std::uint64_t total_inner() const;
+  std::uint64_t total_values() const { return 1 + 8 * total_inner(); }
+  std::uint64_t first_inner(unsigned level) const;
+  std::uint64_t first_value(unsigned level) const;
+  std::uint64_t level_values(unsigned level) const;
+  // Non-padding voxels covered by node (i, j, k) of `level` (§8.1).
+  std::uint64_t weight(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k) const;
+  double physical(double decoded) const { return value_offset + value_scale * decoded; }
+};
+
+}  // namespace ivol

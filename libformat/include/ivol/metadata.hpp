@@ -1,0 +1,35 @@
+// The metadata block (spec §11): what the values mean, where the voxels are,
+// and where the data came from.
+#pragma once
+
+#include <array>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+namespace ivol {
+
+struct Metadata {
+  std::array<double, 3> voxel_size{1.0, 1.0, 1.0};
+  std::string unit = "mm";
+  std::array<double, 3> origin{0.0, 0.0, 0.0};  // centre of voxel (0, 0, 0)
+  std::string quantity = "grey_value";           // e.g. "linear_attenuation"
+  std::string value_unit;                        // e.g. "1/mm"; empty for grey values
+  nlohmann::json structure = nlohmann::json::object();
+  nlohmann::json provenance = nlohmann::json::object();
+  nlohmann::json user = nlohmann::json::object();
+  nlohmann::json other = nlohmann::json::object();  // keys this version does not know, kept
+
+  nlohmann::json to_json() const;
+  // Throws Error(Malformed) naming the offending key.
+  static Metadata from_json(const nlohmann::json& json);
+  // Parses the metadata block's bytes (UTF-8 JSON, no BOM, no duplicate keys).
+  static Metadata parse(const std::string& text);
+};
+
+// The provenance entries ivol writes by default: software name and version,
+// creation time (RFC 3339, UTC).
+nlohmann::json default_provenance();
+const char* library_version();
+
+}  // namespace ivol

@@ -1,0 +1,101 @@
+// Reading .ivol files: the whole volume, one voxel, a box, a slice, a level of
+// detail or a trilinear sample, decompressing only the blocks they touch.
+//
+// A Reader is not thread-safe; open one Reader per thread (they share nothing
+// but the file). Every block read is checked against its CRC-32C; every node
+// visited is checked against the rules of spec §8. Errors are ivol::Error.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "ivol/geometry.hpp"
+#include "ivol/metadata.hpp"
+
+namespace ivol {
+
+struct ReaderOptions {
+  std::uint64_t cache_bytes = 256ull << 20;  // decoded blocks kept in memory
+};
+
+// One entry of the block table (spec §6.3).
+struct BlockInfo {
+  std::uint64_t file_offset = 0;
+  std::uint64_t first_element = 0;
+  std::uint32_t element_count = 0;
+  std::uint32_t stored_size = 0;
+  std::uint32_t crc = 0;
+  std::uint8_t stream = 0;
+  std::uint8_t codec = 0;
+  std::uint8_t flags = 0;
+  std::uint8_t level = 0;
+};
+
+const char* stream_name(std::uint8_t stream);  // "metadata", "nodes", "values" or "stream N"
+
+// What the header, footer and index say.
+struct FileInfo {
+  std::uint16_t version_major = 0;
+  std::uint16_t version_minor = 0;
+  std::uint32_t header_size = 0;
+  std::uint64_t required_features = 0;
+  std::uint64_t optional_features = 0;
+  std::uint64_t file_size = 0;
+  std::uint64_t index_offset = 0;
+  std::uint64_t index_size = 0;
+  VolumeLayout layout;
+  std::vector<BlockInfo> blocks;
+};
+
+struct IoStats {
+  std::uint64_t bytes_read = 0;       // bytes read from the file, all parts
+  std::uint64_t blocks_decoded = 0;   // blocks read, checked and decompressed
+  std::uint64_t cache_hits = 0;
+};
+
+struct CheckReport;
+
+class Reader {
+ public:
+  // Reads and checks the header, footer, index and metadata.
+  explicit Reader(const std::string& path, const ReaderOptions& options = {});
+  ~Reader();
+  Reader(Reader&&) noexcept;
+  Reader& operator=(Reader&&) noexcept;
+
+  const std::string& path() const;
+  const FileInfo& info() const;
+  const VolumeLayout& layout() const;
+  const Metadata& metadata() const;
+
+  std::uint32_t voxel_bits(std::uint32_t x, std::uint32_t y, std::uint32_t z, unsigned lod = 0);
+  double voxel_value(std::uint32_t x, std::uint32_t y, std::uint32_t z, unsigned lod = 0);
+
+  // Physical values of `box` (in the coordinates of level of detail `lod`),
+  // [z][y][x] with x fastest.
+  std::vector<float> read_box(const Box& box, unsigned lod = 0);
+  // Stored bits of `box`, encoding_width() bytes per voxel, little-endian.
+  std::vector<std::uint8_t> read_box_bits(const Box& box, unsigned lod = 0);
+  std::vector<float> read_slice(Axis axis, std::uint32_t index);
+  // The whole volume at 1/2^lod resolution (spec §12.3).
+  std::vector<float> read_lod(unsigned lod);
+  // Trilinear interpolation between voxel centres at a world position (spec
+  // §12.1); positions outside the volume take the nearest border voxel.
+  double sample(double world_x, double world_y, double world_z);
+
+  // Reads, checks and decodes one block of the block table.
+  std::vector<std::uint8_t> read_block(std::size_t block_index);
+
+  const IoStats& io_stats() const;
+  void reset_io_stats();
+
+ struct Impl;  // internal
+
+ private:
+  friend CheckReport check_file(const std::string& path);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace ivol

@@ -1,0 +1,294 @@
+#include "file_index.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "ivol/crc32c.hpp"
+#include "ivol/error.hpp"
+#include "layout.hpp"
+
+namespace ivol {
+
+const char* stream_name(std::uint8_t stream) {
+  switch (stream) {
+    case 1: return "metadata";
+    case 2: return "nodes";
+    case 3: return "values";
+    default: return "unknown stream";
+  }
+}
+
+namespace detail {
+namespace {
+
+using layout::load;
+
+std::string hex32(std::uint32_t v) {
+  char text[16];
+  std::snprintf(text, sizeof text, "0x%08X", v);
+  return text;
+}
+
+class StructureReader {
+ public:
+  explicit StructureReader(RandomAccessFile& file) : file_(file) {}
+
+  FileInfo run() {
+    info_.file_size = file_.size();
+    read_header();
+    read_footer();
+    read_index();
+    return info_;
+  }
+
+ private:
+  [[noreturn]] void fail(ErrorClass c, const std::string& part, const std::string& what) const {
+    throw Error(c, file_.path() + ": " + part + ": " + what);
+  }
+
+  void read_header() {
+    const std::uint64_t size = file_.size();
+    const std::size_t prefix = static_cast<std::size_t>(std::min<std::uint64_t>(size, layout::kMaxHeaderSize));
+    header_ = file_.read(0, prefix);
+    const std::size_t sig_bytes = std::min<std::size_t>(prefix, 8);
+    if (std::memcmp(header_.data(), layout::kSignature.data(), sig_bytes) != 0)
+      fail(ErrorClass::NotIvol, "header", "the file does not start with the .ivol signature 89 49 56 4F 4C 0D 0A 0A");
+    if (size < 8) fail(ErrorClass::Truncated, "header", "the file is only " + std::to_string(size) + " bytes long");
+    if (size < 12) fail(ErrorClass::Truncated, "header", "the file ends inside the version field");
+    info_.version_major = load<std::uint16_t>(&header_[layout::kHeaderVersionMajor]);
+    info_.version_minor = load<std::uint16_t>(&header_[layout::kHeaderVersionMinor]);
+    if (info_.version_major != layout::kVersionMajor)
+      fail(ErrorClass::UnsupportedVersion, "header",
+           "format version " + std::to_string(info_.version_major) + "." + std::to_string(info_.version_minor) +
+               " is not supported (this reader reads major version 1)");
+    if (size < 16) fail(ErrorClass::Truncated, "header", "the file ends inside the header");
+    info_.header_size = load<std::uint32_t>(&header_[layout::kHeaderSizeField]);
+    if (info_.header_size < layout::kHeaderSize || info_.header_size > layout::kMaxHeaderSize)
+      fail(ErrorClass::Malformed, "header", "header_size " + std::to_string(info_.header_size) + " is outside 40 .. 4096");
+    if (size < std::uint64_t{info_.header_size} + layout::kFooterSize)
+      fail(ErrorClass::Truncated, "header", "the file (" + std::to_string(size) +
+                                               " bytes) is shorter than its header and a footer");
+    const std::uint32_t stored = load<std::uint32_t>(&header_[info_.header_size - 4]);
+    const std::uint32_t actual = crc32c(header_.data(), info_.header_size - 4);
+    if (stored != actual)
+      fail(ErrorClass::Checksum, "header", "CRC-32C is " + hex32(actual) + " but header_crc says " + hex32(stored));
+    if (load<std::uint32_t>(&header_[layout::kHeaderReserved]) != 0)
+      fail(ErrorClass::Malformed, "header", "reserved bytes 32..35 are not zero");
+    info_.required_features = load<std::uint64_t>(&header_[layout::kHeaderRequiredFeatures]);
+    info_.optional_features = load<std::uint64_t>(&header_[layout::kHeaderOptionalFeatures]);
+    if (info_.required_features != 0) {
+      std::string bits;
+      for (int b = 0; b < 64; ++b)
+        if ((info_.required_features >> b) & 1u) bits += (bits.empty() ? "" : ", ") + std::to_string(b);
+      fail(ErrorClass::UnsupportedFeature, "header", "required feature bit(s) " + bits + " are not known to this reader");
+    }
+  }
+
+  void read_footer() {
+    const std::uint64_t size = file_.size();
+    const auto footer = file_.read(size - layout::kFooterSize, layout::kFooterSize);
+    if (std::memcmp(&footer[layout::kFooterEndSignature], layout::kEndSignature.data(), 8) != 0)
+      fail(ErrorClass::Truncated, "footer", "the file does not end with IVOL_END (truncated, extended or damaged at its end)");
+    const std::uint32_t stored = load<std::uint32_t>(&footer[layout::kFooterCrc]);
+    const std::uint32_t actual = crc32c(footer.data(), layout::kFooterCrc);
+    if (stored != actual)
+      fail(ErrorClass::Checksum, "footer", "CRC-32C is " + hex32(actual) + " but footer_crc says " + hex32(stored));
+    info_.index_offset = load<std::uint64_t>(&footer[layout::kFooterIndexOffset]);
+    info_.index_size = load<std::uint64_t>(&footer[layout::kFooterIndexSize]);
+    index_crc_ = load<std::uint32_t>(&footer[layout::kFooterIndexCrc]);
+    const std::uint64_t room = size - layout::kFooterSize;
+    if (info_.index_offset < info_.header_size || info_.index_offset > room ||
+        info_.index_size != room - info_.index_offset)
+      fail(ErrorClass::Malformed, "footer", "index at offset " + std::to_string(info_.index_offset) + " with size " +
+                                                std::to_string(info_.index_size) + " does not end where the footer begins (" +
+                                                std::to_string(room) + ")");
+  }
+
+  void read_index() {
+    if (info_.index_size < layout::kIndexFixedSize)
+      fail(ErrorClass::Malformed, "index", "index_size " + std::to_string(info_.index_size) + " is smaller than 48");
+    const auto index = file_.read(info_.index_offset, static_cast<std::size_t>(info_.index_size));
+    const std::uint32_t actual = crc32c(index.data(), index.size());
+    if (actual != index_crc_)
+      fail(ErrorClass::Checksum, "index", "CRC-32C is " + hex32(actual) + " but the footer's index_crc says " + hex32(index_crc_));
+    const unsigned char* p = index.data();
+    if (std::memcmp(p, layout::kIndexSignature.data(), 4) != 0)
+      fail(ErrorClass::Malformed, "index", "does not start with IVIX");
+    const std::uint32_t fixed_size = load<std::uint32_t>(p + layout::kIndexFixedSizeField);
+    if (fixed_size < layout::kIndexFixedSize || fixed_size > layout::kMaxIndexFixedSize || fixed_size > index.size())
+      fail(ErrorClass::Malformed, "index", "fixed_size " + std::to_string(fixed_size) + " is outside 48 .. 4096 or the index");
+    const std::uint8_t structure = p[layout::kIndexStructureKind];
+    if (structure != layout::kStructureOctree)
+      fail(ErrorClass::UnsupportedFeature, "index", "structure_kind " + std::to_string(structure) + " is not known (1 = octree)");
+    const std::uint8_t encoding = p[layout::kIndexValueEncoding];
+    if (!is_known_encoding(encoding))
+      fail(ErrorClass::UnsupportedFeature, "index", "value_encoding " + std::to_string(encoding) + " is not known");
+    VolumeLayout& v = info_.layout;
+    v.encoding = static_cast<ValueEncoding>(encoding);
+    v.depth = p[layout::kIndexDepth];
+    if (p[layout::kIndexReserved] != 0) fail(ErrorClass::Malformed, "index", "reserved byte 11 is not zero");
+    for (int a = 0; a < 3; ++a) {
+      v.dims[a] = load<std::uint32_t>(p + layout::kIndexSizeX + 4 * a);
+      if (v.dims[a] == 0) fail(ErrorClass::Malformed, "index", std::string("size_") + "xyz"[a] + " is 0");
+    }
+    if (v.depth > layout::kMaxDepth || v.depth != depth_for(v.dims))
+      fail(ErrorClass::Malformed, "index", "depth " + std::to_string(v.depth) + " is not the smallest D with 2^D >= " +
+                                               std::to_string(std::max({v.dims[0], v.dims[1], v.dims[2]})));
+    v.value_scale = load<double>(p + layout::kIndexScale);
+    v.value_offset = load<double>(p + layout::kIndexOffset);
+    if (!std::isfinite(v.value_scale) || v.value_scale == 0.0)
+      fail(ErrorClass::Malformed, "index", "value_scale is not finite and non-zero");
+    if (!std::isfinite(v.value_offset)) fail(ErrorClass::Malformed, "index", "value_offset is not finite");
+    const std::uint32_t block_count = load<std::uint32_t>(p + layout::kIndexBlockCount);
+    const std::uint32_t entry_size = load<std::uint32_t>(p + layout::kIndexBlockEntrySize);
+    if (block_count < 2) fail(ErrorClass::Malformed, "index", "block_count " + std::to_string(block_count) + " is below 2");
+    if (entry_size < layout::kBlockEntrySize || entry_size > layout::kMaxBlockEntrySize)
+      fail(ErrorClass::Malformed, "index", "block_entry_size " + std::to_string(entry_size) + " is outside 32 .. 4096");
+    const std::uint64_t expected = std::uint64_t{fixed_size} + 8ull * (v.depth + 1) + std::uint64_t{block_count} * entry_size;
+    if (expected != index.size())
+      fail(ErrorClass::Malformed, "index", "index_size is " + std::to_string(index.size()) + " but its fields need " +
+                                               std::to_string(expected));
+    read_level_table(p + fixed_size);
+    read_block_table(p + fixed_size + 8ull * (v.depth + 1), block_count, entry_size);
+  }
+
+  void read_level_table(const unsigned char* p) {
+    VolumeLayout& v = info_.layout;
+    v.inner_count.resize(v.depth + 1);
+    for (unsigned l = 0; l <= v.depth; ++l) v.inner_count[l] = load<std::uint64_t>(p + 8 * l);
+    auto bad = [&](const std::string& what) { fail(ErrorClass::Malformed, "level table", what); };
+    if (v.inner_count[0] > 1) bad("inner_count[0] is " + std::to_string(v.inner_count[0]) + ", more than one root");
+    if (v.inner_count[v.depth] != 0) bad("inner_count[D] is not 0: voxels cannot be subdivided");
+    std::uint64_t total = 0;
+    for (unsigned l = 0; l < v.depth; ++l) {
+      if (v.inner_count[l + 1] > 8 * v.inner_count[l])
+        bad("inner_count[" + std::to_string(l + 1) + "] = " + std::to_string(v.inner_count[l + 1]) +
+            " exceeds 8 x inner_count[" + std::to_string(l) + "]");
+      total += v.inner_count[l];
+    }
+    // Each inner node needs at least a few bytes of file (the arrays are
+    // compressed, but not beyond zstd's limits); refuse counts that could not
+    // be stored in a file of this size before anything is allocated from them.
+    if (total > (std::uint64_t{1} << 56)) bad("more than 2^56 inner nodes");
+  }
+
+  void read_block_table(const unsigned char* p, std::uint32_t count, std::uint32_t entry_size) {
+    const VolumeLayout& v = info_.layout;
+    info_.blocks.resize(count);
+    std::uint64_t expected_offset = info_.header_size;
+    std::size_t metadata_blocks = 0;
+    for (std::uint32_t b = 0; b < count; ++b) {
+      const unsigned char* e = p + std::uint64_t{b} * entry_size;
+      BlockInfo& blk = info_.blocks[b];
+      blk.file_offset = load<std::uint64_t>(e + layout::kEntryFileOffset);
+      blk.first_element = load<std::uint64_t>(e + layout::kEntryFirstElement);
+      blk.element_count = load<std::uint32_t>(e + layout::kEntryElementCount);
+      blk.stored_size = load<std::uint32_t>(e + layout::kEntryStoredSize);
+      blk.crc = load<std::uint32_t>(e + layout::kEntryCrc);
+      blk.stream = e[layout::kEntryStream];
+      blk.codec = e[layout::kEntryCodec];
+      blk.flags = e[layout::kEntryFlags];
+      blk.level = e[layout::kEntryLevel];
+      const std::string part = "block table entry " + std::to_string(b);
+      auto bad = [&](ErrorClass c, const std::string& what) { fail(c, part, what); };
+      if (blk.file_offset != expected_offset)
+        bad(ErrorClass::Malformed, "file_offset " + std::to_string(blk.file_offset) + " should be " +
+                                       std::to_string(expected_offset) + " (blocks lie back to back after the header)");
+      if (blk.element_count == 0) bad(ErrorClass::Malformed, "element_count is 0");
+      if (blk.stored_size == 0) bad(ErrorClass::Malformed, "stored_size is 0");
+      expected_offset += blk.stored_size;
+      if (expected_offset > info_.index_offset)
+        bad(ErrorClass::Malformed, "the block runs past the index at offset " + std::to_string(info_.index_offset));
+      if (blk.flags & ~layout::kFlagIgnorable) bad(ErrorClass::Malformed, "reserved flag bits are set");
+      if (!is_known_stream(blk.stream)) {
+        if (!(blk.flags & layout::kFlagIgnorable))
+          bad(ErrorClass::UnsupportedFeature, "stream " + std::to_string(blk.stream) +
+                                                  " is not known and the block is not marked ignorable");
+        continue;  // an ignorable block of a stream we do not know: skipped
+      }
+      if (blk.flags != 0) bad(ErrorClass::Malformed, "blocks of known streams must have flags 0");
+      if (blk.codec > 1) bad(ErrorClass::UnsupportedFeature, "codec " + std::to_string(blk.codec) + " is not known");
+      const std::uint64_t width = stream_width(blk.stream, v.encoding);
+      const std::uint64_t decoded = blk.element_count * width;
+      if (decoded > layout::kMaxBlockDecodedBytes)
+        bad(ErrorClass::Malformed, "decoded size " + std::to_string(decoded) + " exceeds 64 MiB");
+      if (blk.codec == 0 && blk.stored_size != decoded)
+        bad(ErrorClass::Malformed, "a stored block of " + std::to_string(blk.element_count) + " elements must be " +
+                                       std::to_string(decoded) + " bytes, not " + std::to_string(blk.stored_size));
+      if (blk.level > v.depth) bad(ErrorClass::Malformed, "level " + std::to_string(blk.level) + " is deeper than D");
+      std::uint64_t lo = 0;
+      std::uint64_t hi = 0;
+      if (blk.stream == 1) {
+        ++metadata_blocks;
+        if (blk.level != 0 || blk.first_element != 0)
+          bad(ErrorClass::Malformed, "the metadata block must have level 0 and first_element 0");
+        if (decoded > layout::kMaxMetadataBytes) bad(ErrorClass::Malformed, "metadata exceeds 16 MiB");
+        continue;
+      }
+      if (blk.stream == 2) {
+        lo = v.first_inner(blk.level);
+        hi = lo + v.inner_count[blk.level];
+      } else {
+        lo = v.first_value(blk.level);
+        hi = lo + v.level_values(blk.level);
+      }
+      if (blk.first_element < lo || blk.first_element > hi || blk.element_count > hi - blk.first_element)
+        bad(ErrorClass::Malformed, std::string(stream_name(blk.stream)) + " " + std::to_string(blk.first_element) +
+                                       " .. " + std::to_string(blk.first_element + blk.element_count) +
+                                       " do not lie in level " + std::to_string(blk.level) + "'s range " +
+                                       std::to_string(lo) + " .. " + std::to_string(hi));
+    }
+    if (expected_offset != info_.index_offset)
+      fail(ErrorClass::Malformed, "block table", "blocks end at " + std::to_string(expected_offset) +
+                                                     " but the index begins at " + std::to_string(info_.index_offset));
+    if (metadata_blocks != 1)
+      fail(ErrorClass::Malformed, "block table", std::to_string(metadata_blocks) + " metadata blocks (exactly 1 required)");
+    check_coverage(2, v.total_inner());
+    check_coverage(3, v.total_values());
+  }
+
+  // Blocks of a stream, in order of first_element, cover 0 .. total exactly.
+  void check_coverage(std::uint8_t stream, std::uint64_t total) {
+    std::vector<const BlockInfo*> list;
+    for (const auto& b : info_.blocks)
+      if (b.stream == stream) list.push_back(&b);
+    std::sort(list.begin(), list.end(),
+              [](const BlockInfo* a, const BlockInfo* b) { return a->first_element < b->first_element; });
+    std::uint64_t next = 0;
+    for (const BlockInfo* b : list) {
+      if (b->first_element != next)
+        fail(ErrorClass::Malformed, "block table",
+             std::string(stream_name(stream)) + " element " + std::to_string(next) +
+                 (b->first_element > next ? " is in no block" : " is in two blocks"));
+      next += b->element_count;
+    }
+    if (next != total)
+      fail(ErrorClass::Malformed, "block table", std::string(stream_name(stream)) + ": blocks hold " +
+                                                     std::to_string(next) + " elements, the level table needs " +
+                                                     std::to_string(total));
+  }
+
+  RandomAccessFile& file_;
+  FileInfo info_;
+  std::vector<std::uint8_t> header_;
+  std::uint32_t index_crc_ = 0;
+};
+
+}  // namespace
+
+bool is_known_stream(std::uint8_t stream) { return stream >= 1 && stream <= 3; }
+
+std::size_t stream_width(std::uint8_t stream, ValueEncoding encoding) {
+  switch (stream) {
+    case 1: return 1;
+    case 2: return 8;
+    case 3: return encoding_width(encoding);
+    default: return 1;
+  }
+}
+
+FileInfo read_file_structure(RandomAccessFile& file) { return StructureReader(file).run(); }
+
+}  // namespace detail
+}  // namespace ivol

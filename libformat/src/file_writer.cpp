@@ -1,0 +1,180 @@
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <zstd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <memory>
+
+#include "ivol/crc32c.hpp"
+#include "ivol/error.hpp"
+#include "ivol/writer.hpp"
+#include "layout.hpp"
+
+namespace ivol {
+namespace {
+
+[[noreturn]] void io_error(const std::string& path, const std::string& what) {
+  throw Error(ErrorClass::Io, path + ": " + what + ": " + std::strerror(errno));
+}
+
+std::string directory_of(const std::string& path) {
+  const auto slash = path.find_last_of('/');
+  if (slash == std::string::npos) return ".";
+  if (slash == 0) return "/";
+  return path.substr(0, slash);
+}
+
+}  // namespace
+
+EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_element,
+                          std::uint32_t element_count, std::size_t width, const void* data,
+                          const WriteOptions& options) {
+  EncodedBlock block;
+  block.stream = stream;
+  block.level = static_cast<std::uint8_t>(level);
+  block.first_element = first_element;
+  block.element_count = element_count;
+  const std::size_t raw_size = std::size_t{element_count} * width;
+  if (raw_size > layout::kMaxBlockDecodedBytes)
+    throw Error(ErrorClass::InvalidArgument, "encode_block: a block may hold at most 64 MiB");
+  if (options.compress) {
+    block.bytes.resize(ZSTD_compressBound(raw_size));
+    // One context per thread, reused: creating one costs more than a small block.
+    thread_local std::unique_ptr<ZSTD_CCtx, decltype(&ZSTD_freeCCtx)> context(ZSTD_createCCtx(), ZSTD_freeCCtx);
+    ZSTD_CCtx* cctx = context.get();
+    if (!cctx) throw Error(ErrorClass::Io, "zstd: cannot create a compression context");
+    ZSTD_CCtx_reset(cctx, ZSTD_reset_session_and_parameters);
+    ZSTD_CCtx_setParameter(cctx, ZSTD_c_compressionLevel, options.zstd_level);
+    ZSTD_CCtx_setParameter(cctx, ZSTD_c_checksumFlag, 1);
+    ZSTD_CCtx_setParameter(cctx, ZSTD_c_contentSizeFlag, 1);
+    const std::size_t size = ZSTD_compress2(cctx, block.bytes.data(), block.bytes.size(), data, raw_size);
+    if (ZSTD_isError(size))
+      throw Error(ErrorClass::Io, std::string("zstd compression failed: ") + ZSTD_getErrorName(size));
+    if (size < raw_size) {
+      block.bytes.resize(size);
+      block.codec = Codec::Zstd;
+    }
+  }
+  if (block.codec == Codec::Stored) {
+    const auto* p = static_cast<const std::uint8_t*>(data);
+    block.bytes.assign(p, p + raw_size);
+  }
+  block.crc = crc32c(block.bytes.data(), block.bytes.size());
+  return block;
+}
+
+FileWriter::FileWriter(const std::string& path, const VolumeLayout& layout)
+    : path_(path), layout_(layout) {
+  temp_path_ = directory_of(path) + "/." + path.substr(path.find_last_of('/') + 1) + ".tmp-XXXXXX";
+  std::vector<char> name(temp_path_.begin(), temp_path_.end());
+  name.push_back('\0');
+  fd_ = mkstemp(name.data());
+  if (fd_ < 0) io_error(path, "cannot create a temporary file in " + directory_of(path));
+  temp_path_.assign(name.data());
+  fchmod(fd_, 0644);
+
+  unsigned char header[layout::kHeaderSize] = {};
+  std::memcpy(header, layout::kSignature.data(), 8);
+  layout::store<std::uint16_t>(header + layout::kHeaderVersionMajor, layout::kVersionMajor);
+  layout::store<std::uint16_t>(header + layout::kHeaderVersionMinor, layout::kVersionMinor);
+  layout::store<std::uint32_t>(header + layout::kHeaderSizeField, layout::kHeaderSize);
+  layout::store<std::uint32_t>(header + layout::kHeaderSize - 4, crc32c(header, layout::kHeaderSize - 4));
+  write_all(header, sizeof header, "header");
+}
+
+FileWriter::~FileWriter() {
+  if (fd_ >= 0) ::close(fd_);
+  if (!finished_ && !temp_path_.empty()) ::unlink(temp_path_.c_str());
+}
+
+void FileWriter::write_all(const void* data, std::size_t size, const char* what) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  while (size > 0) {
+    const ssize_t n = ::write(fd_, p, size);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) io_error(path_, std::string("cannot write the ") + what);
+    p += n;
+    size -= static_cast<std::size_t>(n);
+    offset_ += static_cast<std::uint64_t>(n);
+  }
+}
+
+void FileWriter::append(const EncodedBlock& block) {
+  if (finished_) throw Error(ErrorClass::InvalidArgument, path_ + ": append after finish");
+  const std::uint64_t at = offset_;
+  write_all(block.bytes.data(), block.bytes.size(), "block");
+  entries_.push_back(Entry{at, block.first_element, block.element_count,
+                           static_cast<std::uint32_t>(block.bytes.size()), block.crc,
+                           static_cast<std::uint8_t>(block.stream), static_cast<std::uint8_t>(block.codec),
+                           block.level});
+}
+
+void FileWriter::finish(const Metadata& metadata, const std::vector<std::uint64_t>& inner_count) {
+  if (inner_count.size() != layout_.depth + 1)
+    throw Error(ErrorClass::InvalidArgument, path_ + ": the level table needs depth + 1 entries");
+  const std::string json = metadata.to_json().dump();
+  if (json.size() > layout::kMaxMetadataBytes)
+    throw Error(ErrorClass::InvalidArgument, path_ + ": metadata exceeds 16 MiB");
+  WriteOptions metadata_options;
+  append(encode_block(Stream::Metadata, 0, 0, static_cast<std::uint32_t>(json.size()), 1, json.data(),
+                      metadata_options));
+
+  const std::uint64_t index_offset = offset_;
+  const std::size_t level_bytes = 8 * inner_count.size();
+  std::vector<unsigned char> index(layout::kIndexFixedSize + level_bytes +
+                                   entries_.size() * layout::kBlockEntrySize);
+  unsigned char* p = index.data();
+  std::memcpy(p, layout::kIndexSignature.data(), 4);
+  layout::store<std::uint32_t>(p + layout::kIndexFixedSizeField, layout::kIndexFixedSize);
+  p[layout::kIndexStructureKind] = layout::kStructureOctree;
+  p[layout::kIndexValueEncoding] = static_cast<std::uint8_t>(layout_.encoding);
+  p[layout::kIndexDepth] = static_cast<std::uint8_t>(layout_.depth);
+  for (int a = 0; a < 3; ++a)
+    layout::store<std::uint32_t>(p + layout::kIndexSizeX + 4 * a, layout_.dims[a]);
+  layout::store<double>(p + layout::kIndexScale, layout_.value_scale);
+  layout::store<double>(p + layout::kIndexOffset, layout_.value_offset);
+  layout::store<std::uint32_t>(p + layout::kIndexBlockCount, static_cast<std::uint32_t>(entries_.size()));
+  layout::store<std::uint32_t>(p + layout::kIndexBlockEntrySize, layout::kBlockEntrySize);
+  p += layout::kIndexFixedSize;
+  for (std::uint64_t count : inner_count) layout::store<std::uint64_t>(p, count), p += 8;
+  for (const Entry& e : entries_) {
+    layout::store<std::uint64_t>(p + layout::kEntryFileOffset, e.file_offset);
+    layout::store<std::uint64_t>(p + layout::kEntryFirstElement, e.first_element);
+    layout::store<std::uint32_t>(p + layout::kEntryElementCount, e.element_count);
+    layout::store<std::uint32_t>(p + layout::kEntryStoredSize, e.stored_size);
+    layout::store<std::uint32_t>(p + layout::kEntryCrc, e.crc);
+    p[layout::kEntryStream] = e.stream;
+    p[layout::kEntryCodec] = e.codec;
+    p[layout::kEntryFlags] = 0;
+    p[layout::kEntryLevel] = e.level;
+    p += layout::kBlockEntrySize;
+  }
+  write_all(index.data(), index.size(), "index");
+
+  unsigned char footer[layout::kFooterSize] = {};
+  layout::store<std::uint64_t>(footer + layout::kFooterIndexOffset, index_offset);
+  layout::store<std::uint64_t>(footer + layout::kFooterIndexSize, index.size());
+  layout::store<std::uint32_t>(footer + layout::kFooterIndexCrc, crc32c(index.data(), index.size()));
+  layout::store<std::uint32_t>(footer + layout::kFooterCrc, crc32c(footer, layout::kFooterCrc));
+  std::memcpy(footer + layout::kFooterEndSignature, layout::kEndSignature.data(), 8);
+  write_all(footer, sizeof footer, "footer");
+
+  if (::fsync(fd_) != 0) io_error(path_, "cannot flush the file to disk");
+  if (::close(fd_) != 0) {
+    fd_ = -1;
+    io_error(path_, "cannot close the file");
+  }
+  fd_ = -1;
+  if (::rename(temp_path_.c_str(), path_.c_str()) != 0) io_error(path_, "cannot rename the finished file into place");
+  finished_ = true;
+  // Make the rename itself durable.
+  const int dir = ::open(directory_of(path_).c_str(), O_RDONLY | O_DIRECTORY);
+  if (dir >= 0) {
+    ::fsync(dir);
+    ::close(dir);
+  }
+}
+
+}  // namespace ivol

@@ -1,0 +1,117 @@
+#include "ivol/reader.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "reader_impl.hpp"
+#include "ivol/error.hpp"
+#include "layout.hpp"
+#include "tree_walk.hpp"
+
+namespace ivol {
+
+
+Reader::Reader(const std::string& path, const ReaderOptions& options)
+    : impl_(std::make_unique<Impl>(path, options)) {}
+Reader::~Reader() = default;
+Reader::Reader(Reader&&) noexcept = default;
+Reader& Reader::operator=(Reader&&) noexcept = default;
+
+const std::string& Reader::path() const { return impl_->file.path(); }
+const FileInfo& Reader::info() const { return impl_->info; }
+const VolumeLayout& Reader::layout() const { return impl_->info.layout; }
+const Metadata& Reader::metadata() const { return impl_->metadata; }
+const IoStats& Reader::io_stats() const {
+  impl_->stats.bytes_read = impl_->file.bytes_read - impl_->bytes_baseline;
+  return impl_->stats;
+}
+
+void Reader::reset_io_stats() {
+  impl_->stats = IoStats{};
+  impl_->bytes_baseline = impl_->file.bytes_read;
+}
+
+std::uint32_t Reader::voxel_bits(std::uint32_t x, std::uint32_t y, std::uint32_t z, unsigned lod) {
+  impl_->check_box(Box{{x, y, z}, {x + 1, y + 1, z + 1}}, lod);
+  detail::ImplAccess access{impl_.get()};
+  return detail::lookup_bits(access, impl_->info.layout, impl_->ranges, x, y, z, lod);
+}
+
+double Reader::voxel_value(std::uint32_t x, std::uint32_t y, std::uint32_t z, unsigned lod) {
+  const VolumeLayout& v = impl_->info.layout;
+  return v.physical(decode_value(v.encoding, voxel_bits(x, y, z, lod)));
+}
+
+std::vector<float> Reader::read_box(const Box& box, unsigned lod) {
+  impl_->check_box(box, lod);
+  const VolumeLayout& v = impl_->info.layout;
+  std::vector<float> out(box.voxel_count());
+  detail::ImplAccess access{impl_.get()};
+  detail::walk_box(access, v, impl_->ranges, box, lod, [&](const Box& region, std::uint32_t bits) {
+    detail::fill_region(out.data(), box, region, static_cast<float>(v.physical(decode_value(v.encoding, bits))));
+  });
+  return out;
+}
+
+std::vector<std::uint8_t> Reader::read_box_bits(const Box& box, unsigned lod) {
+  impl_->check_box(box, lod);
+  const VolumeLayout& v = impl_->info.layout;
+  const std::size_t width = encoding_width(v.encoding);
+  std::vector<std::uint8_t> out(box.voxel_count() * width);
+  detail::ImplAccess access{impl_.get()};
+  detail::walk_box(access, v, impl_->ranges, box, lod, [&](const Box& region, std::uint32_t bits) {
+    if (width == 2) detail::fill_region(reinterpret_cast<std::uint16_t*>(out.data()), box, region,
+                                        static_cast<std::uint16_t>(bits));
+    else detail::fill_region(reinterpret_cast<std::uint32_t*>(out.data()), box, region, bits);
+  });
+  return out;
+}
+
+std::vector<float> Reader::read_slice(Axis axis, std::uint32_t index) {
+  return read_box(slice_box(impl_->info.layout.dims, axis, index));
+}
+
+std::vector<float> Reader::read_lod(unsigned lod) {
+  if (lod > impl_->info.layout.depth) impl_->check_box(Box{}, lod);
+  return read_box(full_box(impl_->info.layout.dims, lod), lod);
+}
+
+double Reader::sample(double wx, double wy, double wz) {
+  const VolumeLayout& v = impl_->info.layout;
+  const Metadata& m = impl_->metadata;
+  const double world[3] = {wx, wy, wz};
+  std::uint32_t lo[3];
+  std::uint32_t hi[3];
+  double frac[3];
+  for (int a = 0; a < 3; ++a) {
+    const double p = (world[a] - m.origin[a]) / m.voxel_size[a];
+    const double limit = static_cast<double>(v.dims[a] - 1);
+    const double clamped = std::isnan(p) ? 0.0 : std::min(std::max(p, 0.0), limit);
+    lo[a] = static_cast<std::uint32_t>(std::floor(clamped));
+    hi[a] = std::min(lo[a] + 1, v.dims[a] - 1);
+    frac[a] = clamped - lo[a];
+  }
+  double result = 0.0;
+  for (unsigned c = 0; c < 8; ++c) {
+    double weight = 1.0;
+    std::uint32_t at[3];
+    for (int a = 0; a < 3; ++a) {
+      const bool upper = (c >> a) & 1u;
+      at[a] = upper ? hi[a] : lo[a];
+      weight *= upper ? frac[a] : 1.0 - frac[a];
+    }
+    if (weight != 0.0) result += weight * voxel_value(at[0], at[1], at[2]);
+  }
+  return result;
+}
+
+std::vector<std::uint8_t> Reader::read_block(std::size_t block_index) {
+  if (block_index >= impl_->info.blocks.size())
+    throw Error(ErrorClass::InvalidArgument, path() + ": no block " + std::to_string(block_index));
+  const BlockInfo& b = impl_->info.blocks[block_index];
+  return detail::read_and_decode_block(impl_->file, b, block_index,
+                                       detail::stream_width(b.stream, impl_->info.layout.encoding));
+}
+
+}  // namespace ivol

@@ -1,0 +1,121 @@
+// The Reader's state, shared with check_file. Internal to libformat.
+#pragma once
+
+#include <algorithm>
+#include <cstring>
+
+#include "block_reader.hpp"
+#include "file_index.hpp"
+#include "ivol/error.hpp"
+#include "ivol/reader.hpp"
+#include "layout.hpp"
+#include "tree_walk.hpp"
+
+namespace ivol {
+
+struct Reader::Impl {
+  detail::RandomAccessFile file;
+  FileInfo info;
+  Metadata metadata;
+  detail::LevelRanges ranges;
+  detail::BlockCache cache;
+  IoStats stats;
+  std::uint64_t bytes_baseline = 0;  // file.bytes_read at the last reset
+  // Blocks of the nodes and values streams, sorted by first element.
+  std::vector<std::size_t> stream_blocks[4];
+  // The block last used for each stream and level: walks stay within one
+  // block per level for long stretches.
+  std::vector<std::size_t> hint[4];
+
+  Impl(const std::string& path, const ReaderOptions& options)
+      : file(path), info(detail::read_file_structure(file)), ranges(info.layout), cache(options.cache_bytes) {
+    for (std::size_t b = 0; b < info.blocks.size(); ++b)
+      if (detail::is_known_stream(info.blocks[b].stream)) stream_blocks[info.blocks[b].stream].push_back(b);
+    for (auto& list : stream_blocks)
+      std::sort(list.begin(), list.end(), [&](std::size_t a, std::size_t b) {
+        return info.blocks[a].first_element < info.blocks[b].first_element;
+      });
+    for (auto& h : hint) h.assign(info.layout.depth + 1, SIZE_MAX);
+    const auto text = block(stream_blocks[1].front());
+    try {
+      metadata = Metadata::parse(std::string(text->begin(), text->end()));
+    } catch (const Error& e) {
+      throw Error(e.error_class(), file.path() + ": " + e.what());
+    }
+  }
+
+  detail::BlockData block(std::size_t index) {
+    if (auto hit = cache.find(index)) {
+      ++stats.cache_hits;
+      return hit;
+    }
+    const BlockInfo& b = info.blocks[index];
+    auto data = std::make_shared<const std::vector<std::uint8_t>>(
+        detail::read_and_decode_block(file, b, index, detail::stream_width(b.stream, info.layout.encoding)));
+    ++stats.blocks_decoded;
+    cache.insert(index, data);
+    return data;
+  }
+
+  // Pointer to element `element` of `stream` in a decoded block. `keep` holds
+  // the block alive while the caller uses the pointer.
+  const std::uint8_t* element(std::uint8_t stream, std::uint64_t element, detail::BlockData& keep) {
+    const auto& list = stream_blocks[stream];
+    auto contains = [&](std::size_t b) {
+      const BlockInfo& blk = info.blocks[b];
+      return element >= blk.first_element && element - blk.first_element < blk.element_count;
+    };
+    std::size_t found = SIZE_MAX;
+    for (auto& h : hint[stream])
+      if (h != SIZE_MAX && contains(h)) {
+        found = h;
+        break;
+      }
+    if (found == SIZE_MAX) {
+      auto it = std::upper_bound(list.begin(), list.end(), element, [&](std::uint64_t e, std::size_t b) {
+        return e < info.blocks[b].first_element;
+      });
+      if (it == list.begin()) throw Error(ErrorClass::Malformed, file.path() + ": element outside every block");
+      found = *(it - 1);
+      hint[stream][info.blocks[found].level] = found;
+    }
+    keep = block(found);
+    const std::size_t width = detail::stream_width(stream, info.layout.encoding);
+    return keep->data() + (element - info.blocks[found].first_element) * width;
+  }
+
+  std::uint64_t node_word(std::uint64_t index) {
+    detail::BlockData keep;
+    return layout::load<std::uint64_t>(element(2, index, keep));
+  }
+
+  std::uint32_t value_bits(std::uint64_t index) {
+    detail::BlockData keep;
+    const std::uint8_t* p = element(3, index, keep);
+    if (info.layout.encoding == ValueEncoding::Float32) return layout::load<std::uint32_t>(p);
+    return layout::load<std::uint16_t>(p);
+  }
+
+  void check_box(const Box& box, unsigned lod) const {
+    if (lod > info.layout.depth)
+      throw Error(ErrorClass::InvalidArgument, file.path() + ": level of detail " + std::to_string(lod) +
+                                                   " exceeds the depth " + std::to_string(info.layout.depth));
+    const Dims d = lod_dims(info.layout.dims, lod);
+    for (int a = 0; a < 3; ++a)
+      if (box.hi[a] > d[a] || box.lo[a] >= box.hi[a])
+        throw Error(ErrorClass::InvalidArgument, file.path() + ": box " + box.to_string() +
+                                                     " is empty or outside the volume at level of detail " +
+                                                     std::to_string(lod));
+  }
+};
+
+namespace detail {
+
+struct ImplAccess {
+  Reader::Impl* impl;
+  std::uint64_t node_word(std::uint64_t i) const { return impl->node_word(i); }
+  std::uint32_t value_bits(std::uint64_t i) const { return impl->value_bits(i); }
+};
+
+}  // namespace detail
+}  // namespace ivol

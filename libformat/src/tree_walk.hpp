@@ -1,0 +1,134 @@
+// Descending the pointer-packed octree (spec §8.3), shared by the in-memory
+// Octree and the file Reader. `Access` provides node_word(i) and value_bits(i).
+#pragma once
+
+#include <algorithm>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "ivol/error.hpp"
+#include "ivol/geometry.hpp"
+#include "ivol/octree.hpp"
+
+namespace ivol::detail {
+
+constexpr std::uint64_t kNoInner = ~std::uint64_t{0};
+
+// Per-level index ranges, precomputed once per file.
+struct LevelRanges {
+  std::vector<std::uint64_t> first_inner;  // depth + 2 entries; [l, l+1) is level l
+  explicit LevelRanges(const VolumeLayout& layout) {
+    first_inner.resize(layout.depth + 2, 0);
+    for (unsigned l = 0; l <= layout.depth; ++l)
+      first_inner[l + 1] = first_inner[l] + layout.inner_count[l];
+  }
+};
+
+inline unsigned popcount8(unsigned v) { return static_cast<unsigned>(__builtin_popcount(v & 0xFFu)); }
+
+// Rules a reader checks for every inner node it visits (§8.3, §8.4).
+inline void check_node_word(const VolumeLayout& layout, const LevelRanges& ranges, unsigned level,
+                            std::uint64_t index, std::uint64_t word) {
+  const unsigned mask = child_mask(word);
+  const std::uint64_t first = first_inner_child(word);
+  auto fail = [&](const std::string& what) {
+    throw Error(ErrorClass::Malformed, "node " + std::to_string(index) + " (level " +
+                                           std::to_string(level) + "): " + what);
+  };
+  if (level + 1 > layout.depth) fail("an inner node at the deepest level");
+  if (level + 1 == layout.depth && mask != 0)
+    fail("child_mask is not 0 at level D-1, whose children are single voxels");
+  const std::uint64_t lo = ranges.first_inner[level + 1];
+  const std::uint64_t hi = ranges.first_inner[level + 2];
+  if (first < lo || first > hi || first + popcount8(mask) > hi)
+    fail("first_inner_child " + std::to_string(first) + " with " + std::to_string(popcount8(mask)) +
+         " inner children lies outside level " + std::to_string(level + 1) + "'s nodes [" +
+         std::to_string(lo) + ", " + std::to_string(hi) + ")");
+}
+
+template <class Access>
+std::uint32_t lookup_bits(Access& access, const VolumeLayout& layout, const LevelRanges& ranges,
+                          std::uint32_t x, std::uint32_t y, std::uint32_t z, unsigned lod) {
+  const unsigned target = layout.depth - lod;
+  std::uint64_t value_index = 0;
+  std::uint64_t inner = layout.inner_count[0] ? 0 : kNoInner;
+  for (unsigned level = 0; level < target && inner != kNoInner; ++level) {
+    const std::uint64_t word = access.node_word(inner);
+    check_node_word(layout, ranges, level, inner, word);
+    const unsigned shift = target - level - 1;
+    const unsigned c = ((x >> shift) & 1u) | (((y >> shift) & 1u) << 1) | (((z >> shift) & 1u) << 2);
+    const unsigned mask = child_mask(word);
+    value_index = 1 + 8 * inner + c;
+    inner = (mask >> c) & 1u ? first_inner_child(word) + popcount8(mask & ((1u << c) - 1u)) : kNoInner;
+  }
+  return access.value_bits(value_index);
+}
+
+// Calls sink(region, bits) for every leaf (or node of the target level) that
+// meets `box`, with `region` the part of the box it covers, in the
+// coordinates of level of detail `lod`.
+template <class Access, class Sink>
+void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ranges, const Box& box,
+              unsigned lod, Sink&& sink) {
+  const unsigned target = layout.depth - lod;
+  struct Frame {
+    unsigned level;
+    std::uint32_t i, j, k;
+    std::uint64_t value_index;
+    std::uint64_t inner;
+  };
+  std::vector<Frame> stack;
+  stack.push_back({0, 0, 0, 0, 0, layout.inner_count[0] ? 0 : kNoInner});
+  while (!stack.empty()) {
+    const Frame f = stack.back();
+    stack.pop_back();
+    const std::uint64_t side = std::uint64_t{1} << (target - f.level);
+    Box region;
+    const std::uint64_t origin[3] = {f.i * side, f.j * side, f.k * side};
+    bool meets = true;
+    for (int a = 0; a < 3; ++a) {
+      const std::uint64_t lo = std::max<std::uint64_t>(origin[a], box.lo[a]);
+      const std::uint64_t hi = std::min<std::uint64_t>(origin[a] + side, box.hi[a]);
+      if (lo >= hi) {
+        meets = false;
+        break;
+      }
+      region.lo[a] = static_cast<std::uint32_t>(lo);
+      region.hi[a] = static_cast<std::uint32_t>(hi);
+    }
+    if (!meets) continue;
+    if (f.inner == kNoInner || f.level == target) {
+      sink(region, access.value_bits(f.value_index));
+      continue;
+    }
+    const std::uint64_t word = access.node_word(f.inner);
+    check_node_word(layout, ranges, f.level, f.inner, word);
+    const unsigned mask = child_mask(word);
+    const std::uint64_t first = first_inner_child(word);
+    // Push in reverse so that children are visited in octant order, which
+    // keeps block accesses sequential within each level.
+    for (int c = 7; c >= 0; --c) {
+      const auto cu = static_cast<unsigned>(c);
+      const std::uint64_t child_inner =
+          (mask >> cu) & 1u ? first + popcount8(mask & ((1u << cu) - 1u)) : kNoInner;
+      stack.push_back({f.level + 1, 2 * f.i + (cu & 1u), 2 * f.j + ((cu >> 1) & 1u),
+                       2 * f.k + ((cu >> 2) & 1u), 1 + 8 * f.inner + cu, child_inner});
+    }
+  }
+}
+
+// Writes `bits` (width bytes each) or physical floats into a [z][y][x] buffer
+// over `box`, for the region a walk reports.
+template <class T>
+void fill_region(T* out, const Box& box, const Box& region, T value) {
+  const std::uint64_t nx = box.hi[0] - box.lo[0];
+  const std::uint64_t ny = box.hi[1] - box.lo[1];
+  for (std::uint32_t z = region.lo[2]; z < region.hi[2]; ++z)
+    for (std::uint32_t y = region.lo[1]; y < region.hi[1]; ++y) {
+      T* row = out + ((z - box.lo[2]) * ny + (y - box.lo[1])) * nx + (region.lo[0] - box.lo[0]);
+      std::fill(row, row + (region.hi[0] - region.lo[0]), value);
+    }
+}
+
+}  // namespace ivol::detail

@@ -1,0 +1,55 @@
+// ivol info FILE [--json]: what a file holds and how it is laid out.
+#include <iostream>
+
+#include "commands.hpp"
+#include "ivol/reader.hpp"
+#include "report.hpp"
+
+namespace ivol::cli {
+
+Runner add_info_command(CLI::App& app, const GlobalOptions& /*global*/) {
+  auto* cmd = app.add_subcommand("info", "Show the structure, sizes, levels, blocks and metadata of an .ivol file");
+  auto file = std::make_shared<std::string>();
+  auto json = std::make_shared<bool>(false);
+  cmd->add_option("FILE", *file, "The .ivol file")->required();
+  cmd->add_flag("--json", *json, "Print one JSON object (for machines)");
+  return [file, json]() {
+    Reader reader(*file);
+    const nlohmann::json d = describe_file(reader);
+    if (*json) {
+      std::cout << d.dump(2) << "\n";
+      return kExitOk;
+    }
+    const auto& dims = d["dimensions"];
+    std::cout << d["file"].get<std::string>() << "\n"
+              << "  format         .ivol " << d["format_version"].get<std::string>() << ", octree of depth "
+              << d["depth"] << "\n"
+              << "  dimensions     " << dims[0] << " x " << dims[1] << " x " << dims[2] << " voxels of "
+              << d["voxel_size"][0] << " x " << d["voxel_size"][1] << " x " << d["voxel_size"][2] << " "
+              << d["unit"].get<std::string>() << "\n"
+              << "  values         " << d["value_encoding"].get<std::string>() << " (physical = "
+              << d["value_offset"] << " + " << d["value_scale"] << " x stored), "
+              << reader.metadata().quantity
+              << (reader.metadata().value_unit.empty() ? "" : " in " + reader.metadata().value_unit) << "\n"
+              << "  file           " << human_bytes(d["file_bytes"]) << " (dense float32 "
+              << human_bytes(d["dense_float32_bytes"]) << ", ratio " << d["ratio_vs_float32"].get<double>()
+              << ")\n"
+              << "  in memory      " << human_bytes(d["in_memory_bytes"]) << " (" << d["inner_nodes"]
+              << " inner nodes, " << d["values"] << " values)\n"
+              << "  blocks         " << d["blocks"] << " (index " << human_bytes(d["index_bytes"]) << ")\n"
+              << "  levels         level  side   inner nodes        leaves   blocks   bytes\n";
+    for (const auto& l : d["levels"]) {
+      char line[160];
+      std::snprintf(line, sizeof line, "                 %5u %5llu %13llu %13llu %8llu   %s\n",
+                    l["level"].get<unsigned>(), l["voxel_side"].get<unsigned long long>(),
+                    l["inner_nodes"].get<unsigned long long>(), l["leaves"].get<unsigned long long>(),
+                    l["blocks"].get<unsigned long long>(),
+                    human_bytes(l["node_bytes"].get<std::uint64_t>() + l["value_bytes"].get<std::uint64_t>()).c_str());
+      std::cout << line;
+    }
+    std::cout << "  metadata       " << d["metadata"].dump() << "\n";
+    return kExitOk;
+  };
+}
+
+}  // namespace ivol::cli

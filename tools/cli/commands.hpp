@@ -1,0 +1,27 @@
+// The ivol subcommands. Each registers itself on the application and returns
+// the function that runs it; the functions return the process exit code.
+#pragma once
+
+#include <functional>
+
+#include <CLI/CLI.hpp>
+
+namespace ivol::cli {
+
+// Exit codes of every subcommand.
+constexpr int kExitOk = 0;
+constexpr int kExitUsage = 1;    // bad command line
+constexpr int kExitFailure = 2;  // bad input file, damaged file, I/O error
+
+struct GlobalOptions {
+  bool quiet = false;
+  bool verbose = false;
+};
+
+using Runner = std::function<int()>;
+
+Runner add_demo_command(CLI::App& app, const GlobalOptions& global);
+Runner add_info_command(CLI::App& app, const GlobalOptions& global);
+Runner add_verify_command(CLI::App& app, const GlobalOptions& global);
+
+}  // namespace ivol::cli

@@ -1,0 +1,54 @@
+// ivol: the command line of the ivol toolkit. Uses libformat's public API only.
+#include <iostream>
+#include <map>
+
+#include "commands.hpp"
+#include "ivol/error.hpp"
+#include "ivol/metadata.hpp"
+
+int main(int argc, char** argv) {
+  using namespace ivol::cli;
+  CLI::App app{"ivol — archival storage of CT volumes with inhomogeneous resolution (.ivol files)"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", std::string("ivol ") + ivol::library_version());
+  GlobalOptions global;
+  app.add_flag("-q,--quiet", global.quiet, "Print nothing but errors");
+  app.add_flag("-v,--verbose", global.verbose, "Print more detail");
+
+  std::map<CLI::App*, Runner> runners;
+  auto add = [&](Runner (*adder)(CLI::App&, const GlobalOptions&)) {
+    const std::size_t before = app.get_subcommands({}).size();
+    Runner run = adder(app, global);
+    runners[app.get_subcommands({})[before]] = std::move(run);
+  };
+  add(add_demo_command);
+  add(add_info_command);
+  add(add_verify_command);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);  // help goes to stdout, exit 0
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    app.exit(e, std::cerr, std::cerr);
+    return kExitUsage;
+  }
+  for (auto& [sub, run] : runners) {
+    if (!sub->parsed()) continue;
+    try {
+      return run();
+    } catch (const ivol::Error& e) {
+      std::cerr << "ivol " << sub->get_name() << ": error (" << ivol::error_class_name(e.error_class())
+                << "): " << e.what() << "\n";
+      return kExitFailure;
+    } catch (const std::exception& e) {
+      std::cerr << "ivol " << sub->get_name() << ": error: " << e.what() << "\n";
+      return kExitFailure;
+    }
+  }
+  return kExitUsage;
+}
