@@ -1,0 +1,1173 @@
+#!/usr/bin/python3
+"""ivolref.py -- independent reference reader for the .ivol format, version 1.0.
+
+Written from format-spec/ivol.md alone (no code of the ivol project was read).
+Section numbers (§n) below refer to that document.  Where the specification
+left a choice open, the choice made here is listed in SPEC-NOTES.md next to
+this file, and the code cites it as "SPEC-NOTES n" at that place.
+
+Needs Python 3 with numpy and zstandard (Debian: python3-numpy,
+python3-zstandard).  Usage:
+
+    ivolref.py check FILE               full verification; prints "ok"
+    ivolref.py dense FILE -o OUT        full verification + dense export (§12.2)
+    ivolref.py lod FILE K -o OUT        level of detail K (§12.3), partial read
+    ivolref.py info FILE                JSON summary of header, index, metadata
+    ivolref.py conformance MANIFEST     run a set of test vectors
+
+Exit status: 0 success; 1 the file was refused ("error: <class>: <message>");
+2 usage or I/O error; 3 the file exceeds this reader's own limits (§13 allows
+them; not an error of the file); 4 internal error of this reader (a bug).
+"""
+
+import argparse
+import collections
+import json
+import math
+import os
+import signal
+import struct
+import sys
+
+import numpy as np
+import zstandard
+
+
+# ============================================================ errors (§13)
+
+ERROR_CLASSES = ("not-ivol", "unsupported-version", "unsupported-feature",
+                 "truncated", "checksum", "malformed")
+
+
+class IvolError(Exception):
+    """The file is refused; `cls` is one of the error classes of §13."""
+
+    def __init__(self, cls, message):
+        assert cls in ERROR_CLASSES
+        super().__init__("%s: %s" % (cls, message))
+        self.cls = cls
+        self.message = message
+
+
+class ReaderLimit(Exception):
+    """The file exceeds a limit of this reader (§13, last paragraphs)."""
+
+
+class UsageError(Exception):
+    """The command line asks for something impossible (exit status 2)."""
+
+
+def fail(cls, message):
+    raise IvolError(cls, message)
+
+
+# Limits of this reader (lower than the format allows, as §13 permits).
+LIMIT_DECODED_BYTES = 1 << 30    # node array + value array held in memory
+LIMIT_OUTPUT_BYTES = 1 << 30     # dense export / level of detail
+
+
+# ============================================================ §2.1 CRC-32C
+
+def _crc32c_table():
+    table = []
+    for n in range(256):
+        crc = n
+        for _ in range(8):
+            crc = (crc >> 1) ^ (0x82F63B78 if crc & 1 else 0)
+        table.append(crc)
+    return table
+
+
+_CRC32C_TABLE = _crc32c_table()
+
+
+def crc32c(data):
+    """CRC-32C (Castagnoli), reflected, init and final XOR 0xFFFFFFFF (§2.1)."""
+    table = _CRC32C_TABLE
+    crc = 0xFFFFFFFF
+    for b in data:
+        crc = table[(crc ^ b) & 0xFF] ^ (crc >> 8)
+    return crc ^ 0xFFFFFFFF
+
+
+def _selftest_crc32c():
+    # The check values of the table in §2.1.
+    assert crc32c(b"123456789") == 0xE3069283
+    assert crc32c(bytes(32)) == 0x8A9136AA
+    assert crc32c(b"\xff" * 32) == 0x62A8AB43
+
+
+# ============================================================ XXH64
+# The zstd content checksum (RFC 8878 §3.1.1) is the low 32 bits of XXH64 of
+# the decompressed content with seed 0.  Implemented here so that a wrong
+# content checksum is told apart from other damage (error class `checksum`).
+
+_P1, _P2, _P3 = 0x9E3779B185EBCA87, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9
+_P4, _P5 = 0x85EBCA77C2B2AE63, 0x27D4EB2F165667C5
+_M64 = (1 << 64) - 1
+
+
+def _rotl64(x, r):
+    return ((x << r) | (x >> (64 - r))) & _M64
+
+
+def _xxh_round(acc, lane):
+    acc = (acc + lane * _P2) & _M64
+    return (_rotl64(acc, 31) * _P1) & _M64
+
+
+def xxh64(data, seed=0):
+    n = len(data)
+    p = 0
+    if n >= 32:
+        v1 = (seed + _P1 + _P2) & _M64
+        v2 = (seed + _P2) & _M64
+        v3 = seed
+        v4 = (seed - _P1) & _M64
+        stripes = n // 32
+        for a, b, c, d in struct.iter_unpack("<4Q", data[:stripes * 32]):
+            v1 = _xxh_round(v1, a)
+            v2 = _xxh_round(v2, b)
+            v3 = _xxh_round(v3, c)
+            v4 = _xxh_round(v4, d)
+        p = stripes * 32
+        h = (_rotl64(v1, 1) + _rotl64(v2, 7) + _rotl64(v3, 12) + _rotl64(v4, 18)) & _M64
+        for v in (v1, v2, v3, v4):
+            h = ((h ^ _xxh_round(0, v)) * _P1 + _P4) & _M64
+    else:
+        h = (seed + _P5) & _M64
+    h = (h + n) & _M64
+    while p + 8 <= n:
+        (lane,) = struct.unpack_from("<Q", data, p)
+        h = (_rotl64(h ^ _xxh_round(0, lane), 27) * _P1 + _P4) & _M64
+        p += 8
+    if p + 4 <= n:
+        (lane,) = struct.unpack_from("<I", data, p)
+        h = (_rotl64(h ^ ((lane * _P1) & _M64), 23) * _P2 + _P3) & _M64
+        p += 4
+    while p < n:
+        h = (_rotl64(h ^ ((data[p] * _P5) & _M64), 11) * _P1) & _M64
+        p += 1
+    h ^= h >> 33
+    h = (h * _P2) & _M64
+    h ^= h >> 29
+    h = (h * _P3) & _M64
+    h ^= h >> 32
+    return h
+
+
+# ============================================================ file access
+
+class FileReader:
+    """Reads byte ranges of the file; never outside it (§13)."""
+
+    def __init__(self, path):
+        self.f = open(path, "rb")
+        self.size = os.fstat(self.f.fileno()).st_size
+
+    def read(self, offset, size):
+        # Every caller has checked the range against self.size before.
+        if offset < 0 or size < 0 or offset + size > self.size:
+            raise AssertionError("read outside the file")
+        self.f.seek(offset)
+        data = self.f.read(size)
+        if len(data) != size:   # the file shrank while we read it
+            fail("truncated", "file ended at offset %d while reading %d bytes"
+                 % (offset + len(data), size))
+        return data
+
+    def close(self):
+        self.f.close()
+
+
+# ============================================================ §4 Header
+
+SIGNATURE = b"\x89IVOL\r\n\n"
+
+Header = collections.namedtuple(
+    "Header", "version_major version_minor header_size "
+              "required_features optional_features")
+
+
+def read_header(r):
+    """§4, checked in the order of §13 steps 1 to 3."""
+    head = r.read(0, min(r.size, 16))
+    # Step 1: signature (an empty file is truncated, SPEC-NOTES 2).
+    n = min(r.size, 8)
+    if head[:n] != SIGNATURE[:n]:
+        fail("not-ivol", "header: bytes 0..%d are %s, expected the signature %s"
+             % (n, head[:n].hex(" "), SIGNATURE.hex(" ")))
+    if r.size < 8:
+        fail("truncated", "file is %d bytes long, shorter than the signature" % r.size)
+    # Step 2: version_major (SPEC-NOTES 3: read when its 2 bytes are present).
+    if r.size < 10:
+        fail("truncated", "file is %d bytes long, ends inside version_major" % r.size)
+    (major,) = struct.unpack_from("<H", head, 8)
+    if major != 1:
+        fail("unsupported-version",
+             "header: version_major at offset 8 is %d, this reader knows 1" % major)
+    if r.size < 12:
+        fail("truncated", "file is %d bytes long, shorter than 12 bytes" % r.size)
+    (minor,) = struct.unpack_from("<H", head, 10)
+    # Step 3: header_size, file size, header_crc, reserved, required features.
+    if r.size < 16:
+        fail("truncated", "file is %d bytes long, ends inside header_size" % r.size)
+    (header_size,) = struct.unpack_from("<I", head, 12)
+    if not 40 <= header_size <= 4096:
+        fail("malformed", "header: header_size at offset 12 is %d, expected 40..4096"
+             % header_size)
+    if r.size < header_size + 32:
+        fail("truncated", "file is %d bytes long, shorter than header (%d) + footer (32)"
+             % (r.size, header_size))
+    hdr = r.read(0, header_size)
+    (stored_crc,) = struct.unpack_from("<I", hdr, header_size - 4)
+    actual = crc32c(hdr[:header_size - 4])
+    if actual != stored_crc:
+        fail("checksum", "header: header_crc at offset %d is 0x%08X, CRC-32C of bytes "
+             "0..%d is 0x%08X" % (header_size - 4, stored_crc, header_size - 4, actual))
+    required, optional, reserved = struct.unpack_from("<QQI", hdr, 16)
+    if reserved != 0:
+        fail("malformed", "header: reserved field at offset 32 is 0x%08X, expected 0"
+             % reserved)
+    # No required feature is defined in version 1.0 (§14.2): name the bits.
+    if required != 0:
+        bits = [b for b in range(64) if required >> b & 1]
+        fail("unsupported-feature", "header: required_features has unknown bit(s) %s"
+             % ", ".join(map(str, bits)))
+    # optional_features: ignored (§14.2).  Bytes 36 .. header_size - 4: skipped (§4).
+    return Header(major, minor, header_size, required, optional)
+
+
+# ============================================================ §5 Footer
+
+END_SIGNATURE = b"IVOL_END"
+
+Footer = collections.namedtuple("Footer", "index_offset index_size index_crc")
+
+
+def read_footer(r, header):
+    """§5, checked in the order of §13 step 4.  Returns the footer and the index bytes."""
+    at = r.size - 32
+    ft = r.read(at, 32)
+    if ft[24:32] != END_SIGNATURE:
+        fail("truncated", "footer: bytes at offset %d are %s, expected end_signature "
+             "'IVOL_END'" % (at + 24, ft[24:32].hex(" ")))
+    index_offset, index_size, index_crc, footer_crc = struct.unpack_from("<QQII", ft, 0)
+    actual = crc32c(ft[:20])
+    if actual != footer_crc:
+        fail("checksum", "footer: footer_crc at offset %d is 0x%08X, CRC-32C of footer "
+             "bytes 0..20 is 0x%08X" % (at + 20, footer_crc, actual))
+    if index_offset < header.header_size:
+        fail("malformed", "footer: index_offset %d is less than header_size %d"
+             % (index_offset, header.header_size))
+    if index_offset + index_size + 32 != r.size:
+        fail("malformed", "footer: index_offset %d + index_size %d + 32 = %d, expected "
+             "the file size %d" % (index_offset, index_size,
+                                   index_offset + index_size + 32, r.size))
+    index = r.read(index_offset, index_size)
+    actual = crc32c(index)
+    if actual != index_crc:
+        fail("checksum", "index: index_crc (footer offset %d) is 0x%08X, CRC-32C of the "
+             "%d index bytes at offset %d is 0x%08X"
+             % (at + 16, index_crc, index_size, index_offset, actual))
+    return Footer(index_offset, index_size, index_crc), index
+
+
+# ============================================================ §6 Index
+
+INDEX_SIGNATURE = b"IVIX"
+ENCODINGS = {1: ("binary16", 2), 2: ("uint16", 2), 3: ("float32", 4)}   # §9
+STREAM_METADATA, STREAM_NODES, STREAM_VALUES = 1, 2, 3                  # §6.4
+STREAM_NAMES = {1: "metadata", 2: "nodes", 3: "values"}
+MAX_BLOCK_DECODED = 64 * 1024 * 1024                                   # §7
+MAX_METADATA = 16 * 1024 * 1024                                        # §11
+
+BlockEntry = collections.namedtuple(
+    "BlockEntry", "number file_offset first_element element_count stored_size "
+                  "crc stream codec flags level")
+
+
+class Index:
+    """The decoded index (§6.1 fixed part, §6.2 level table, §6.3 block table)."""
+
+    def where(self, e):
+        """How error messages name a block (§13)."""
+        return "block %d (stream %d%s, level %d, at offset %d)" % (
+            e.number, e.stream,
+            " " + STREAM_NAMES[e.stream] if e.stream in STREAM_NAMES else "",
+            e.level, e.file_offset)
+
+
+def read_index(header, footer, idx):
+    """§6, checked in the order of §13 step 5 (without the metadata block)."""
+    ix = Index()
+    ix.header = header
+    ix.footer = footer
+    base = footer.index_offset
+    # ---- §6.1 fixed part
+    if len(idx) < 48:
+        fail("malformed", "index: index_size %d is smaller than the fixed part (48)"
+             % len(idx))
+    (sig, fixed_size, structure_kind, value_encoding, depth, reserved,
+     size_x, size_y, size_z, value_scale, value_offset,
+     block_count, block_entry_size) = struct.unpack_from("<4sI4B3I2d2I", idx, 0)
+    if sig != INDEX_SIGNATURE:   # SPEC-NOTES 6: class not stated; malformed
+        fail("malformed", "index: index_signature at offset %d is %s, expected 'IVIX'"
+             % (base, sig.hex(" ")))
+    if not 48 <= fixed_size <= 4096:
+        fail("malformed", "index: fixed_size %d, expected 48..4096" % fixed_size)
+    if structure_kind != 1:
+        fail("unsupported-feature", "index: structure_kind %d, this reader knows 1 "
+             "(octree)" % structure_kind)
+    if value_encoding not in ENCODINGS:
+        fail("unsupported-feature", "index: value_encoding %d, this reader knows 1, 2, 3"
+             % value_encoding)
+    if depth > 31:
+        fail("malformed", "index: depth %d, expected 0..31" % depth)
+    if reserved != 0:
+        fail("malformed", "index: reserved byte at index offset 11 is %d, expected 0"
+             % reserved)
+    for name, v in (("size_x", size_x), ("size_y", size_y), ("size_z", size_z)):
+        if v < 1:
+            fail("malformed", "index: %s is 0, expected >= 1" % name)
+    expected_depth = (max(size_x, size_y, size_z) - 1).bit_length()
+    if depth != expected_depth:
+        fail("malformed", "index: depth %d, expected %d for %dx%dx%d voxels"
+             % (depth, expected_depth, size_x, size_y, size_z))
+    if not (math.isfinite(value_scale) and value_scale != 0):
+        fail("malformed", "index: value_scale %r, expected finite and non-zero"
+             % value_scale)
+    if not math.isfinite(value_offset):
+        fail("malformed", "index: value_offset %r, expected finite" % value_offset)
+    if block_count < 2:
+        fail("malformed", "index: block_count %d, expected >= 2" % block_count)
+    if not 32 <= block_entry_size <= 4096:
+        fail("malformed", "index: block_entry_size %d, expected 32..4096"
+             % block_entry_size)
+    D = depth
+    expected_size = fixed_size + 8 * (D + 1) + block_count * block_entry_size
+    if len(idx) != expected_size:   # §6.3; checked here, before the tables are read
+        fail("malformed", "index: index_size %d, expected fixed_size %d + 8 x %d + "
+             "block_count %d x block_entry_size %d = %d"
+             % (len(idx), fixed_size, D + 1, block_count, block_entry_size,
+                expected_size))
+    ix.value_encoding = value_encoding
+    ix.encoding_name, ix.width = ENCODINGS[value_encoding]
+    ix.depth = D
+    ix.size = (size_x, size_y, size_z)
+    ix.value_scale, ix.value_offset = value_scale, value_offset
+    ix.fixed_size, ix.block_entry_size = fixed_size, block_entry_size
+
+    # ---- §6.2 level table
+    counts = list(struct.unpack_from("<%dQ" % (D + 1), idx, fixed_size))
+    if counts[0] > 1:
+        fail("malformed", "level table: inner_count[0] is %d, expected 0 or 1" % counts[0])
+    if counts[D] != 0:
+        fail("malformed", "level table: inner_count[%d] (last level) is %d, expected 0"
+             % (D, counts[D]))
+    for l in range(D):
+        if counts[l + 1] > 8 * counts[l]:
+            fail("malformed", "level table: inner_count[%d] = %d exceeds 8 x "
+                 "inner_count[%d] = %d" % (l + 1, counts[l + 1], l, 8 * counts[l]))
+    for l in range(D + 1):   # implied by the rule above; checked as §6.2 lists it
+        if counts[l] == 0 and any(counts[m] for m in range(l + 1, D + 1)):
+            fail("malformed", "level table: inner_count[%d] is 0 but a deeper level "
+                 "has inner nodes" % l)
+    ix.inner_count = counts
+    ix.total_inner = sum(counts)
+    ix.total_values = 1 + 8 * ix.total_inner
+    ix.first_inner = [sum(counts[:l]) for l in range(D + 1)]
+    ix.level_values = [1] + [8 * counts[l - 1] for l in range(1, D + 1)]
+    ix.first_value = [0] + [1 + 8 * ix.first_inner[l - 1] for l in range(1, D + 1)]
+
+    # ---- §6.3 block table (per entry, in table order; SPEC-NOTES 7)
+    at = fixed_size + 8 * (D + 1)
+    expected_offset = header.header_size
+    entries = []
+    for number in range(block_count):
+        e = BlockEntry(number, *struct.unpack_from("<QQIIIBBBB", idx, at))
+        at += block_entry_size           # bytes 32 .. block_entry_size: skipped
+        if e.file_offset != expected_offset:
+            fail("malformed", "block table: block %d has file_offset %d, expected %d "
+                 "(blocks follow each other without gaps from header_size)"
+                 % (number, e.file_offset, expected_offset))
+        expected_offset = e.file_offset + e.stored_size
+        if e.element_count < 1:
+            fail("malformed", "block table: %s has element_count 0" % ix.where(e))
+        if e.stored_size < 1:
+            fail("malformed", "block table: %s has stored_size 0" % ix.where(e))
+        if e.flags & 0xFE:
+            fail("malformed", "block table: %s has reserved flag bits set (flags 0x%02X)"
+                 % (ix.where(e), e.flags))
+        if e.stream == 0 or e.stream >= 4:   # §6.4: streams reserved for later versions
+            if not e.flags & 1:
+                fail("unsupported-feature", "block table: %s belongs to unknown stream %d "
+                     "and is not ignorable" % (ix.where(e), e.stream))
+            entries.append(e)    # ignorable: skipped (SPEC-NOTES 12 for its CRC)
+            continue
+        if e.flags != 0:
+            fail("malformed", "block table: %s has flags 0x%02X, expected 0 for stream %d"
+                 % (ix.where(e), e.flags, e.stream))
+        check_block_level(ix, e)
+        entries.append(e)
+    if expected_offset != footer.index_offset:
+        fail("malformed", "block table: the last block ends at %d, expected index_offset %d"
+             % (expected_offset, footer.index_offset))
+    ix.blocks = entries
+
+    # ---- §6.4 streams
+    meta = [e for e in entries if e.stream == STREAM_METADATA]
+    if len(meta) != 1:
+        fail("malformed", "block table: %d blocks of stream 1 (metadata), expected 1"
+             % len(meta))
+    ix.metadata_block = meta[0]
+    check_stream_coverage(ix, STREAM_NODES, ix.total_inner)
+    check_stream_coverage(ix, STREAM_VALUES, ix.total_values)
+    return ix
+
+
+def check_block_level(ix, e):
+    """§6.4: all elements of a block belong to the level in its `level` field."""
+    if e.stream == STREAM_METADATA:
+        if e.level != 0:
+            fail("malformed", "block table: %s: the metadata block has level %d, expected 0"
+                 % (ix.where(e), e.level))
+        if e.first_element != 0:   # SPEC-NOTES 23: the only block of its stream
+            fail("malformed", "block table: %s: the metadata block has first_element %d, "
+                 "expected 0" % (ix.where(e), e.first_element))
+        return
+    if e.level > ix.depth:
+        fail("malformed", "block table: %s: level %d is deeper than depth %d"
+             % (ix.where(e), e.level, ix.depth))
+    if e.stream == STREAM_NODES:
+        lo, n = ix.first_inner[e.level], ix.inner_count[e.level]
+    else:
+        lo, n = ix.first_value[e.level], ix.level_values[e.level]
+    if not (lo <= e.first_element and e.first_element + e.element_count <= lo + n):
+        fail("malformed", "block table: %s: elements %d..%d lie outside level %d's range "
+             "%d..%d" % (ix.where(e), e.first_element, e.first_element + e.element_count,
+                         e.level, lo, lo + n))
+
+
+def check_stream_coverage(ix, stream, total):
+    """§6.4: the blocks of a stream cover 0 .. total exactly once."""
+    blocks = sorted((e for e in ix.blocks if e.stream == stream),
+                    key=lambda e: e.first_element)
+    position = 0
+    for e in blocks:
+        if e.first_element != position:
+            fail("malformed", "block table: stream %d (%s): %s starts at element %d, "
+                 "expected %d (%s)" % (stream, STREAM_NAMES[stream], ix.where(e),
+                                       e.first_element, position,
+                                       "gap" if e.first_element > position else "overlap"))
+        position += e.element_count
+    if position != total:
+        fail("malformed", "block table: stream %d (%s) covers elements 0..%d, expected 0..%d"
+             % (stream, STREAM_NAMES[stream], position, total))
+
+
+# ============================================================ §7 Blocks
+
+def stream_width(ix, stream):
+    return {STREAM_METADATA: 1, STREAM_NODES: 8, STREAM_VALUES: ix.width}[stream]
+
+
+def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
+    """§7: read one block, check its CRC, decode it.  Returns the decoded bytes."""
+    where = ix.where(e)
+    stored = r.read(e.file_offset, e.stored_size)
+    actual = crc32c(stored)
+    if actual != e.crc:   # §7: the CRC is checked before decoding
+        fail("checksum", "%s: CRC-32C of the %d stored bytes is 0x%08X, the block table "
+             "says 0x%08X" % (where, e.stored_size, actual, e.crc))
+    if e.codec not in (0, 1):      # checked when the block is read (SPEC-NOTES 8)
+        fail("unsupported-feature", "%s: codec %d, this reader knows 0 (stored) and 1 (zstd)"
+             % (where, e.codec))
+    size = e.element_count * stream_width(ix, e.stream)
+    if size > MAX_BLOCK_DECODED:
+        fail("malformed", "%s: decoded size %d exceeds 64 MiB" % (where, size))
+    if size > limit:   # §11: the metadata is at most 16 MiB
+        fail("malformed", "%s: decoded size %d exceeds %d" % (where, size, limit))
+    if e.codec == 0:
+        if e.stored_size != size:
+            fail("malformed", "%s: stored block (codec 0) has stored_size %d, expected "
+                 "element_count x width = %d" % (where, e.stored_size, size))
+        return stored
+    return decode_zstd_frame(stored, size, where)
+
+
+ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
+
+
+def decode_zstd_frame(data, size, where):
+    """§7 codec 1: exactly one zstd frame (RFC 8878 §3.1.1) with Frame_Content_Size."""
+    def need(n, what):
+        if len(data) < n:
+            fail("malformed", "%s: zstd frame ends inside the %s" % (where, what))
+
+    need(5, "frame header")
+    if data[:4] != ZSTD_MAGIC:
+        fail("malformed", "%s: stored bytes do not start with a zstd frame (magic %s)"
+             % (where, data[:4].hex(" ")))
+    fhd = data[4]
+    fcs_flag, single_segment = fhd >> 6, (fhd >> 5) & 1
+    reserved_bit, has_checksum, did_flag = (fhd >> 3) & 1, (fhd >> 2) & 1, fhd & 3
+    if reserved_bit:
+        fail("malformed", "%s: zstd frame header has its reserved bit set" % where)
+    p = 5 + (0 if single_segment else 1)          # Window_Descriptor
+    did_size = (0, 1, 2, 4)[did_flag]
+    fcs_size = (1 if single_segment else 0, 2, 4, 8)[fcs_flag]
+    need(p + did_size + fcs_size, "frame header")
+    dictionary_id = int.from_bytes(data[p:p + did_size], "little")
+    p += did_size
+    if fcs_size == 0:
+        fail("malformed", "%s: zstd frame header carries no Frame_Content_Size" % where)
+    content_size = int.from_bytes(data[p:p + fcs_size], "little")
+    content_size += 256 if fcs_size == 2 else 0
+    p += fcs_size
+    if dictionary_id != 0:
+        fail("malformed", "%s: zstd frame needs dictionary %d" % (where, dictionary_id))
+    if content_size != size:
+        fail("malformed", "%s: zstd Frame_Content_Size is %d, expected element_count x "
+             "width = %d" % (where, content_size, size))
+    # Walk the zstd blocks to find the end of the frame (RFC 8878 §3.1.1.2).
+    while True:
+        need(p + 3, "block header")
+        block_header = int.from_bytes(data[p:p + 3], "little")
+        p += 3
+        last, block_type, block_size = block_header & 1, (block_header >> 1) & 3, block_header >> 3
+        if block_type == 3:
+            fail("malformed", "%s: zstd block of reserved type 3" % where)
+        p += 1 if block_type == 1 else block_size
+        need(p, "last zstd block")
+        if last:
+            break
+    end_of_blocks = p
+    if has_checksum:
+        need(p + 4, "content checksum")
+        (stored_checksum,) = struct.unpack_from("<I", data, p)
+        p += 4
+    if p != len(data):
+        fail("malformed", "%s: %d bytes follow the zstd frame (only one frame is allowed)"
+             % (where, len(data) - p))
+    # Decode the frame without its checksum; the checksum is verified below, so
+    # that a wrong checksum is reported as class `checksum`.
+    frame = data[:4] + bytes([fhd & ~0x04]) + data[5:end_of_blocks]
+    try:
+        out = zstandard.ZstdDecompressor(max_window_size=1 << 31).decompress(
+            frame, max_output_size=size)
+    except zstandard.ZstdError as err:
+        fail("malformed", "%s: zstd frame does not decode: %s" % (where, err))
+    if len(out) != size:
+        fail("malformed", "%s: zstd frame decodes to %d bytes, expected %d"
+             % (where, len(out), size))
+    if has_checksum:
+        actual = xxh64(out) & 0xFFFFFFFF
+        if actual != stored_checksum:
+            fail("checksum", "%s: zstd content checksum is 0x%08X, XXH64 of the content "
+                 "gives 0x%08X" % (where, stored_checksum, actual))
+    return out
+
+
+# ============================================================ §11 Metadata
+
+class _DuplicateKey(Exception):
+    pass
+
+
+def _object_without_duplicates(pairs):
+    obj = {}
+    for key, value in pairs:
+        if key in obj:
+            raise _DuplicateKey(key)
+        obj[key] = value
+    return obj
+
+
+def _reject_constant(name):     # NaN, Infinity, -Infinity are not JSON (RFC 8259)
+    raise ValueError("%s is not JSON" % name)
+
+
+def _parse_int(text):           # Python refuses int() of > 4300 digits
+    return int(text) if len(text) <= 4000 else float(text)
+
+
+def _is_finite(v):
+    try:
+        return math.isfinite(float(v))
+    except OverflowError:
+        return False
+
+
+def _is_number(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _has_lone_surrogate(v):
+    """True if a key or string of the parsed JSON cannot be encoded as UTF-8."""
+    if isinstance(v, str):
+        try:
+            v.encode("utf-8")
+        except UnicodeEncodeError:
+            return True
+        return False
+    if isinstance(v, dict):
+        return any(_has_lone_surrogate(k) or _has_lone_surrogate(x) for k, x in v.items())
+    if isinstance(v, list):
+        return any(_has_lone_surrogate(x) for x in v)
+    return False
+
+
+def read_metadata(r, ix):
+    """§11: the metadata block (stream 1) holds a JSON object."""
+    e = ix.metadata_block
+    data = read_block(r, ix, e, limit=MAX_METADATA)
+    where = "metadata (%s)" % ix.where(e)
+    if data.startswith(b"\xef\xbb\xbf"):
+        fail("malformed", "%s: starts with a UTF-8 byte-order mark" % where)
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        fail("malformed", "%s: not valid UTF-8 (byte %d)" % (where, err.start))
+    try:
+        meta = json.loads(text, object_pairs_hook=_object_without_duplicates,
+                          parse_constant=_reject_constant, parse_int=_parse_int)
+    except _DuplicateKey as err:
+        fail("malformed", "%s: an object contains key %r twice" % (where, err.args[0]))
+    except ValueError as err:
+        fail("malformed", "%s: not valid JSON: %s" % (where, err))
+    except RecursionError:   # RFC 8259 §9 lets a parser limit nesting (SPEC-NOTES 35c)
+        raise ReaderLimit("%s: JSON nested too deeply for this reader" % where)
+    if not isinstance(meta, dict):
+        fail("malformed", "%s: the top level is not a JSON object" % where)
+    if _has_lone_surrogate(meta):   # §11: "\ud800" alone is not valid text
+        fail("malformed", "%s: a string holds a lone surrogate escape" % where)
+
+    def bad(key, what):
+        fail("malformed", "%s: key %r %s" % (where, key, what))
+
+    def number_triple(key, positive):
+        v = meta.get(key)
+        if not (isinstance(v, list) and len(v) == 3 and all(_is_number(a) for a in v)):
+            bad(key, "must be an array of 3 numbers")
+        for a in v:   # SPEC-NOTES 35d: numbers too large for binary64 are refused
+            if not _is_finite(a) or (positive and not a > 0):
+                bad(key, "holds %r, expected a finite%s number"
+                    % (a, " positive" if positive else ""))
+
+    for key in ("voxel_size", "unit", "origin", "value"):
+        if key not in meta:
+            bad(key, "is required and missing")
+    number_triple("voxel_size", positive=True)
+    if not isinstance(meta["unit"], str):
+        bad("unit", "must be a string")
+    number_triple("origin", positive=False)
+    value = meta["value"]
+    if not isinstance(value, dict):
+        bad("value", "must be an object")
+    if not isinstance(value.get("quantity"), str):
+        bad("value.quantity", "is required and must be a string")
+    if "unit" in value and not isinstance(value["unit"], str):
+        bad("value.unit", "must be a string")
+    for key in ("structure", "provenance", "user"):   # SPEC-NOTES 36: only their type
+        if key in meta and not isinstance(meta[key], dict):
+            bad(key, "must be an object")
+    return meta
+
+
+# ============================================================ §13 steps 1-5
+
+def open_ivol(path):
+    """Open a file and check everything up to and including the metadata
+    (§13 steps 1-5).  Returns (reader, index, metadata)."""
+    r = FileReader(path)
+    try:
+        header = read_header(r)                     # steps 1-3
+        footer, idx = read_footer(r, header)        # step 4
+        ix = read_index(header, footer, idx)        # step 5: index
+        meta = read_metadata(r, ix)                 # step 5: metadata block
+    except BaseException:
+        r.close()
+        raise
+    return r, ix, meta
+
+
+# ============================================================ §13 step 6: other blocks
+
+def read_streams(r, ix, top_level, check_ignorable):
+    """§13 step 6 (SPEC-NOTES 10, 27): read the node blocks of levels < top_level
+    and the value blocks of levels <= top_level, in table (file) order; check the
+    CRCs of ignorable blocks when check_ignorable (SPEC-NOTES 12).  Returns
+    (nodes, values) as little-endian numpy arrays."""
+    n_nodes = ix.first_inner[top_level]
+    n_values = ix.first_value[top_level] + ix.level_values[top_level]
+    need = n_nodes * 8 + n_values * ix.width
+    if need > LIMIT_DECODED_BYTES:
+        raise ReaderLimit("the node and value arrays need %d bytes, this reader's limit "
+                          "is %d" % (need, LIMIT_DECODED_BYTES))
+    nodes = np.zeros(n_nodes, "<u8")
+    values = np.zeros(n_values, "<u%d" % ix.width)
+    for e in ix.blocks:
+        if e.stream >= 4:   # ignorable block of an unknown stream (§6.4)
+            if check_ignorable:
+                stored = r.read(e.file_offset, e.stored_size)
+                if crc32c(stored) != e.crc:
+                    fail("checksum", "%s: CRC-32C of the ignorable block does not match"
+                         % ix.where(e))
+            continue
+        if e.stream == STREAM_NODES and e.level < top_level:
+            target = nodes
+        elif e.stream == STREAM_VALUES and e.level <= top_level:
+            target = values
+        else:
+            continue        # the metadata (already read) or a block not needed
+        data = read_block(r, ix, e)
+        target[e.first_element:e.first_element + e.element_count] = \
+            np.frombuffer(data, target.dtype)
+    return nodes, values
+
+
+# ============================================================ §8 The octree
+
+POPCOUNT = np.array([bin(i).count("1") for i in range(256)], np.int64)
+OCTANT = np.arange(8, dtype=np.int64)                  # c = x_bit + 2 y_bit + 4 z_bit
+X_BIT, Y_BIT, Z_BIT = OCTANT & 1, (OCTANT >> 1) & 1, (OCTANT >> 2) & 1
+FIC_BITS = np.uint64((1 << 56) - 1)
+
+
+def ov(a, n, s):
+    """§8.1: ov(a, n) = max(0, min(n, (a+1)·s) − a·s), for arrays a."""
+    return np.maximum(0, np.minimum(n, (a + 1) * s) - a * s)
+
+
+def weights_f64(wx, wy, wz, side):
+    """w = ov·ov·ov converted to binary64 (§8.1, §10).  Exact integer product,
+    then one rounding to nearest (exact while w <= 2^53; SPEC-NOTES 30)."""
+    if side ** 3 < 1 << 63:
+        return (wx * wy * wz).astype(np.float64)
+    return np.array([float(int(a) * int(b) * int(c))
+                     for a, b, c in zip(wx.ravel(), wy.ravel(), wz.ravel())],
+                    np.float64).reshape(wx.shape)
+
+
+class Level:
+    """The inner nodes of one level and their eight children, as the §8 walk
+    found them (arrays in node order)."""
+
+
+def walk_octree(ix, nodes, values, top_level):
+    """§8.3/§8.4: visit the inner nodes of levels 0 .. top_level-1 breadth-first,
+    check the structural rules, and return one Level per level with inner nodes."""
+    D = ix.depth
+    sx, sy, sz = ix.size
+    levels = []
+    if ix.inner_count[0] == 0:
+        return levels                     # the root is a leaf (§8.3)
+    ci = cj = ck = np.zeros(1, np.int64)  # node coordinates of the root
+    vidx = np.zeros(1, np.int64)          # the root's value is value 0
+    masks_before = 0                      # Σ popcount(child_mask) of all earlier nodes
+    for l in range(top_level):
+        count = ix.inner_count[l]
+        if count == 0:
+            break
+        first = ix.first_inner[l]
+        words = nodes[first:first + count]
+        fic = (words & FIC_BITS).astype(np.int64)
+        mask = (words >> np.uint64(56)).astype(np.int64)
+        pop = POPCOUNT[mask]
+        numbers = first + np.arange(count, dtype=np.int64)
+
+        def refuse(bad, what):
+            k = int(np.flatnonzero(bad)[0])
+            fail("malformed", "nodes: inner node %d (level %d, node coordinates %d,%d,%d, "
+                 "node word 0x%016X): %s" % (first + k, l, ci[k], cj[k], ck[k],
+                                             int(words[k]), what(k)))
+
+        # §8.3: first_inner_child(n) = 1 + Σ_{m<n} popcount(child_mask(m))
+        expected = 1 + masks_before + np.cumsum(pop) - pop
+        bad = fic != expected
+        if bad.any():
+            refuse(bad, lambda k: "first_inner_child is %d, expected %d (breadth-first "
+                   "order)" % (fic[k], expected[k]))
+        # §8.3: first_inner_child lies in the next level's range of inner nodes
+        lo = ix.first_inner[l + 1]                       # l < top_level <= D
+        hi = lo + ix.inner_count[l + 1]
+        bad = ~((fic >= lo) & ((fic < hi) | ((fic == hi) & (mask == 0))))
+        if bad.any():
+            refuse(bad, lambda k: "first_inner_child %d outside %d..%d" % (fic[k], lo, hi))
+        # §8.4: an inner node of level D-1 has child_mask 0
+        if l == D - 1:
+            bad = mask != 0
+            if bad.any():
+                refuse(bad, lambda k: "child_mask 0x%02X at level D-1, expected 0" % mask[k])
+        # Geometry of the eight children (§8.1), side s = 2^(D-l-1)
+        s = 1 << (D - l - 1)
+        cx = 2 * ci[:, None] + X_BIT
+        cy = 2 * cj[:, None] + Y_BIT
+        cz = 2 * ck[:, None] + Z_BIT
+        wx, wy, wz = ov(cx, sx, s), ov(cy, sy, s), ov(cz, sz, s)
+        empty = (wx == 0) | (wy == 0) | (wz == 0)           # weight 0: all padding
+        inner = ((mask[:, None] >> OCTANT) & 1).astype(bool)
+        child_vidx = 1 + 8 * numbers[:, None] + OCTANT       # §8.3: values 1 + 8n + c
+        child_values = values[child_vidx]
+        # §8.4: a node of weight 0 is a leaf, and its value has all bits zero
+        bad_child = empty & inner
+        if bad_child.any():
+            refuse(bad_child.any(axis=1), lambda k: "child %d has weight 0 (padding) but "
+                   "is marked inner" % np.flatnonzero(bad_child[k])[0])
+        bad_child = empty & (child_values != 0)
+        if bad_child.any():
+            refuse(bad_child.any(axis=1), lambda k: "child %d (value %d) has weight 0 "
+                   "(padding) but its value 0x%X is not zero" % (
+                       np.flatnonzero(bad_child[k])[0],
+                       child_vidx[k][bad_child[k]][0], child_values[k][bad_child[k]][0]))
+        # §8.4: Σ popcount(child_mask) over level l = inner_count[l + 1]
+        total = int(pop.sum())
+        expected_total = ix.inner_count[l + 1]
+        if total != expected_total:
+            fail("malformed", "nodes: level %d: the child masks mark %d inner children, "
+                 "inner_count[%d] is %d" % (l, total, l + 1, expected_total))
+        lv = Level()
+        lv.level, lv.first, lv.count = l, first, count
+        lv.ci, lv.cj, lv.ck, lv.vidx = ci, cj, ck, vidx
+        lv.cx, lv.cy, lv.cz, lv.wx, lv.wy, lv.wz = cx, cy, cz, wx, wy, wz
+        lv.empty, lv.inner, lv.child_vidx = empty, inner, child_vidx
+        levels.append(lv)
+        # The inner children, in (n, c) order, are the inner nodes of level l+1.
+        ci, cj, ck, vidx = cx[inner], cy[inner], cz[inner], child_vidx[inner]
+        masks_before += total
+    return levels
+
+
+# ============================================================ §9 Value encodings
+
+def decode_values(values, encoding):
+    """§9: the binary64 number `decoded` of each stored element."""
+    with np.errstate(all="ignore"):
+        if encoding == 1:
+            return values.view("<f2").astype(np.float64)
+        if encoding == 2:
+            return values.astype(np.float64)
+        return values.view("<f4").astype(np.float64)
+
+
+def encode_binary16(m):
+    """§9: round binary64 to the nearest binary16, ties to even, overflow to
+    infinity; NaN -> 0x7E00.  Integer arithmetic on the bits, one rounding."""
+    bits = m.view(np.uint64)
+    sign = (bits >> np.uint64(63)).astype(np.int64) << 15
+    exponent = ((bits >> np.uint64(52)) & np.uint64(0x7FF)).astype(np.int64)
+    mantissa = (bits & np.uint64((1 << 52) - 1)).astype(np.int64) | (1 << 52)
+    e = exponent - 1023                                  # m = mantissa · 2^(e-52)
+    shift = np.minimum(42 + np.maximum(0, -14 - e), 60)  # to the binary16 quantum
+    q = mantissa >> shift
+    rest = mantissa & ((np.int64(1) << shift) - 1)
+    half = np.int64(1) << (shift - 1)
+    q += (rest > half) | ((rest == half) & ((q & 1) == 1))
+    magnitude = np.where(e >= -14, ((e + 15) << 10) + (q - 1024), q)  # carry is natural
+    magnitude = np.minimum(magnitude, 0x7C00)            # overflow -> infinity
+    magnitude = np.where(exponent == 0, 0, magnitude)    # zero, binary64 subnormals
+    magnitude = np.where(exponent == 0x7FF, 0x7C00, magnitude)  # infinity
+    out = (sign | magnitude).astype(np.uint16)
+    out[np.isnan(m)] = 0x7E00
+    return out
+
+
+def encode_values(m, encoding):
+    """§9: encode(m) for an array of binary64 numbers; returns the stored bits."""
+    with np.errstate(all="ignore"):
+        if encoding == 1:
+            return encode_binary16(m)
+        if encoding == 2:
+            return np.clip(np.rint(m), 0, 65535).astype(np.uint16)
+        out = m.astype(np.float32).view(np.uint32).copy()
+        out[np.isnan(m)] = 0x7FC00000
+        return out
+
+
+# ============================================================ §10 Inner-node averages
+
+def check_averages(ix, values, levels):
+    """§10: recompute m(node) bottom-up, in exactly the spec's order of
+    operations, and compare encode(m) with every stored inner value bit for bit."""
+    D = ix.depth
+    decoded = decode_values(values, ix.value_encoding)
+    m_of_level = [None] * len(levels)
+    m_next = None          # m of the inner nodes of the level below, in node order
+    with np.errstate(all="ignore"):
+        for lv in reversed(levels):
+            m_child = decoded[lv.child_vidx]                # leaves: decoded value
+            if m_next is not None:
+                m_child[lv.inner] = m_next                  # inner children: unrounded m
+            side = 1 << (D - lv.level - 1)
+            w = weights_f64(lv.wx, lv.wy, lv.wz, side)
+            acc = np.zeros(lv.count)                        # acc = +0.0
+            for c in range(8):                              # c = 0 … 7, in order
+                take = w[:, c] > 0
+                acc = np.where(take, acc + w[:, c] * m_child[:, c], acc)
+            # W = Σ w(child) = w(node): the children partition the node's voxels
+            W = weights_f64(ov(lv.ci, ix.size[0], 2 * side),
+                            ov(lv.cj, ix.size[1], 2 * side),
+                            ov(lv.ck, ix.size[2], 2 * side), 2 * side)
+            m = acc / W
+            m_of_level[lv.level] = m
+            m_next = m
+    for lv, m in zip(levels, m_of_level):                    # report top-down
+        expected = encode_values(m, ix.value_encoding)
+        stored = values[lv.vidx]
+        bad = np.flatnonzero(expected != stored)
+        if bad.size:
+            k = int(bad[0])
+            fail("malformed", "nodes: inner node %d (level %d, node coordinates %d,%d,%d) "
+                 "stores value %d = 0x%X, the average of §10 encodes to 0x%X (m = %r)"
+                 % (lv.first + k, lv.level, lv.ci[k], lv.cj[k], lv.ck[k], int(lv.vidx[k]),
+                    int(stored[k]), int(expected[k]), float(m[k])))
+
+
+# ============================================================ §12 Derived views
+
+def build_level_of_detail(ix, values, levels, top_level):
+    """§12.3 (and §12.2 for top_level = D): the array [z][y][x] of the values of
+    the nodes of level top_level, a missing node taking the value of the leaf
+    that covers it.  Built top-down on the non-padding extent of each level."""
+    D = ix.depth
+    sx, sy, sz = ix.size
+    grid = values[0:1].reshape(1, 1, 1)                      # level 0: the root
+    for l in range(top_level):
+        s = 1 << (D - l - 1)
+        extent = (-(-sz // s), -(-sy // s), -(-sx // s))     # ceil(size / s)
+        grid = grid.repeat(2, 0).repeat(2, 1).repeat(2, 2)
+        grid = grid[:extent[0], :extent[1], :extent[2]].copy()
+        if l < len(levels):                                 # children of level l's inner nodes
+            lv = levels[l]
+            keep = ~lv.empty
+            grid[lv.cz[keep], lv.cy[keep], lv.cx[keep]] = values[lv.child_vidx[keep]]
+    return grid
+
+
+def output_bytes(ix, top_level):
+    k = ix.depth - top_level
+    n = 1
+    for size in ix.size:
+        n *= -(-size // (1 << k))
+    return n * ix.width
+
+
+def check_output_limit(ix, top_level):
+    need = output_bytes(ix, top_level)
+    if need > LIMIT_OUTPUT_BYTES:
+        raise ReaderLimit("the output needs %d bytes, this reader's limit is %d"
+                          % (need, LIMIT_OUTPUT_BYTES))
+
+
+# ============================================================ whole-file operations
+
+def verify_file(path, want_dense=False):
+    """Full verification (§13 steps 1-6, all blocks, all nodes, all averages).
+    Returns (index, metadata, dense bytes or None)."""
+    r, ix, meta = open_ivol(path)
+    try:
+        D = ix.depth
+        if want_dense:
+            check_output_limit(ix, D)
+        nodes, values = read_streams(r, ix, D, check_ignorable=True)
+        levels = walk_octree(ix, nodes, values, D)
+        check_averages(ix, values, levels)
+        dense = None
+        if want_dense:
+            dense = build_level_of_detail(ix, values, levels, D).tobytes()
+        return ix, meta, dense
+    finally:
+        r.close()
+
+
+def level_of_detail(path, k):
+    """§12.3: level of detail k, reading only the blocks of levels <= D - k.
+    Returns (index, bytes).  With k = 0 all blocks are read and the averages
+    are checked as well."""
+    r, ix, meta = open_ivol(path)
+    try:
+        D = ix.depth
+        if not 0 <= k <= D:
+            raise UsageError("level of detail %d out of range 0..%d for this file" % (k, D))
+        top = D - k
+        check_output_limit(ix, top)
+        nodes, values = read_streams(r, ix, top, check_ignorable=(k == 0))
+        levels = walk_octree(ix, nodes, values, top)
+        if k == 0:
+            check_averages(ix, values, levels)
+        return ix, build_level_of_detail(ix, values, levels, top).tobytes()
+    finally:
+        r.close()
+
+
+def info(path):
+    r, ix, meta = open_ivol(path)
+    r.close()
+    h = ix.header
+    blocks = []
+    for e in ix.blocks:
+        blocks.append({"block": e.number, "stream": e.stream,
+                       "stream_name": STREAM_NAMES.get(e.stream, "unknown (ignorable)"),
+                       "level": e.level, "codec": e.codec, "flags": e.flags,
+                       "file_offset": e.file_offset, "stored_size": e.stored_size,
+                       "first_element": e.first_element,
+                       "element_count": e.element_count, "crc": "0x%08X" % e.crc})
+    per_stream = {}
+    for e in ix.blocks:
+        s = per_stream.setdefault(STREAM_NAMES.get(e.stream, "stream %d" % e.stream),
+                                  {"blocks": 0, "elements": 0, "stored_bytes": 0})
+        s["blocks"] += 1
+        s["elements"] += e.element_count
+        s["stored_bytes"] += e.stored_size
+    return {
+        "version": "%d.%d" % (h.version_major, h.version_minor),
+        "version_major": h.version_major, "version_minor": h.version_minor,
+        "header_size": h.header_size, "optional_features": h.optional_features,
+        "file_size": ix.footer.index_offset + ix.footer.index_size + 32,
+        "index_offset": ix.footer.index_offset, "index_size": ix.footer.index_size,
+        "sizes": list(ix.size), "size_x": ix.size[0], "size_y": ix.size[1],
+        "size_z": ix.size[2], "depth": ix.depth,
+        "encoding": ix.encoding_name, "value_encoding": ix.value_encoding,
+        "scale": ix.value_scale, "offset": ix.value_offset,
+        "inner_count": ix.inner_count, "total_inner": ix.total_inner,
+        "total_values": ix.total_values,
+        "block_count": len(ix.blocks), "blocks_per_stream": per_stream,
+        "blocks": blocks, "metadata": meta,
+    }
+
+
+# ============================================================ conformance runner
+
+def run_conformance(manifest_path):
+    """Run every vector of a manifest; returns the number of failures."""
+    with open(manifest_path, "rb") as f:
+        manifest = json.loads(f.read().decode("utf-8"))
+    base = os.path.dirname(os.path.abspath(manifest_path))
+    vectors = manifest["vectors"]
+    passed = failed = 0
+    for number, v in enumerate(vectors):
+        name = v.get("file", "#%d" % number) if isinstance(v, dict) else "#%d" % number
+        try:
+            problems = run_vector(base, v)
+        except Exception as err:   # a broken manifest entry fails its vector only
+            problems = ["cannot run vector: %s: %s" % (type(err).__name__, err)]
+        if problems:
+            failed += 1
+            print("FAIL %s: %s" % (name, "; ".join(problems)))
+        else:
+            passed += 1
+            print("PASS %s" % name)
+    print("%d passed, %d failed" % (passed, failed))
+    return failed
+
+
+def run_vector(base, v):
+    path = os.path.join(base, v["file"])
+    expect = v["expect"]
+    problems = []
+    try:
+        _, _, dense = verify_file(path, want_dense=expect == "ok" and "dense" in v)
+        got, message = "ok", ""
+    except IvolError as err:
+        got, message = err.cls, err.message
+    except ReaderLimit as err:
+        got, message = "reader-limit", str(err)
+    if got != expect:
+        return ["expected %s, got %s%s" % (expect, got, ": " + message if message else "")]
+    if expect != "ok":
+        return []
+    if "dense" in v:
+        with open(os.path.join(base, v["dense"]), "rb") as f:
+            want = f.read()
+        if dense != want:
+            problems.append("dense export differs (%d bytes, expected %d)%s"
+                            % (len(dense), len(want), first_difference(dense, want)))
+    for k, raw in sorted((v.get("lod") or {}).items(), key=lambda kv: int(kv[0])):
+        with open(os.path.join(base, raw), "rb") as f:
+            want = f.read()
+        try:
+            _, got_bytes = level_of_detail(path, int(k))
+        except (IvolError, ReaderLimit, UsageError) as err:
+            problems.append("lod %s: %s" % (k, err))
+            continue
+        if got_bytes != want:
+            problems.append("lod %s differs (%d bytes, expected %d)%s"
+                            % (k, len(got_bytes), len(want),
+                               first_difference(got_bytes, want)))
+    return problems
+
+
+def first_difference(a, b):
+    for i in range(min(len(a), len(b))):
+        if a[i] != b[i]:
+            return ", first difference at byte %d" % i
+    return ""
+
+
+# ============================================================ command line
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(
+        prog="ivolref.py", description="Reference reader for .ivol version 1.0 "
+        "(written from format-spec/ivol.md alone).")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("check", help="full verification; prints ok")
+    p.add_argument("file")
+    p = sub.add_parser("dense", help="full verification and dense export (§12.2)")
+    p.add_argument("file")
+    p.add_argument("-o", dest="out", required=True)
+    p = sub.add_parser("lod", help="level of detail K (§12.3), partial read")
+    p.add_argument("file")
+    p.add_argument("k", type=int)
+    p.add_argument("-o", dest="out", required=True)
+    p = sub.add_parser("info", help="JSON summary of header, index and metadata")
+    p.add_argument("file")
+    p = sub.add_parser("conformance", help="run the vectors of a JSON manifest")
+    p.add_argument("manifest")
+    args = parser.parse_args(argv)
+
+    try:
+        _selftest_crc32c()
+        if args.command == "check":
+            verify_file(args.file)
+            print("ok")
+        elif args.command == "dense":
+            _, _, dense = verify_file(args.file, want_dense=True)
+            with open(args.out, "wb") as f:
+                f.write(dense)
+        elif args.command == "lod":
+            _, data = level_of_detail(args.file, args.k)
+            with open(args.out, "wb") as f:
+                f.write(data)
+        elif args.command == "info":
+            print(json.dumps(info(args.file), indent=2))
+        elif args.command == "conformance":
+            try:
+                failed = run_conformance(args.manifest)
+            except (OSError, ValueError, KeyError, TypeError) as err:
+                print("error: usage: cannot read manifest %s: %s" % (args.manifest, err))
+                return 2
+            return 0 if failed == 0 else 1
+        return 0
+    except IvolError as err:
+        print("error: %s: %s" % (err.cls, err.message))
+        return 1
+    except UsageError as err:
+        print("error: usage: %s" % err)
+        return 2
+    except OSError as err:
+        print("error: io: %s" % err)
+        return 2
+    except (ReaderLimit, MemoryError) as err:
+        print("error: reader-limit: %s" % (err or "out of memory"))
+        return 3
+    except Exception as err:   # a bug of this reader, never a verdict on the file
+        print("error: internal: %s: %s" % (type(err).__name__, err))
+        return 4
+
+
+if __name__ == "__main__":
+    if hasattr(signal, "SIGPIPE"):            # "ivolref.py info F | head" is not an error
+        signal.signal(signal.SIGPIPE, signal.SIG_DFL)
+    sys.exit(main())

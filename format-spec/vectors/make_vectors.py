@@ -1,0 +1,1952 @@
+#!/usr/bin/env python3
+"""Conformance test vectors for the .ivol format, version 1.0.
+
+Written from format-spec/ivol.md alone (no code of the ivol project is used).
+Needs only the Python standard library, numpy and zstandard; run it with
+
+    /usr/bin/python3 format-spec/vectors/make_vectors.py
+
+It (re)writes, next to this file: valid/, invalid/, manifest.json and
+README.md.  The output is deterministic (fixed seeds, fixed metadata).
+
+The script contains
+  * CRC-32C (table driven, checked against the bit-wise definition of §2.1),
+  * exact encoders to binary16 / uint16 / float32 (round to nearest, ties to
+    even, done with exact rational arithmetic, §9),
+  * an octree writer (§6-§10): lossless merging of regions whose non-padding
+    voxels all have the same stored bits, padding held at the coarsest level,
+    breadth-first arrays, inner averages by the recursion of §10, blocks per
+    level and split by a size limit, stored or zstd blocks, index, footer,
+  * an independent level-of-detail computation by weighted 2x2x2 box
+    filtering of the dense source (§12.3 / §10),
+  * a small reader that follows the check order of §13; it is used only as a
+    self-test: every valid vector must read back to its expected dense export
+    and levels of detail, and every invalid vector must fail with its
+    expected error class at the intended check.  The expected outputs are
+    NOT produced by this reader.
+"""
+
+import json
+import math
+import os
+import shutil
+import struct
+import sys
+from fractions import Fraction
+
+import numpy as np
+import zstandard
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+SIG = b"\x89IVOL\r\n\n"
+END_SIG = b"IVOL_END"
+IDX_SIG = b"IVIX"
+MIB64 = 64 << 20
+MIB16 = 16 << 20
+
+BINARY16, UINT16, FLOAT32 = 1, 2, 3
+ENC_NAME = {BINARY16: "binary16", UINT16: "uint16", FLOAT32: "float32"}
+VWIDTH = {BINARY16: 2, UINT16: 2, FLOAT32: 4}
+NPBITS = {BINARY16: np.uint16, UINT16: np.uint16, FLOAT32: np.uint32}
+
+STREAM_META, STREAM_NODES, STREAM_VALUES = 1, 2, 3
+CODEC_STORED, CODEC_ZSTD = 0, 1
+
+
+# ---------------------------------------------------------------- CRC-32C (§2.1)
+
+def crc32c_bitwise(data):
+    crc = 0xFFFFFFFF
+    for b in data:
+        crc ^= b
+        for _ in range(8):
+            crc = (crc >> 1) ^ (0x82F63B78 if crc & 1 else 0)
+    return crc ^ 0xFFFFFFFF
+
+
+def _make_table():
+    t = []
+    for i in range(256):
+        c = i
+        for _ in range(8):
+            c = (c >> 1) ^ (0x82F63B78 if c & 1 else 0)
+        t.append(c)
+    return t
+
+
+_CRC_T = _make_table()
+
+
+def crc32c(data):
+    crc = 0xFFFFFFFF
+    t = _CRC_T
+    for b in bytes(data):
+        crc = (crc >> 8) ^ t[(crc ^ b) & 0xFF]
+    return crc ^ 0xFFFFFFFF
+
+
+def _check_crc():
+    assert crc32c(b"123456789") == 0xE3069283
+    assert crc32c(bytes(32)) == 0x8A9136AA
+    assert crc32c(b"\xff" * 32) == 0x62A8AB43
+    for s in (b"", b"a", b"ivol", bytes(range(256))):
+        assert crc32c(s) == crc32c_bitwise(s)
+
+
+# ---------------------------------------------------------- value encodings (§9)
+
+def _enc_ieee(m, mant, expb):
+    """Round binary64 m to the nearest IEEE number with `mant` fraction bits
+    and `expb` exponent bits, ties to even, overflow to infinity.  Returns
+    the bit pattern, or None for NaN."""
+    if math.isnan(m):
+        return None
+    bias = (1 << (expb - 1)) - 1
+    emin = 1 - bias
+    inf_bits = ((1 << expb) - 1) << mant
+    sign = (1 << (mant + expb)) if math.copysign(1.0, m) < 0 else 0
+    a = abs(m)
+    if math.isinf(a):
+        return sign | inf_bits
+    if a == 0.0:
+        return sign
+    e = max(math.frexp(a)[1] - 1, emin)          # 2^e <= a < 2^(e+1) (or subnormal)
+    q = Fraction(2) ** (e - mant)                # spacing of the target numbers there
+    r = round(Fraction(a) / q)                   # Fraction rounds half to even
+    if r >= (1 << mant):
+        bits = ((e + bias) << mant) + (r - (1 << mant))   # carries into exponent
+    else:
+        bits = r                                 # subnormal (e == emin)
+    if bits >= inf_bits:
+        bits = inf_bits
+    return sign | bits
+
+
+def encode(enc, m):
+    if enc == BINARY16:
+        b = _enc_ieee(m, 10, 5)
+        return 0x7E00 if b is None else b
+    if enc == FLOAT32:
+        b = _enc_ieee(m, 23, 8)
+        return 0x7FC00000 if b is None else b
+    if enc == UINT16:
+        if math.isnan(m):
+            raise ValueError("NaN cannot occur with uint16")
+        if math.isinf(m):
+            return 0 if m < 0 else 65535
+        r = round(Fraction(m))
+        return min(max(r, 0), 65535)
+    raise ValueError(enc)
+
+
+def _dec_ieee(bits, mant, expb):
+    bias = (1 << (expb - 1)) - 1
+    s = -1.0 if bits >> (mant + expb) else 1.0
+    e = (bits >> mant) & ((1 << expb) - 1)
+    f = bits & ((1 << mant) - 1)
+    if e == (1 << expb) - 1:
+        return s * math.inf if f == 0 else math.nan
+    if e == 0:
+        return s * math.ldexp(f, 1 - bias - mant)
+    return s * math.ldexp(f + (1 << mant), e - bias - mant)
+
+
+def decode(enc, bits):
+    bits = int(bits)
+    if enc == BINARY16:
+        return _dec_ieee(bits, 10, 5)
+    if enc == FLOAT32:
+        return _dec_ieee(bits, 23, 8)
+    if enc == UINT16:
+        return float(bits)
+    raise ValueError(enc)
+
+
+def _check_encoders():
+    rng = np.random.default_rng(12345)
+    xs = list(rng.standard_normal(3000) * 10.0 ** rng.integers(-9, 6, 3000))
+    xs += [65504.0, 65519.99, 65520.0, 1e300, -1e300, 2.0 ** -25, 2.0 ** -24 * 1.5,
+           2.0 ** -26, 3.0 * 2 ** -25, 5e-324, -0.0, 0.0, math.inf, -math.inf]
+    xs += [1.0 + 2.0 ** -11, 1.0 + 3 * 2.0 ** -11, 1.0 + 2.0 ** -24, 1.0 + 3 * 2.0 ** -24,
+           2.0 ** -150, 3 * 2.0 ** -150, 3.4028235677973366e38, 3.4028235e38 * 1.0000001]
+    with np.errstate(over="ignore"):
+        for x in xs:
+            x = float(x)
+            h = int(np.array([x], dtype=np.float64).astype(np.float16).view(np.uint16)[0])
+            f = int(np.array([x], dtype=np.float64).astype(np.float32).view(np.uint32)[0])
+            assert encode(BINARY16, x) == h, (x, hex(encode(BINARY16, x)), hex(h))
+            assert encode(FLOAT32, x) == f, (x, hex(encode(FLOAT32, x)), hex(f))
+    for b in range(0x10000):
+        v = decode(BINARY16, b)
+        ref = float(np.array([b], dtype=np.uint16).view(np.float16)[0])
+        assert (math.isnan(v) and math.isnan(ref)) or (v == ref and math.copysign(1, v) == math.copysign(1, ref))
+        if not math.isnan(v):
+            assert encode(BINARY16, v) == b
+    assert encode(UINT16, 2.5) == 2 and encode(UINT16, 3.5) == 4 and encode(UINT16, -3.0) == 0
+    assert encode(UINT16, 70000.4) == 65535 and encode(UINT16, 65534.5) == 65534
+
+
+def f16(x):
+    return encode(BINARY16, float(x))
+
+
+def f32(x):
+    return encode(FLOAT32, float(x))
+
+
+def min_depth(X, Y, Z):
+    return (max(X, Y, Z) - 1).bit_length()
+
+
+def ceil_div(a, b):
+    return -(-a // b)
+
+
+# ------------------------------------------------------------------ octree (§8, §10)
+
+class Node:
+    __slots__ = ("l", "i", "j", "k", "w", "inner", "bits", "m", "children")
+
+    def __init__(self, l, i, j, k):
+        self.l, self.i, self.j, self.k = l, i, j, k
+        self.inner = False
+        self.bits = 0
+        self.m = None
+        self.children = None
+
+
+class Tree:
+    pass
+
+
+def build_tree(src, enc, depth=None, force_inner=(), avg="spec"):
+    """src: numpy array [z][y][x] of element bits (uint16 / uint32).
+    A node is a leaf when it is entirely padding or when all its non-padding
+    voxels have the same bits (lossless merge); otherwise it is inner.
+    force_inner: set of (level, i, j, k) that are subdivided regardless
+    (used only for invalid vectors).  avg: 'spec' (§10), 'rounded' (parents
+    averaged from the children's stored values: a writer bug) or
+    'unweighted' (children weight 1: a writer bug)."""
+    Z, Y, X = src.shape
+    D = min_depth(X, Y, Z) if depth is None else depth
+    force_inner = set(force_inner)
+    levels = [[Node(0, 0, 0, 0)]]
+    for l in range(D + 1):
+        s = 1 << (D - l)
+        nxt = []
+        for nd in levels[l]:
+            x0, y0, z0 = nd.i * s, nd.j * s, nd.k * s
+            reg = src[z0:min(z0 + s, Z), y0:min(y0 + s, Y), x0:min(x0 + s, X)]
+            nd.w = int(reg.size)
+            uniform = nd.w == 0 or bool((reg == reg.flat[0]).all())
+            forced = (l, nd.i, nd.j, nd.k) in force_inner
+            if l < D and (forced or not uniform):
+                nd.inner = True
+                nd.children = []
+                for c in range(8):
+                    ch = Node(l + 1, 2 * nd.i + (c & 1), 2 * nd.j + ((c >> 1) & 1), 2 * nd.k + ((c >> 2) & 1))
+                    nd.children.append(ch)
+                    nxt.append(ch)
+            else:
+                nd.bits = int(reg.flat[0]) if nd.w else 0
+        if l < D:
+            levels.append(nxt)
+    # inner averages, bottom up (§10)
+    for l in range(D, -1, -1):
+        for nd in levels[l]:
+            if not nd.inner:
+                nd.m = decode(enc, nd.bits) if nd.w else None
+                continue
+            acc = 0.0
+            W = 0
+            for ch in nd.children:
+                if ch.w > 0:
+                    if avg == "spec":
+                        acc = acc + float(ch.w) * ch.m
+                        W = W + ch.w
+                    elif avg == "rounded":
+                        acc = acc + float(ch.w) * decode(enc, ch.bits)
+                        W = W + ch.w
+                    elif avg == "unweighted":
+                        acc = acc + ch.m
+                        W = W + 1
+                    else:
+                        raise ValueError(avg)
+            if W == 0:
+                nd.m = None
+                nd.bits = 0
+            else:
+                nd.m = acc / float(W)
+                nd.bits = encode(enc, nd.m)
+    t = Tree()
+    t.enc, t.D, t.size = enc, D, (X, Y, Z)
+    t.levels = levels
+    t.inner_count = [sum(1 for nd in levels[l] if nd.inner) for l in range(D + 1)]
+    t.values = [nd.bits for lv in levels for nd in lv]
+    words = []
+    running = 1
+    for lv in levels:
+        for nd in lv:
+            if nd.inner:
+                mask = 0
+                for c, ch in enumerate(nd.children):
+                    if ch.inner:
+                        mask |= 1 << c
+                words.append((mask << 56) | running)
+                running += bin(mask).count("1")
+    t.nodes = words
+    t.first_inner = [sum(t.inner_count[:l]) for l in range(D + 1)]
+    t.level_values = [1] + [8 * t.inner_count[l - 1] for l in range(1, D + 1)]
+    t.first_value = [0] + [1 + 8 * t.first_inner[l - 1] for l in range(1, D + 1)]
+    assert len(t.values) == 1 + 8 * len(t.nodes)
+    return t
+
+
+# ------------------------------------------------- levels of detail from the source
+
+def pyramid_lods(src, enc, D):
+    """Levels of detail 1..D computed from the dense source alone: weighted
+    2x2x2 box filter in octant order with the arithmetic of §10.  A cell whose
+    non-padding voxels all have the same bits keeps those bits (that is what
+    a file written with lossless leaf merging stores, §12.3)."""
+    out = {}
+    m = np.array([decode(enc, b) for b in src.ravel()], dtype=np.float64).reshape(src.shape)
+    w = np.ones(src.shape, dtype=np.int64)
+    ub = src.astype(np.int64)                      # uniform bits, -1: not uniform
+    for k in range(1, D + 1):
+        z2, y2, x2 = (ceil_div(n, 2) for n in m.shape)
+        padw = ((0, 2 * z2 - m.shape[0]), (0, 2 * y2 - m.shape[1]), (0, 2 * x2 - m.shape[2]))
+        mp = np.pad(m, padw, constant_values=0.0)
+        wp = np.pad(w, padw, constant_values=0)
+        bp = np.pad(ub, padw, constant_values=-2)
+        acc = np.zeros((z2, y2, x2), dtype=np.float64)
+        W = np.zeros((z2, y2, x2), dtype=np.int64)
+        nub = np.full((z2, y2, x2), -2, dtype=np.int64)    # -2: no non-padding child yet
+        with np.errstate(all="ignore"):
+            for c in range(8):
+                xb, yb, zb = c & 1, (c >> 1) & 1, (c >> 2) & 1
+                mc = mp[zb::2, yb::2, xb::2]
+                wc = wp[zb::2, yb::2, xb::2]
+                bc = bp[zb::2, yb::2, xb::2]
+                has = wc > 0
+                prod = wc.astype(np.float64) * mc
+                acc = np.where(has, acc + prod, acc)
+                W = W + wc
+                nub = np.where(~has, nub, np.where(nub == -2, bc, np.where(nub == bc, nub, -1)))
+            mnew = acc / W.astype(np.float64)
+        uni = nub >= 0
+        res = np.zeros((z2, y2, x2), dtype=NPBITS[enc])
+        for idx in np.ndindex(z2, y2, x2):
+            if uni[idx]:
+                res[idx] = nub[idx]
+                mnew[idx] = decode(enc, nub[idx])
+            else:
+                res[idx] = encode(enc, float(mnew[idx]))
+        out[k] = res
+        m, w, ub = mnew, W, nub
+    return out
+
+
+# ------------------------------------------------------------------- file writer
+
+class Blk:
+    """One block: stream, level, element range, decoded bytes, codec, and
+    optional overrides of entry fields / stored bytes (for invalid files)."""
+
+    def __init__(self, stream, level, first, count, data, codec=CODEC_ZSTD, flags=0,
+                 zcheck=True, zsize=True):
+        self.stream, self.level, self.first, self.count = stream, level, first, count
+        self.data, self.codec, self.flags = data, codec, flags
+        self.zcheck, self.zsize = zcheck, zsize
+        self.stored = None          # override of the stored bytes
+        self.ov = {}                # override of entry fields
+        self.extra = b""            # bytes 32 .. block_entry_size of the entry
+
+    def stored_bytes(self):
+        if self.stored is not None:
+            return self.stored
+        if self.codec == CODEC_STORED:
+            return self.data
+        if self.codec == CODEC_ZSTD:
+            return zframe(self.data, self.zcheck, self.zsize)
+        return self.data            # unknown codec: raw bytes
+
+
+def zframe(data, checksum=True, content_size=True):
+    level = 19 if len(data) <= (1 << 20) else 3
+    c = zstandard.ZstdCompressor(level=level, write_checksum=checksum,
+                                 write_content_size=content_size, write_dict_id=False)
+    return c.compress(data)
+
+
+def pack_values(enc, vals):
+    return struct.pack("<%d%s" % (len(vals), "I" if enc == FLOAT32 else "H"), *vals)
+
+
+def pack_nodes(words):
+    return struct.pack("<%dQ" % len(words), *words)
+
+
+def split_range(a, b, per):
+    out = []
+    while a < b:
+        e = min(b, a + per) if per else b
+        out.append((a, e))
+        a = e
+    return out
+
+
+def level_blocks(t, codec=CODEC_ZSTD, limit=None, zcheck=True):
+    """Blocks in the order of §15: values of level l, then nodes of level l.
+    limit: the largest decoded size of a block in bytes.  codec may be
+    'auto' (zstd when smaller), 'alt' (alternate stored/zstd)."""
+    vw = VWIDTH[t.enc]
+    blocks = []
+    for l in range(t.D + 1):
+        a = t.first_value[l]
+        for s, e in split_range(a, a + t.level_values[l], (limit // vw) if limit else None):
+            blocks.append(Blk(STREAM_VALUES, l, s, e - s, pack_values(t.enc, t.values[s:e]), zcheck=zcheck))
+        a = t.first_inner[l]
+        for s, e in split_range(a, a + t.inner_count[l], (limit // 8) if limit else None):
+            blocks.append(Blk(STREAM_NODES, l, s, e - s, pack_nodes(t.nodes[s:e]), zcheck=zcheck))
+    for n, b in enumerate(blocks):
+        if codec == "auto":
+            b.codec = CODEC_ZSTD if len(zframe(b.data, zcheck)) < len(b.data) else CODEC_STORED
+        elif codec == "alt":
+            b.codec = (CODEC_STORED, CODEC_ZSTD)[n % 2]
+        else:
+            b.codec = codec
+    return blocks
+
+
+DEFAULT_META = {
+    "voxel_size": [0.05, 0.05, 0.05],
+    "unit": "mm",
+    "origin": [0.0, 0.0, 0.0],
+    "value": {"quantity": "grey_value", "unit": ""},
+}
+
+
+def meta_bytes(obj):
+    return json.dumps(obj, ensure_ascii=False, separators=(",", ":")).encode("utf-8")
+
+
+def meta_block(text, codec=CODEC_ZSTD, zcheck=True):
+    if isinstance(text, dict):
+        text = meta_bytes(text)
+    return Blk(STREAM_META, 0, 0, len(text), text, codec=codec, zcheck=zcheck)
+
+
+class Layout:
+    pass
+
+
+def assemble(t, blocks, scale=1.0, offset=0.0, major=1, minor=0, header_extra=b"",
+             required=0, optional=0, hreserved=0, fixed_extra=b"", structure_kind=1,
+             value_encoding=None, depth=None, ireserved=0, size=None, level_table=None,
+             entry_extra=b"", gap_before_index=b"", index_tail=b"", block_count=None):
+    """Header | blocks | index | footer, all CRCs computed.  Returns
+    (bytes, Layout).  Every keyword overrides one field of a valid file."""
+    header_size = 40 + len(header_extra)
+    fixed_size = 48 + len(fixed_extra)
+    entry_size = 32 + len(entry_extra)
+    hdr = struct.pack("<8sHHIQQI", SIG, major, minor, header_size, required, optional, hreserved)
+    hdr += header_extra
+    hdr += struct.pack("<I", crc32c(hdr))
+    assert len(hdr) == header_size
+    out = bytearray(hdr)
+    lay = Layout()
+    lay.header_size, lay.fixed_size, lay.entry_size = header_size, fixed_size, entry_size
+    lay.block_offsets = []
+    entries = []
+    for b in blocks:
+        st = b.stored_bytes()
+        f = dict(file_offset=len(out), first=b.first, count=b.count, stored_size=len(st),
+                 crc=crc32c(st), stream=b.stream, codec=b.codec, flags=b.flags, level=b.level)
+        f.update(b.ov)
+        lay.block_offsets.append(len(out))
+        out += st
+        entries.append(struct.pack("<QQIIIBBBB", f["file_offset"], f["first"], f["count"],
+                                   f["stored_size"], f["crc"], f["stream"], f["codec"],
+                                   f["flags"], f["level"]) + (b.extra or entry_extra))
+    out += gap_before_index
+    index_offset = len(out)
+    X, Y, Z = t.size if size is None else size
+    D = t.D if depth is None else depth
+    ve = t.enc if value_encoding is None else value_encoding
+    lt = t.inner_count if level_table is None else level_table
+    bc = len(blocks) if block_count is None else block_count
+    idx = struct.pack("<4sIBBBBIIIddII", IDX_SIG, fixed_size, structure_kind, ve, D, ireserved,
+                      X, Y, Z, scale, offset, bc, entry_size) + fixed_extra
+    lay.level_table_offset = len(idx)
+    idx += struct.pack("<%dQ" % len(lt), *lt)
+    lay.entries_offset = len(idx)
+    idx += b"".join(entries) + index_tail
+    out += idx
+    footer = struct.pack("<QQI", index_offset, len(idx), crc32c(idx))
+    footer += struct.pack("<I", crc32c(footer)) + END_SIG
+    out += footer
+    lay.index_offset, lay.index_size = index_offset, len(idx)
+    return bytes(out), lay
+
+
+def u16(d, o):
+    return struct.unpack_from("<H", d, o)[0]
+
+
+def u32(d, o):
+    return struct.unpack_from("<I", d, o)[0]
+
+
+def u64(d, o):
+    return struct.unpack_from("<Q", d, o)[0]
+
+
+def reseal(data, header=True, index=True):
+    """Recompute header_crc, index_crc and footer_crc after a patch."""
+    d = bytearray(data)
+    if header:
+        hs = u32(d, 12)
+        struct.pack_into("<I", d, hs - 4, crc32c(d[:hs - 4]))
+    f = len(d) - 32
+    if index:
+        io, isz = u64(d, f), u64(d, f + 8)
+        struct.pack_into("<I", d, f + 16, crc32c(d[io:io + isz]))
+    struct.pack_into("<I", d, f + 20, crc32c(d[f:f + 20]))
+    return bytes(d)
+
+
+def patch(data, off, fmt, *vals):
+    d = bytearray(data)
+    struct.pack_into(fmt, d, off, *vals)
+    return bytes(d)
+
+
+def patch_index(data, lay, rel, fmt, *vals):
+    """Patch the index at offset rel (relative to the index) and reseal."""
+    return reseal(patch(data, lay.index_offset + rel, fmt, *vals))
+
+
+def entry_off(lay, n, field):
+    fo = {"file_offset": 0, "first": 8, "count": 16, "stored_size": 20, "crc": 24,
+          "stream": 28, "codec": 29, "flags": 30, "level": 31}[field]
+    return lay.entries_offset + n * lay.entry_size + fo
+
+
+# ------------------------------------------------------------------ self-test reader
+
+class IvolError(Exception):
+    def __init__(self, cls, tag, msg=""):
+        super().__init__("%s [%s] %s" % (cls, tag, msg))
+        self.cls, self.tag = cls, tag
+
+
+def _fail(cls, tag, msg=""):
+    raise IvolError(cls, tag, msg)
+
+
+def _no_dups(pairs):
+    d = {}
+    for k, v in pairs:
+        if k in d:
+            _fail("malformed", "metadata.duplicate_key", k)
+        d[k] = v
+    return d
+
+
+def _reject_constant(s):
+    _fail("malformed", "metadata.json", "non-JSON constant " + s)
+
+
+def _is_num(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def check_metadata(txt):
+    if len(txt) > MIB16:
+        _fail("malformed", "metadata.size")
+    if txt.startswith(b"\xef\xbb\xbf"):
+        _fail("malformed", "metadata.bom")
+    try:
+        s = txt.decode("utf-8")
+    except UnicodeDecodeError:
+        _fail("malformed", "metadata.utf8")
+    try:
+        obj = json.loads(s, object_pairs_hook=_no_dups, parse_constant=_reject_constant)
+    except json.JSONDecodeError:
+        _fail("malformed", "metadata.json")
+    if not isinstance(obj, dict):
+        _fail("malformed", "metadata.top_level")
+    vs = obj.get("voxel_size")
+    if not (isinstance(vs, list) and len(vs) == 3 and all(_is_num(v) and v > 0 for v in vs)):
+        _fail("malformed", "metadata.voxel_size")
+    if not isinstance(obj.get("unit"), str):
+        _fail("malformed", "metadata.unit")
+    og = obj.get("origin")
+    if not (isinstance(og, list) and len(og) == 3 and all(_is_num(v) for v in og)):
+        _fail("malformed", "metadata.origin")
+    val = obj.get("value")
+    if not (isinstance(val, dict) and isinstance(val.get("quantity"), str)):
+        _fail("malformed", "metadata.value")
+    if "unit" in val and not isinstance(val["unit"], str):
+        _fail("malformed", "metadata.value")
+    for k in ("structure", "provenance", "user"):
+        if k in obj and not isinstance(obj[k], dict):
+            _fail("malformed", "metadata." + k)
+    return obj
+
+
+def decode_block(data, e, width):
+    st = data[e["file_offset"]:e["file_offset"] + e["stored_size"]]
+    if crc32c(st) != e["crc"]:
+        _fail("checksum", "block.crc", "block %d" % e["n"])
+    need = e["count"] * width
+    if e["codec"] == CODEC_STORED:
+        return st
+    try:
+        p = zstandard.get_frame_parameters(st)
+    except zstandard.ZstdError:
+        _fail("malformed", "zstd.frame")
+    if p.content_size != need:
+        _fail("malformed", "zstd.content_size", str(p.content_size))
+    if p.dict_id != 0:
+        _fail("malformed", "zstd.dict")
+    dobj = zstandard.ZstdDecompressor().decompressobj()
+    try:
+        out = dobj.decompress(st)
+    except zstandard.ZstdError as ex:
+        if "checksum" in str(ex).lower():
+            _fail("checksum", "zstd.checksum")
+        _fail("malformed", "zstd.data", str(ex))
+    if not dobj.eof or dobj.unused_data or len(out) != need:
+        _fail("malformed", "zstd.extra")
+    return out
+
+
+def read_ivol(data, verify=True):
+    """Returns (dense, {k: lod}, metadata).  Raises IvolError."""
+    n = len(data)
+    # 1. signature
+    if n < 8:
+        if data == SIG[:n]:
+            _fail("truncated", "short.signature")
+        _fail("not-ivol", "signature")
+    if data[:8] != SIG:
+        _fail("not-ivol", "signature")
+    # 2. version
+    if n < 10:
+        _fail("truncated", "short.version")
+    if u16(data, 8) != 1:
+        _fail("unsupported-version", "version_major", str(u16(data, 8)))
+    if n < 12:
+        _fail("truncated", "short.version")
+    # 3. header
+    if n < 16:
+        _fail("truncated", "short.header")
+    hs = u32(data, 12)
+    if not 40 <= hs <= 4096:
+        _fail("malformed", "header_size")
+    if n < hs + 32:
+        _fail("truncated", "short.file")
+    if crc32c(data[:hs - 4]) != u32(data, hs - 4):
+        _fail("checksum", "header_crc")
+    if u32(data, 32) != 0:
+        _fail("malformed", "header.reserved")
+    if u64(data, 16) != 0:
+        _fail("unsupported-feature", "required_features")
+    # 4. footer
+    if data[-8:] != END_SIG:
+        _fail("truncated", "end_signature")
+    f = n - 32
+    if crc32c(data[f:f + 20]) != u32(data, f + 20):
+        _fail("checksum", "footer_crc")
+    io, isz = u64(data, f), u64(data, f + 8)
+    if io < hs or io + isz + 32 != n:
+        _fail("malformed", "index_range")
+    idx = data[io:io + isz]
+    if crc32c(idx) != u32(data, f + 16):
+        _fail("checksum", "index_crc")
+    # 5. index: fixed part
+    if isz < 48:
+        _fail("malformed", "index_size")
+    if idx[:4] != IDX_SIG:
+        _fail("malformed", "index_signature")
+    fs = u32(idx, 4)
+    if not 48 <= fs <= 4096 or fs > isz:
+        _fail("malformed", "fixed_size")
+    sk, ve, D, ires = idx[8], idx[9], idx[10], idx[11]
+    if sk != 1:
+        _fail("unsupported-feature", "structure_kind", str(sk))
+    if ve not in (1, 2, 3):
+        _fail("unsupported-feature", "value_encoding", str(ve))
+    if ires != 0:
+        _fail("malformed", "index.reserved")
+    X, Y, Z = u32(idx, 12), u32(idx, 16), u32(idx, 20)
+    if min(X, Y, Z) < 1:
+        _fail("malformed", "size")
+    if D > 31 or D != min_depth(X, Y, Z):
+        _fail("malformed", "depth")
+    scale, offset = struct.unpack_from("<dd", idx, 24)
+    if not math.isfinite(scale) or scale == 0.0:
+        _fail("malformed", "value_scale")
+    if not math.isfinite(offset):
+        _fail("malformed", "value_offset")
+    bc, es = u32(idx, 40), u32(idx, 44)
+    if bc < 2:
+        _fail("malformed", "block_count")
+    if not 32 <= es <= 4096:
+        _fail("malformed", "block_entry_size")
+    if isz != fs + 8 * (D + 1) + bc * es:
+        _fail("malformed", "index_size")
+    # level table
+    ic = list(struct.unpack_from("<%dQ" % (D + 1), idx, fs))
+    if ic[0] > 1 or ic[D] != 0:
+        _fail("malformed", "level_table")
+    for l in range(D):
+        if ic[l + 1] > 8 * ic[l]:
+            _fail("malformed", "level_table")
+    total_inner = sum(ic)
+    total_values = 1 + 8 * total_inner
+    first_inner = [sum(ic[:l]) for l in range(D + 1)]
+    level_values = [1] + [8 * ic[l - 1] for l in range(1, D + 1)]
+    first_value = [0] + [1 + 8 * first_inner[l - 1] for l in range(1, D + 1)]
+    vw = VWIDTH[ve]
+    width = {1: 1, 2: 8, 3: vw}
+    # block table
+    entries = []
+    pos = hs
+    for b in range(bc):
+        o = fs + 8 * (D + 1) + b * es
+        fo, fe, cnt, ss, crc, stream, codec, flags, level = struct.unpack_from("<QQIIIBBBB", idx, o)
+        e = dict(n=b, file_offset=fo, first=fe, count=cnt, stored_size=ss, crc=crc,
+                 stream=stream, codec=codec, flags=flags, level=level)
+        if flags & 0xFE:
+            _fail("malformed", "block.flags", "block %d" % b)
+        if fo != pos:
+            _fail("malformed", "block.placement", "block %d" % b)
+        if cnt < 1 or ss < 1:
+            _fail("malformed", "block.sizes", "block %d" % b)
+        pos += ss
+        if stream in (1, 2, 3):
+            if flags != 0:
+                _fail("malformed", "block.flags", "block %d" % b)
+            if codec not in (0, 1):
+                _fail("unsupported-feature", "codec", "block %d codec %d" % (b, codec))
+            if cnt * width[stream] > MIB64:
+                _fail("malformed", "block.too_large", "block %d" % b)
+            if codec == 0 and ss != cnt * width[stream]:
+                _fail("malformed", "block.stored_size", "block %d" % b)
+        elif not flags & 1:
+            _fail("unsupported-feature", "stream", "block %d stream %d" % (b, stream))
+        entries.append(e)
+    if pos != io:
+        _fail("malformed", "block.placement", "last block does not end at index_offset")
+    metas = [e for e in entries if e["stream"] == 1]
+    if len(metas) != 1:
+        _fail("malformed", "metadata.count")
+    if metas[0]["level"] != 0:
+        _fail("malformed", "metadata.level")
+    for stream, total in ((2, total_inner), (3, total_values)):
+        pos = 0
+        for e in sorted((e for e in entries if e["stream"] == stream), key=lambda e: e["first"]):
+            if e["first"] != pos:
+                _fail("malformed", "stream.coverage", "stream %d" % stream)
+            pos += e["count"]
+            l = e["level"]
+            if l > D:
+                _fail("malformed", "block.level")
+            lo, hi = ((first_inner[l], first_inner[l] + ic[l]) if stream == 2 else
+                      (first_value[l], first_value[l] + level_values[l]))
+            if e["first"] < lo or e["first"] + e["count"] > hi:
+                _fail("malformed", "block.level", "block %d" % e["n"])
+        if pos != total:
+            _fail("malformed", "stream.coverage", "stream %d" % stream)
+    meta = check_metadata(decode_block(data, metas[0], 1))
+    # 6. the other blocks
+    nodes = [None] * total_inner
+    values = [None] * total_values
+    for e in entries:
+        if e["stream"] == 2:
+            raw = decode_block(data, e, 8)
+            nodes[e["first"]:e["first"] + e["count"]] = struct.unpack("<%dQ" % e["count"], raw)
+        elif e["stream"] == 3:
+            raw = decode_block(data, e, vw)
+            values[e["first"]:e["first"] + e["count"]] = struct.unpack(
+                "<%d%s" % (e["count"], "I" if vw == 4 else "H"), raw)
+    # nodes (§8)
+    dt = NPBITS[ve]
+    dense = np.zeros((Z, Y, X), dtype=dt)
+
+    def weight(l, i, j, k):
+        s = 1 << (D - l)
+        ov = lambda a, nn: max(0, min(nn, (a + 1) * s) - a * s)
+        return ov(i, X) * ov(j, Y) * ov(k, Z)
+
+    # per level: list of (value index, coords, inner node index or None)
+    lvl = [[(0, (0, 0, 0), 0 if ic[0] == 1 else None)]]
+    running = 1
+    tree = []
+    for l in range(D + 1):
+        cur = lvl[l]
+        nxt = []
+        ninner = 0
+        for vi, (i, j, k), nn in cur:
+            w = weight(l, i, j, k)
+            if w == 0 and nn is not None:
+                _fail("malformed", "padding_subdivided", "level %d node %s" % (l, (i, j, k)))
+            if w == 0 and values[vi] != 0:
+                _fail("malformed", "padding_value", "level %d node %s" % (l, (i, j, k)))
+            tree.append((l, vi, (i, j, k), nn, w))
+            if nn is None:
+                continue
+            ninner += 1
+            word = nodes[nn]
+            fic, mask = word & ((1 << 56) - 1), word >> 56
+            if l == D - 1 and mask:
+                _fail("malformed", "mask_at_last_level", "node %d" % nn)
+            if fic != running:
+                _fail("malformed", "first_inner_child", "node %d: %d, expected %d" % (nn, fic, running))
+            pc = 0
+            for c in range(8):
+                child_inner = (mask >> c) & 1
+                ci = (2 * i + (c & 1), 2 * j + ((c >> 1) & 1), 2 * k + ((c >> 2) & 1))
+                nxt.append((1 + 8 * nn + c, ci, (fic + pc) if child_inner else None))
+                pc += child_inner
+            running += pc
+        if ninner != ic[l]:
+            _fail("malformed", "popcount_sum", "level %d" % l)
+        if l < D:
+            lvl.append(nxt)
+    # dense export (§12.2)
+    node_m = {}
+    by_vi = {}
+    for l, vi, (i, j, k), nn, w in tree:
+        by_vi[vi] = (l, (i, j, k), nn, w)
+        if nn is None and w > 0:
+            s = 1 << (D - l)
+            dense[k * s:(k + 1) * s, j * s:(j + 1) * s, i * s:(i + 1) * s] = values[vi]
+    # verify averages (§10)
+    if verify:
+        for l, vi, (i, j, k), nn, w in reversed(tree):
+            if w == 0:
+                continue
+            if nn is None:
+                node_m[vi] = decode(ve, values[vi])
+                continue
+            acc, W = 0.0, 0
+            for c in range(8):
+                cvi = 1 + 8 * nn + c
+                cw = by_vi[cvi][3]
+                if cw > 0:
+                    acc = acc + float(cw) * node_m[cvi]
+                    W += cw
+            node_m[vi] = acc / float(W)
+            if encode(ve, node_m[vi]) != values[vi]:
+                _fail("malformed", "average", "value %d" % vi)
+    # levels of detail (§12.3)
+    lods = {}
+    for kk in range(1, D + 1):
+        L = D - kk
+        arr = np.zeros((ceil_div(Z, 1 << kk), ceil_div(Y, 1 << kk), ceil_div(X, 1 << kk)), dtype=dt)
+        for l, vi, (i, j, k), nn, w in tree:
+            if l > L or w == 0 or (nn is not None and l < L):
+                continue
+            s = 1 << (L - l)
+            arr[k * s:(k + 1) * s, j * s:(j + 1) * s, i * s:(i + 1) * s] = values[vi]
+        lods[kk] = arr
+    return dense, lods, meta
+
+
+# ------------------------------------------------------------------- the vectors
+
+MANIFEST = []
+RAW_TOTAL = [0]
+
+
+def _write(rel, data):
+    p = os.path.join(HERE, rel)
+    with open(p, "wb") as fh:
+        fh.write(data)
+    RAW_TOTAL[0] += len(data)
+
+
+def raw_bits(arr):
+    return arr.astype(arr.dtype.newbyteorder("<")).tobytes()
+
+
+def add_valid(name, data, src, enc, desc, lods=True):
+    D = min_depth(src.shape[2], src.shape[1], src.shape[0])
+    rel = "valid/%s.ivol" % name
+    _write(rel, data)
+    ent = {"file": rel, "expect": "ok", "dense": "valid/%s.dense.raw" % name}
+    _write(ent["dense"], raw_bits(src))
+    exp_lods = pyramid_lods(src, enc, D) if lods else {}
+    if exp_lods:
+        ent["lod"] = {}
+        for k in sorted(exp_lods):
+            ent["lod"][str(k)] = "valid/%s.lod%d.raw" % (name, k)
+            _write(ent["lod"][str(k)], raw_bits(exp_lods[k]))
+    ent["value_encoding"] = ENC_NAME[enc]
+    ent["size"] = [src.shape[2], src.shape[1], src.shape[0]]
+    ent["description"] = desc
+    MANIFEST.append(ent)
+    # self-test
+    dense, got_lods, _ = read_ivol(data)
+    assert dense.dtype == src.dtype and np.array_equal(dense, src), name
+    for k, a in exp_lods.items():
+        assert np.array_equal(got_lods[k], a), (name, k)
+
+
+def add_invalid(name, data, expect, tag, desc, verify_only=False, dense_src=None):
+    rel = "invalid/%s.ivol" % name
+    _write(rel, data)
+    ent = {"file": rel, "expect": expect}
+    if verify_only:
+        ent["expect_without_verify"] = "ok"
+        ent["dense"] = "invalid/%s.dense.raw" % name
+        _write(ent["dense"], raw_bits(dense_src))
+    ent["description"] = desc
+    MANIFEST.append(ent)
+    try:
+        read_ivol(data)
+    except IvolError as ex:
+        assert ex.cls == expect, (name, ex.cls, ex.tag, str(ex))
+        assert tag is None or ex.tag == tag, (name, ex.tag, tag, str(ex))
+    else:
+        raise AssertionError("%s was accepted" % name)
+    if verify_only:
+        dense, _, _ = read_ivol(data, verify=False)
+        assert np.array_equal(dense, dense_src)
+
+
+def simple_file(src, enc, meta=None, codec=CODEC_ZSTD, limit=None, meta_codec=None,
+                meta_first=False, zcheck=True, tree=None, **kw):
+    t = tree or build_tree(src, enc)
+    blocks = level_blocks(t, codec, limit, zcheck=zcheck)
+    mb = meta_block(meta if meta is not None else DEFAULT_META,
+                    codec if meta_codec is None and codec in (0, 1) else (meta_codec or CODEC_ZSTD),
+                    zcheck=zcheck)
+    if meta_first:
+        blocks.insert(0, mb)
+    else:
+        blocks.append(mb)
+    data, lay = assemble(t, blocks, **kw)
+    return data, lay, t, blocks
+
+
+# ---- source volumes
+
+def vol_object_in_air(X, Y, Z, enc, seed, air, centre, radius, lo, hi):
+    rng = np.random.default_rng(seed)
+    z, y, x = np.mgrid[0:Z, 0:Y, 0:X]
+    d2 = (x - centre[0]) ** 2 + (y - centre[1]) ** 2 + (z - centre[2]) ** 2
+    inside = d2 <= radius * radius
+    if enc == UINT16:
+        v = rng.integers(lo, hi, size=(Z, Y, X)).astype(np.uint16)
+        a = np.uint16(air)
+    else:
+        noise = rng.uniform(lo, hi, size=(Z, Y, X))
+        v = np.array([[[(f16 if enc == BINARY16 else f32)(q) for q in row] for row in pl] for pl in noise],
+                     dtype=NPBITS[enc])
+        a = NPBITS[enc]((f16 if enc == BINARY16 else f32)(air))
+    return np.where(inside, v, a).astype(NPBITS[enc])
+
+
+def arr_f16(vals, shape):
+    return np.array([f16(v) for v in np.ravel(vals)], dtype=np.uint16).reshape(shape)
+
+
+def arr_f32(vals, shape):
+    return np.array([f32(v) for v in np.ravel(vals)], dtype=np.uint32).reshape(shape)
+
+
+def sample_source():
+    # 3 x 2 x 2 uint16; octant 0 (x < 2) holds 100..106 and 99, the column
+    # x = 2 (octant 1) is uniform 301.
+    src = np.zeros((2, 2, 3), dtype=np.uint16)
+    oct0 = [100, 101, 102, 103, 104, 105, 106, 99]
+    for c, v in enumerate(oct0):
+        src[(c >> 2) & 1, (c >> 1) & 1, c & 1] = v
+    src[:, :, 2] = 301
+    return src
+
+
+def specials_f32():
+    """8 x 4 x 4 float32: each 2x2x2 cell of level of detail 1 tests one rule."""
+    nan_s = 0x7F800001      # signalling NaN
+    nan_neg = 0xFFC00000
+    inf, ninf = 0x7F800000, 0xFF800000
+    one = f32(1.0)
+    ulp = lambda b, n=1: b + n
+    maxf = 0x7F7FFFFF
+    rng = np.random.default_rng(7)
+    cells = [
+        [0x80000000] * 8,                              # uniform -0 -> leaf keeps -0
+        [0x80000000, 0] * 4,                           # -0 and +0 -> +0
+        [inf] + [f32(3.5)] * 7,                        # +inf with finite -> +inf
+        [inf, ninf] * 4,                               # inf - inf -> NaN -> 0x7FC00000
+        [nan_s] * 8,                                   # uniform signalling NaN -> leaf keeps bits
+        [nan_neg] + [one] * 7,                         # NaN with finite -> 0x7FC00000
+        [nan_neg] * 8,                                 # uniform negative quiet NaN
+        [1, 0] * 4,                                    # mean 2^-150: tie -> even (0)
+        [one] * 4 + [ulp(one)] * 4,                    # 1 + 2^-24: tie -> 1.0 (even)
+        [ulp(one)] * 4 + [ulp(one, 2)] * 4,            # 1 + 3*2^-24: tie -> 1 + 2^-22 (even)
+        [maxf] * 4 + [maxf - 1] * 4,                   # tie at the top -> maxf - 1 (even)
+        [f32(v) for v in rng.normal(5, 2, 8)],
+        [f32(v) for v in rng.normal(-1e-3, 1e-3, 8)],
+        [int(v) for v in rng.integers(1, 0x00800000, 8)],   # subnormals
+        [f32(v) for v in rng.uniform(1e30, 3e38, 8)],
+        [f32(2.0)] * 8,
+    ]
+    src = np.zeros((4, 4, 8), dtype=np.uint32)
+    # cells 0..7 (NaN, inf, zeros) in x < 4, cells 8..15 (finite) in x >= 4, so
+    # that the level-of-detail-2 cell of x >= 4 holds a finite average
+    a = b = 0
+    for k in range(2):
+        for j in range(2):
+            for i in range(4):
+                if i < 2:
+                    cell = cells[a]
+                    a += 1
+                else:
+                    cell = cells[8 + b]
+                    b += 1
+                for c in range(8):
+                    src[2 * k + ((c >> 2) & 1), 2 * j + ((c >> 1) & 1), 2 * i + (c & 1)] = cell[c]
+    return src
+
+
+def specials_f16():
+    inf, ninf = 0x7C00, 0xFC00
+    one = 0x3C00
+    cells = [
+        [0x8000] * 8,                                  # uniform -0
+        [0x8000, 0] * 4,                               # -0 and +0 -> +0
+        [inf] + [f16(3.5)] * 7,                        # +inf -> +inf
+        [inf, ninf] * 4,                               # NaN -> 0x7E00
+        [0x7C01] * 8,                                  # uniform signalling NaN
+        [0xFE00] + [one] * 7,                          # NaN -> 0x7E00
+        [0x7FFF] * 8,                                  # uniform NaN, all payload bits
+        [1, 0] * 4,                                    # mean 2^-25: tie -> 0
+        [one] * 4 + [one + 1] * 4,                     # tie -> 1.0
+        [one + 1] * 4 + [one + 2] * 4,                 # tie -> one + 2
+        [0x7BFF] * 4 + [0x7BFE] * 4,                   # 65504/65472: tie -> 65472
+        [1, 3, 1, 3, 2, 2, 2, 3],                      # subnormal mean 17/8 * 2^-24 -> 2 (2^-23)
+        [0x0001] * 7 + [0x03FF],                       # subnormal, not a tie
+        [f16(v) for v in (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8)],
+        [0x03FF, 0x0400] * 4,                          # largest subnormal / smallest normal: tie -> 0x0400
+        [f16(-2.0)] * 8,
+    ]
+    src = np.zeros((4, 4, 8), dtype=np.uint16)
+    a = b = 0
+    for k in range(2):
+        for j in range(2):
+            for i in range(4):
+                if i < 2:
+                    cell = cells[a]
+                    a += 1
+                else:
+                    cell = cells[8 + b]
+                    b += 1
+                for c in range(8):
+                    src[2 * k + ((c >> 2) & 1), 2 * j + ((c >> 1) & 1), 2 * i + (c & 1)] = cell[c]
+    return src
+
+
+def ties_uint16():
+    """3 x 3 x 3 uint16 whose level-of-detail-1 cells of weight 8, 4 and 2
+    have means exactly halfway between two integers."""
+    src = np.zeros((3, 3, 3), dtype=np.uint16)
+    base = [1000, 2001, 3002, 4003, 5004, 6005, 7006, 8007]
+    for c in range(8):
+        i, j, k = c & 1, (c >> 1) & 1, (c >> 2) & 1
+        cells = [(x, y, z) for z in range(2 * k, min(2 * k + 2, 3))
+                 for y in range(2 * j, min(2 * j + 2, 3)) for x in range(2 * i, min(2 * i + 2, 3))]
+        for n, (x, y, z) in enumerate(cells):
+            # half of the voxels base, half base + 1 -> mean base + 0.5
+            src[z, y, x] = base[c] + (n % 2) if len(cells) > 1 else base[c]
+    return src
+
+
+METADATA_FULL = r'''{
+  "voxel_size": [0.0125, 0.0125, 2.5e-2],
+  "unit": "mm",
+  "origin": [-12.5, 0.325, 0],
+  "value": {"quantity": "linear_attenuation", "unit": "1/mm"},
+  "structure": {
+    "kind": "octree",
+    "lossless": true,
+    "keep": {"rule": "threshold", "threshold": 0.01, "margin": 4},
+    "source_encoding": "float32",
+    "max_abs_error": 0.0
+  },
+  "provenance": {
+    "software": {"name": "ivol-conformance-vectors", "version": "1.0.0"},
+    "created": "2026-11-22T15:00:00Z",
+    "sources": [
+      {"path": "/data/scans/Prüfkörper_α/projections_0001.tif", "bytes": 8388608,
+       "sha256": "9f86d081884c7d659a2feaa0c55ad015a3bf4f1b2b0b822cd15d6c15b0f00a08"}
+    ],
+    "geometry": {"source_isocentre": 250.0, "source_detector": 1000.0,
+                 "detector": {"pixels": [2048, 2048], "pitch": 0.2},
+                 "angles": {"start": 0, "step": 0.25, "count": 1440}},
+    "reconstruction": {"algorithm": "FDK", "filter": "Shepp-Logan", "window": [0.0, 0.05]},
+    "command": "ivol convert --keep threshold=0.01 \"Prüfkörper α.raw\" out.ivol"
+  },
+  "user": {
+    "operator": "Zoë Łukasiewicz",
+    "site": "東京ラボ",
+    "note": "µ-CT, Ω ≈ 3 \u2013 escaped dash; emoji 🧪 raw and \ud83e\uddea escaped; tab\tquote\" backslash\\",
+    "tags": ["α", "β", null, true, false, -1e-3, 12345678901234567890],
+    "nested": {"empty_object": {}, "empty_array": [], "deep": {"deeper": {"deepest": "✓"}}},
+    "unknown_keys_are_ignored": {"x": 1}
+  },
+  "future_top_level_key": {"readers": "must ignore unknown keys"}
+}
+'''
+
+
+def gen():
+    # ------------------------------------------------------------------ valid
+    # 1x1x1
+    src = arr_f32([0.1], (1, 1, 1))
+    d, *_ = simple_file(src, FLOAT32, codec=CODEC_STORED)
+    add_valid("tiny_1x1x1_float32", d, src, FLOAT32,
+              "1x1x1 float32 (value 0.1f): depth 0, level table [0], empty node array, one value, "
+              "two blocks (values, metadata), stored codec.")
+
+    # 3x5x7 uint16 with scale and offset
+    rng = np.random.default_rng(101)
+    src = rng.integers(0, 4096, size=(7, 5, 3)).astype(np.uint16)
+    src[0:2, 0:2, 0:2] = 777          # a uniform 2x2x2 cell -> leaf at level 2
+    src[4:7, 4:5, 0:3] = 1234         # a uniform region partly padding -> leaf at level 1
+    src[2:4, 2:4, 2:3] = 55           # uniform non-padding part of a cell -> leaf
+    src3 = src
+    d, *_ = simple_file(src, UINT16, scale=0.0007, offset=-1.25)
+    add_valid("odd_3x5x7_uint16", d, src, UINT16,
+              "3x5x7 uint16 (x=3, y=5, z=7), depth 3, value_scale 0.0007 and value_offset -1.25, zstd; "
+              "random values with uniform regions (leaves at levels 1 and 2, some partly padding).")
+
+    # 257 x 1 x 2 binary16
+    x = np.arange(257)
+    vals = np.zeros((2, 1, 257))
+    rng = np.random.default_rng(102)
+    vals[0, 0, :] = x / 16.0 + rng.uniform(0, 0.01, 257)
+    vals[1, 0, :] = 100.0 - x / 8.0
+    vals[:, :, 128:256] = 2.5         # a uniform run
+    src = arr_f16(vals, (2, 1, 257))
+    d, *_ = simple_file(src, BINARY16)
+    add_valid("line_257x1x2_binary16", d, src, BINARY16,
+              "257x1x2 binary16, depth 9 (2^9 = 512 >= 257): mostly padding, held at the coarsest "
+              "level; a uniform run x = 128..255 becomes one leaf of side 128 covering padding too.")
+
+    # 2x2x2
+    src = arr_f16([0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8], (2, 2, 2))
+    d, *_ = simple_file(src, BINARY16, codec=CODEC_STORED)
+    add_valid("cube_2x2x2_binary16", d, src, BINARY16,
+              "2x2x2 binary16 0.1 .. 0.8 (x fastest), depth 1, level table [1, 0], stored codec.")
+
+    # 16^3 noise
+    rng = np.random.default_rng(103)
+    src = arr_f16(rng.uniform(-4.0, 4.0, 16 ** 3), (16, 16, 16))
+    d, _, t, _ = simple_file(src, BINARY16, codec="auto")
+    assert t.inner_count == [1, 8, 64, 512, 0]
+    add_valid("noise_16_binary16", d, src, BINARY16,
+              "16^3 binary16 uniform random noise: fully refined octree, level table [1, 8, 64, 512, 0]; "
+              "codec chosen per block (zstd when smaller, else stored).")
+
+    # uniform
+    src = np.full((20, 20, 20), f32(0.5), dtype=np.uint32)
+    d, _, t, _ = simple_file(src, FLOAT32)
+    assert t.inner_count == [0] * 6 and len(t.values) == 1
+    add_valid("uniform_20_float32", d, src, FLOAT32,
+              "20^3 float32 all 0.5: depth 5, the root is one leaf, level table all zero, "
+              "no node blocks, value array of one element (zstd).")
+
+    # sphere in air
+    src = vol_object_in_air(40, 33, 29, BINARY16, 104, 0.0015, (19.5, 15.0, 13.0), 11.0, 0.9, 1.1)
+    d, _, t, _ = simple_file(src, BINARY16, limit=4096)
+    add_valid("sphere_40x33x29_binary16", d, src, BINARY16,
+              "40x33x29 binary16: sphere (radius 11) of noise 0.9..1.1 in uniform air 0.0015; depth 6; "
+              "air and padding as large leaves; zstd; blocks limited to 4096 decoded bytes.")
+
+    # float32 mixed
+    rng = np.random.default_rng(105)
+    z, y, x = np.mgrid[0:9, 0:10, 0:12]
+    vals = 0.01 * x + 0.1 * y - 0.05 * z + rng.normal(0, 1e-4, (9, 10, 12))
+    vals[0:4, 0:8, 0:8] = -7.25
+    vals[4:9, 8:10, 8:12] = 3.0e-41    # subnormal float32, uniform, partly padding
+    src = arr_f32(vals, (9, 10, 12))
+    d, *_ = simple_file(src, FLOAT32, codec=CODEC_ZSTD)
+    add_valid("gradient_12x10x9_float32", d, src, FLOAT32,
+              "12x10x9 float32: gradient with noise, a uniform region -7.25 (one leaf of side 8 with "
+              "padding) and a uniform subnormal region; zstd; depth 4.")
+
+    # multiblock
+    src = vol_object_in_air(24, 20, 18, UINT16, 106, 300, (11.0, 10.0, 9.0), 7.5, 20000, 40000)
+    d, _, t, blocks = simple_file(src, UINT16, codec="alt", limit=48, meta_first=True,
+                                  scale=2.0 ** -12, offset=-1.0)
+    per_level = {}
+    for b in blocks:
+        per_level[(b.stream, b.level)] = per_level.get((b.stream, b.level), 0) + 1
+    assert max(per_level.values()) >= 3
+    add_valid("multiblock_24x20x18_uint16", d, src, UINT16,
+              "24x20x18 uint16 ball in air, blocks limited to 48 decoded bytes (24 values or 6 node "
+              "words), so most levels have several blocks of each stream; codecs alternate "
+              "stored/zstd; the metadata block comes first in the file.")
+
+    # shuffled block order
+    t = build_tree(src3, UINT16)
+    bl = level_blocks(t, CODEC_ZSTD, limit=8)
+    bl.append(meta_block(DEFAULT_META))
+    bl = bl[::-1]
+    bl = bl[1:4] + bl[:1] + bl[4:]          # metadata somewhere in the middle
+    d, _ = assemble(t, bl, scale=0.0007, offset=-1.25)
+    add_valid("shuffled_blocks_3x5x7_uint16", d, src3, UINT16,
+              "Same volume as odd_3x5x7_uint16, blocks of at most 8 decoded bytes written in reverse "
+              "order with the metadata block among them: the spec fixes no file order of blocks, "
+              "only that each stream's blocks, taken in order of first_element, tile it.")
+
+    # base volume for extension tests and invalid files
+    BASE = vol_object_in_air(6, 5, 4, UINT16, 107, 100, (2.0, 2.0, 1.5), 2.2, 1000, 2000)
+
+    # unknown ignorable stream
+    t = build_tree(BASE, UINT16)
+    bl = level_blocks(t, CODEC_ZSTD)
+    ext = Blk(200, 0, 0, 24, b"future stream, skip me\x00\x01", codec=CODEC_STORED, flags=1)
+    bl.insert(2, ext)
+    bl.append(meta_block(DEFAULT_META))
+    d, _ = assemble(t, bl)
+    add_valid("ignorable_stream_200", d, BASE, UINT16,
+              "6x5x4 uint16 with an extra block of unknown stream 200, ignorable flag set (flags = 1), "
+              "stored codec, 24 one-byte elements, between the level blocks: a reader must skip it.")
+
+    # optional features
+    d, *_ = simple_file(BASE, UINT16, optional=(1 << 0) | (1 << 17) | (1 << 63))
+    add_valid("optional_features_unknown", d, BASE, UINT16,
+              "optional_features = bits 0, 17 and 63 set (unknown to 1.0): a reader must ignore them.")
+
+    # minor version 1.7 with bigger header, fixed part and entries
+    t = build_tree(BASE, UINT16)
+    bl = level_blocks(t, CODEC_ZSTD, limit=16)
+    bl.append(meta_block(DEFAULT_META))
+    d, _ = assemble(t, bl, minor=7, header_extra=bytes(range(0xA0, 0xB0)),
+                    fixed_extra=b"FUTURE-FIXED-FIELDS-1.7" + bytes(9),
+                    entry_extra=b"\xEE\xDD\xCC\xBB\xAA\x99\x88\x77")
+    assert u32(d, 12) == 56
+    add_valid("minor_1_7_extended", d, BASE, UINT16,
+              "version 1.7: header_size 56 (16 unknown non-zero bytes at 36..52, header_crc at 52), "
+              "fixed_size 80 (32 unknown bytes at 48..80, level table at 80), block_entry_size 40 "
+              "(8 unknown bytes per entry). A 1.0 reader must skip the extra bytes.")
+
+    MINOR17 = d
+    # the largest header, fixed part and block entries a reader must accept
+    src = arr_f32([-3.75], (1, 1, 1))
+    t = build_tree(src, FLOAT32)
+    bl = level_blocks(t, CODEC_STORED)
+    bl.append(meta_block(DEFAULT_META, CODEC_STORED))
+    pat = lambda nb, s0: bytes((s0 + q) % 251 for q in range(nb))
+    d, _ = assemble(t, bl, minor=1, header_extra=pat(4056, 1), fixed_extra=pat(4048, 2),
+                    entry_extra=pat(4064, 3))
+    assert u32(d, 12) == 4096
+    add_valid("limits_4096", d, src, FLOAT32,
+              "1x1x1 float32 with header_size, fixed_size and block_entry_size all 4096 (the largest "
+              "a reader must accept), the unknown bytes filled with a non-zero pattern.")
+
+    # metadata with all keys
+    text = METADATA_FULL.encode("utf-8")
+    json.loads(text.decode("utf-8"))
+    d, *_ = simple_file(BASE, UINT16, meta=text)
+    add_valid("metadata_full_utf8", d, BASE, UINT16,
+              "Metadata with every key of §11 (structure, provenance with all keys, user), non-ASCII "
+              "UTF-8 (2-, 3- and 4-byte sequences), \\u escapes incl. a surrogate pair, a big integer, "
+              "and unknown keys that must be ignored; pretty-printed with a trailing newline.")
+
+    # sample
+    src = sample_source()
+    d, lay, t, bl = simple_file(src, UINT16, codec=CODEC_STORED, scale=0.5, offset=-1024.0,
+                                meta={"voxel_size": [0.1, 0.1, 0.1], "unit": "mm",
+                                      "origin": [0, 0, 0], "value": {"quantity": "grey_value"}})
+    assert t.inner_count == [1, 1, 0] and t.values[0] == 169
+    add_valid("sample", d, src, UINT16,
+              "The annotated sample of §16: 3x2x2 uint16, scale 0.5, offset -1024, stored codec, "
+              "6 blocks. Root average 169 = encode((8 * 102.5 + 4 * 301) / 12 = 168.67); averaging the "
+              "stored child value 102 instead would give 168.")
+    SAMPLE = (src, d, lay, t, bl)
+
+    # specials
+    src = specials_f32()
+    d, *_ = simple_file(src, FLOAT32)
+    add_valid("specials_8x4x4_float32", d, src, FLOAT32,
+              "float32 special values, one 2x2x2 cell per case: uniform -0 (a leaf keeps -0), -0/+0 mix "
+              "(average +0), +inf, inf-inf (NaN stored 0x7FC00000), uniform signalling NaN 0x7F800001 and "
+              "negative NaN 0xFFC00000 (leaves keep their bits), NaN mixed, subnormal tie 2^-150 -> 0, "
+              "ties to even at 1+2^-24, 1+3*2^-24 and FLT_MAX-ulp/2, subnormals, huge values.")
+    src = specials_f16()
+    d, *_ = simple_file(src, BINARY16)
+    add_valid("specials_8x4x4_binary16", d, src, BINARY16,
+              "binary16 special values, one 2x2x2 cell per case: uniform -0, -0/+0, +inf, inf-inf -> 0x7E00, "
+              "uniform NaN 0x7C01 and 0x7FFF (kept), NaN mixed -> 0x7E00, ties to even (2^-25 -> 0, "
+              "1+2^-11 -> 1, 65488 -> 65472, subnormal/normal boundary), subnormal means.")
+
+    src = ties_uint16()
+    d, *_ = simple_file(src, UINT16, codec=CODEC_STORED, scale=0.001, offset=0.0)
+    add_valid("ties_3x3x3_uint16", d, src, UINT16,
+              "3x3x3 uint16: every level-of-detail-1 cell of weight 8, 4 or 2 has a mean exactly "
+              "halfway between two integers (base + 0.5, bases even and odd): round half to even.")
+
+    # zstd without content checksum
+    d, *_ = simple_file(BASE, UINT16, zcheck=False)
+    add_valid("zstd_no_checksum", d, BASE, UINT16,
+              "All blocks zstd frames without the (optional) content checksum.")
+
+    # metadata of exactly 16 MiB
+    small = arr_f16([1, 2, 3, 4, 5, 6, 7, 8], (2, 2, 2))
+    text = meta_bytes(DEFAULT_META)
+    text = text + b" " * (MIB16 - len(text))
+    d, *_ = simple_file(small, BINARY16, meta=text)
+    add_valid("metadata_16mib", d, small, BINARY16,
+              "2x2x2 binary16 whose metadata is exactly 16 MiB (16 777 216 bytes: JSON followed by "
+              "spaces), zstd-compressed: the largest allowed metadata.")
+
+    # ---------------------------------------------------------------- invalid
+    base, blay, bt, bblocks = simple_file(BASE, UINT16)
+    n = len(base)
+    # values block of level 2 index / nodes
+    vblk = [i for i, b in enumerate(bblocks) if b.stream == 3 and b.level == 2][0]
+    nblk1 = [i for i, b in enumerate(bblocks) if b.stream == 2 and b.level == 1][0]
+    mblk = len(bblocks) - 1
+    assert bt.inner_count[1] >= 2 and bt.inner_count[2] >= 1, bt.inner_count
+
+    def inv(name, data, expect, tag, desc, **kw):
+        add_invalid(name, data, expect, tag, desc, **kw)
+
+    # not-ivol / truncated signatures
+    inv("sig_png", b"\x89PNG\r\n\x1a\n" + base[8:], "not-ivol", "signature",
+        "Signature replaced by the PNG signature.")
+    inv("sig_crlf_to_lf", base.replace(b"\r\n", b"\n"), "not-ivol", "signature",
+        "The whole file after CRLF->LF conversion (signature becomes 89 49 56 4F 4C 0A 0A ..).")
+    inv("sig_lf_to_crlf", base[:7] + b"\r\n" + base[8:], "not-ivol", "signature",
+        "The lone LF of the signature converted to CRLF.")
+    inv("sig_high_bit_stripped", bytes([base[0] & 0x7F]) + base[1:], "not-ivol", "signature",
+        "First byte 0x09 instead of 0x89 (7-bit channel).")
+    inv("sig_short_other", b"GIF89", "not-ivol", "signature",
+        "5-byte file that is not a prefix of the signature.")
+    inv("trunc_empty", b"", "truncated", "short.signature",
+        "Empty file (its 0 bytes equal the start of the signature, §13 step 1).")
+    inv("trunc_5", base[:5], "truncated", "short.signature", "First 5 bytes of a valid file.")
+    inv("trunc_11", base[:11], "truncated", "short.version",
+        "First 11 bytes (version_major = 1 readable, but shorter than 12 bytes).")
+    inv("trunc_30", base[:30], "truncated", "short.file",
+        "First 30 bytes (shorter than header_size + 32).")
+    inv("trunc_header_only", base[:40], "truncated", "short.file", "Only the 40-byte header.")
+    inv("trunc_71", base[:71], "truncated", "short.file",
+        "71 bytes: one byte short of header_size + 32.")
+    mid = blay.block_offsets[vblk] + 3
+    inv("trunc_mid_block", base[:mid], "truncated", "end_signature",
+        "Cut in the middle of a values block.")
+    inv("trunc_mid_index", base[:blay.index_offset + 20], "truncated", "end_signature",
+        "Cut inside the index.")
+    inv("trunc_no_footer", base[:n - 32], "truncated", "end_signature", "Footer missing entirely.")
+    inv("trunc_in_footer_20", base[:n - 20], "truncated", "end_signature",
+        "Last 20 bytes missing (cut inside the footer).")
+    inv("trunc_last_byte", base[:n - 1], "truncated", "end_signature", "Last byte missing.")
+    inv("appended_zeros", base + bytes(16), "truncated", "end_signature",
+        "16 zero bytes appended after the footer.")
+    inv("appended_text", base + b"\r\n", "truncated", "end_signature",
+        "CRLF appended after the footer (e.g. by a text tool).")
+    inv("concatenated_twice", base + base, "malformed", "index_range",
+        "The file twice in a row: it ends with a valid footer (end_signature and footer_crc good), "
+        "but index_offset + index_size + 32 != file size (§13 step 4) -> malformed, not truncated.")
+
+    # versions
+    inv("version_major_2", reseal(patch(base, 8, "<H", 2), index=False), "unsupported-version",
+        "version_major", "version_major = 2 (header CRC recomputed).")
+    inv("version_major_0", reseal(patch(base, 8, "<H", 0), index=False), "unsupported-version",
+        "version_major", "version_major = 0 (header CRC recomputed).")
+    v2 = SIG + struct.pack("<HHI", 2, 0, 100000) + b"a future format, nothing of 1.0 holds" * 2
+    inv("version_major_2_other_layout", v2, "unsupported-version", "version_major",
+        "version_major = 2 followed by data laid out differently (header_size 100000, no footer): "
+        "the version is checked before anything else of the header.")
+    inv("version_major_2_bad_crc", patch(base, 8, "<H", 2), "unsupported-version", "version_major",
+        "version_major = 2 with the old (now wrong) header CRC: the version is checked first.")
+
+    # header
+    inv("header_size_39", reseal(patch(base, 12, "<I", 39), header=False, index=False), "malformed",
+        "header_size", "header_size = 39 (< 40).")
+    inv("header_size_4097", patch(base, 12, "<I", 4097), "malformed", "header_size",
+        "header_size = 4097 (> 4096).")
+    inv("header_size_beyond_file", reseal(patch(base, 12, "<I", n), header=False, index=False),
+        "truncated", "short.file",
+        "header_size = file size (in 40..4096, but file size < header_size + 32).")
+    d = bytearray(MINOR17)
+    d[45] ^= 0x01
+    inv("minor_1_7_header_extra_flipped", bytes(d), "checksum", "header_crc",
+        "The 1.7 file of valid/minor_1_7_extended.ivol with one of the unknown header bytes (offset 45) "
+        "changed: they are covered by header_crc.")
+    inv("header_crc_bad", patch(base, 36, "<I", u32(base, 36) ^ 0x00010000), "checksum", "header_crc",
+        "header_crc with one bit flipped.")
+    inv("header_byte_flipped", patch(base, 26, "<B", base[26] ^ 0x20), "checksum", "header_crc",
+        "One byte of optional_features changed without updating header_crc.")
+    inv("header_reserved_nonzero", reseal(patch(base, 32, "<I", 1), index=False), "malformed",
+        "header.reserved", "Header reserved field (offset 32) = 1, header CRC recomputed.")
+    inv("required_feature_bit0", reseal(patch(base, 16, "<Q", 1), index=False), "unsupported-feature",
+        "required_features", "required_features bit 0 set (unknown in 1.0), header CRC recomputed.")
+    inv("required_feature_bit63", reseal(patch(base, 16, "<Q", 1 << 63), index=False),
+        "unsupported-feature", "required_features", "required_features bit 63 set.")
+    inv("order_reserved_before_required", reseal(patch(patch(base, 16, "<Q", 1), 32, "<I", 7), index=False),
+        "malformed", "header.reserved",
+        "Check order (§13 step 3): reserved header field non-zero AND unknown required feature: "
+        "reserved fields are checked first -> malformed.")
+
+    # footer
+    f = n - 32
+    inv("footer_crc_bad", patch(base, f + 20, "<I", u32(base, f + 20) ^ 1), "checksum", "footer_crc",
+        "footer_crc with one bit flipped.")
+    inv("footer_index_offset_flipped", patch(base, f, "<Q", u64(base, f) ^ 0x100), "checksum",
+        "footer_crc", "A byte of index_offset changed, footer_crc not updated: footer_crc is checked "
+        "before the range of index_offset.")
+    inv("end_signature_bad", patch(base, n - 1, "<B", ord("d")), "truncated", "end_signature",
+        "end_signature 'IVOL_ENd': a file that does not end with end_signature is 'truncated'.")
+    inv("index_offset_below_header", reseal(patch(base, f, "<QQ", 8, n - 32 - 8), header=False,
+                                            index=False), "malformed", "index_range",
+        "index_offset = 8 (< header_size) with index_size = file size - 40 so that the sum rule holds; "
+        "footer_crc recomputed.")
+    inv("index_offset_plus_1", reseal(patch(base, f, "<Q", blay.index_offset + 1), header=False,
+                                      index=False), "malformed", "index_range",
+        "index_offset one too large (index_offset + index_size + 32 != file size); footer_crc recomputed.")
+    io_big = (1 << 64) - 16
+    isz_wrap = (n - 32 - io_big) % (1 << 64)
+    inv("index_offset_wraps", reseal(patch(base, f, "<QQ", io_big, isz_wrap), header=False,
+                                     index=False), "malformed", "index_range",
+        "index_offset = 2^64 - 16 and index_size chosen so that index_offset + index_size + 32 equals "
+        "the file size modulo 2^64: the sum must be computed without overflow.")
+    inv("index_size_plus_8", reseal(patch(base, f + 8, "<Q", blay.index_size + 8), header=False,
+                                    index=False), "malformed", "index_range",
+        "index_size 8 too large; footer_crc recomputed.")
+    d = patch(base, f + 16, "<I", u32(base, f + 16) ^ 0x80000000)
+    d = reseal(d, header=False, index=False)
+    inv("index_crc_bad", d, "checksum", "index_crc",
+        "index_crc with one bit flipped, footer_crc recomputed over it: the index CRC is the first failure.")
+    inv("index_byte_flipped", patch(base, blay.index_offset + blay.entries_offset + 20,
+                                    "<B", base[blay.index_offset + blay.entries_offset + 20] ^ 4),
+        "checksum", "index_crc", "A byte of the block table changed without updating index_crc.")
+
+    # index fixed part
+    def pix(rel, fmt, *v):
+        return patch_index(base, blay, rel, fmt, *v)
+
+    inv("index_signature_bad", pix(0, "<4s", b"IVIY"), "malformed", "index_signature",
+        "index_signature 'IVIY' (CRCs recomputed).")
+    inv("fixed_size_47", pix(4, "<I", 47), "malformed", "fixed_size", "fixed_size = 47 (< 48).")
+    inv("structure_kind_2", pix(8, "<B", 2), "unsupported-feature", "structure_kind",
+        "structure_kind = 2 (unknown).")
+    inv("structure_kind_0", pix(8, "<B", 0), "unsupported-feature", "structure_kind",
+        "structure_kind = 0 (not defined: 'other values').")
+    inv("value_encoding_4", pix(9, "<B", 4), "unsupported-feature", "value_encoding",
+        "value_encoding = 4 (unknown).")
+    inv("value_encoding_0", pix(9, "<B", 0), "unsupported-feature", "value_encoding",
+        "value_encoding = 0 (not defined).")
+    inv("index_reserved_nonzero", pix(11, "<B", 1), "malformed", "index.reserved",
+        "Index reserved byte (offset 11) = 1.")
+    inv("size_x_zero", pix(12, "<I", 0), "malformed", "size", "size_x = 0 (depth still matches max(size)).")
+    inv("value_scale_zero", pix(24, "<d", 0.0), "malformed", "value_scale", "value_scale = 0.")
+    inv("value_scale_nan", pix(24, "<Q", 0x7FF8000000000000), "malformed", "value_scale",
+        "value_scale = NaN.")
+    inv("value_offset_inf", pix(32, "<d", math.inf), "malformed", "value_offset", "value_offset = +inf.")
+    inv("block_entry_size_31", pix(44, "<I", 31), "malformed", "block_entry_size",
+        "block_entry_size = 31 (< 32).")
+    inv("fixed_size_4097", pix(4, "<I", 4097), "malformed", "fixed_size", "fixed_size = 4097 (> 4096).")
+    inv("block_entry_size_4097", pix(44, "<I", 4097), "malformed", "block_entry_size",
+        "block_entry_size = 4097 (> 4096).")
+    inv("block_count_huge", pix(40, "<I", 0xFFFFFFFF), "malformed", "index_size",
+        "block_count = 2^32 - 1: the index_size rule fails; a reader must not allocate 2^32 entries "
+        "before checking it.")
+    inv("block_count_wrong", pix(40, "<I", len(bblocks) + 1), "malformed", "index_size",
+        "block_count one larger than the entries present (index_size rule broken).")
+    d, _ = assemble(bt, bblocks, index_tail=bytes(8))
+    inv("index_trailing_bytes", d, "malformed", "index_size",
+        "8 extra bytes at the end of the index (index_size = fixed_size + 8(D+1) + "
+        "block_count*block_entry_size + 8).")
+    # depth
+    t4 = build_tree(BASE, UINT16, depth=4)
+    bl = level_blocks(t4, CODEC_ZSTD)
+    bl.append(meta_block(DEFAULT_META))
+    d, _ = assemble(t4, bl)
+    inv("depth_not_minimal", d, "malformed", "depth",
+        "6x5x4 volume stored with depth 4 instead of 3; the octree, level table, blocks and averages "
+        "are otherwise consistent for depth 4.")
+    # level table
+    ic = bt.inner_count
+    D = bt.D
+    assert D == 3
+    lt_off = blay.level_table_offset
+    inv("level_table_root_2", pix(lt_off, "<Q", 2), "malformed", "level_table",
+        "inner_count[0] = 2.")
+    inv("level_table_last_nonzero", pix(lt_off + 8 * D, "<Q", 1), "malformed", "level_table",
+        "inner_count[D] = 1.")
+    inv("level_table_growth", pix(lt_off + 8, "<QQ", 9, ic[2] + ic[1] - 9), "malformed", "level_table",
+        "inner_count[1] = 9 > 8 * inner_count[0] (total_inner unchanged).")
+    inv("level_table_zero_then_nonzero", pix(lt_off, "<QQ", 0, ic[1] + ic[0]), "malformed", "level_table",
+        "inner_count[0] = 0 but inner_count[1] > 0.")
+    huge = [min(8 ** l, 1 << 63) for l in range(31)] + [0]
+    assert sum(huge) >= 1 << 64
+    d, _ = assemble(bt, bblocks, size=(1 << 31, 5, 4), depth=31, level_table=huge)
+    inv("level_table_overflow", d, "malformed", None,
+        "size_x = 2^31, depth 31 and a level table that obeys its rules, inner_count[l] = min(8^l, "
+        "2^63), whose sum exceeds 2^64: total_inner and total_values must not wrap around; the blocks "
+        "present cannot cover the streams (block level / coverage rules) -> malformed.")
+
+    # block table
+    def pen(nb, field, fmt, v):
+        return pix(entry_off(blay, nb, field) - 0, fmt, v)
+
+    inv("block_flags_reserved_bit", pen(vblk, "flags", "<B", 2), "malformed", "block.flags",
+        "A values block with flags bit 1 (reserved) set.")
+    inv("block_ignorable_on_values", pen(vblk, "flags", "<B", 1), "malformed", "block.flags",
+        "A values block (stream 3) with the ignorable flag: streams 1-3 must have flags = 0.")
+    inv("block_first_offset_wrong", pen(0, "file_offset", "<Q", 0), "malformed", "block.placement",
+        "First block entry file_offset = 0 instead of header_size.")
+    inv("block_offset_plus_1", pen(vblk, "file_offset", "<Q", blay.block_offsets[vblk] + 1), "malformed",
+        "block.placement", "One block's file_offset one too large (blocks do not tile the file).")
+    d, _ = assemble(bt, bblocks, gap_before_index=b"\x00GAP")
+    inv("block_gap_before_index", d, "malformed", "block.placement",
+        "4 bytes between the last block and the index (index_offset includes them): the last block "
+        "does not end at index_offset.")
+    inv("block_stored_size_plus_1", pen(vblk, "stored_size", "<I", len(bblocks[vblk].stored_bytes()) + 1),
+        "malformed", "block.placement",
+        "A block's stored_size one too large: the next block does not start where it ends.")
+    bl = level_blocks(bt, CODEC_ZSTD)
+    bl.append(meta_block(DEFAULT_META))
+    bl[vblk].codec = 2
+    bl[vblk].stored = bl[vblk].data
+    d, _ = assemble(bt, bl)
+    inv("codec_2", d, "unsupported-feature", "codec",
+        "A values block with codec 2 (unknown); its stored bytes are the raw values, CRC correct.")
+    bl = level_blocks(bt, CODEC_ZSTD)
+    bl.append(meta_block(DEFAULT_META))
+    zb = Blk(STREAM_VALUES, 2, bt.first_value[2], 0, b"", codec=CODEC_ZSTD)
+    bl.insert(vblk, zb)
+    d, _ = assemble(bt, bl)
+    inv("block_element_count_zero", d, "malformed", "block.sizes",
+        "An extra values block with element_count = 0 (a zstd frame of empty content) at the start of "
+        "level 2; coverage of the stream is otherwise exact.")
+    bl = level_blocks(bt, CODEC_ZSTD)
+    bl.append(meta_block(DEFAULT_META))
+    bl.insert(2, Blk(200, 0, 0, 16, b"must understand!", codec=CODEC_STORED, flags=0))
+    d, _ = assemble(bt, bl)
+    inv("stream_200_not_ignorable", d, "unsupported-feature", "stream",
+        "An extra block of unknown stream 200 without the ignorable flag.")
+    bl = level_blocks(bt, CODEC_ZSTD)
+    d, _ = assemble(bt, bl)
+    inv("metadata_missing", d, "malformed", "metadata.count", "No block of stream 1.")
+    bl = level_blocks(bt, CODEC_ZSTD)
+    bl.insert(0, meta_block(DEFAULT_META))
+    bl.append(meta_block(DEFAULT_META))
+    d, _ = assemble(bt, bl)
+    inv("metadata_twice", d, "malformed", "metadata.count", "Two blocks of stream 1.")
+    inv("metadata_level_1", pen(mblk, "level", "<B", 1), "malformed", "metadata.level",
+        "The metadata block has level 1.")
+    inv("block_level_wrong", pen(vblk, "level", "<B", 1), "malformed", "block.level",
+        "A values block of level 2 whose level field says 1.")
+    inv("block_level_beyond_depth", pen(vblk, "level", "<B", 9), "malformed", "block.level",
+        "A values block with level 9 > depth 3.")
+    inv("nodes_block_level_wrong", pen(nblk1, "level", "<B", 0), "malformed", "block.level",
+        "A nodes block of level 1 whose level field says 0.")
+    # stored size mismatch for codec 0
+    bl = level_blocks(bt, CODEC_STORED)
+    bl.append(meta_block(DEFAULT_META, CODEC_STORED))
+    bl[vblk].stored = bl[vblk].data + b"\x00\x00"
+    d, _ = assemble(bt, bl)
+    inv("stored_size_mismatch", d, "malformed", "block.stored_size",
+        "A stored (codec 0) values block whose stored_size is element_count*2 + 2 (two extra bytes, "
+        "file layout and CRCs consistent).")
+    # element ranges: use the multiblock file
+    # a small file with several blocks per level (BASE, blocks of at most 16 decoded bytes)
+    mdata, _, mt, mblocks = simple_file(BASE, UINT16, codec="alt", limit=16, meta_first=True,
+                                        scale=2.0 ** -12, offset=-1.0)
+
+    def rebuild_multi(mut):
+        bl = []
+        for b in mblocks:
+            nb = Blk(b.stream, b.level, b.first, b.count, b.data, b.codec, b.flags)
+            bl.append(nb)
+        mut(bl)
+        d, _ = assemble(mt, bl, scale=2.0 ** -12, offset=-1.0)
+        return d
+
+    vw = 2
+    # find a level with >= 2 values blocks
+    nvb = lambda l: sum(1 for b in mblocks if b.stream == 3 and b.level == l)
+    lv = max((l for l in range(mt.D) if nvb(l + 1) >= 2), key=nvb)
+    assert nvb(lv) >= 2
+    vbs = [i for i, b in enumerate(mblocks) if b.stream == 3 and b.level == lv]
+    i1, i2 = vbs[0], vbs[1]
+
+    def values_of(a, e):
+        return pack_values(UINT16, mt.values[a:e])
+
+    def overlap(bl):
+        b = bl[i2]
+        b.first -= 1
+        b.count += 1
+        b.data = values_of(b.first, b.first + b.count)
+
+    def gap(bl):
+        b = bl[i1]
+        b.count -= 1
+        b.data = values_of(b.first, b.first + b.count)
+
+    def straddle(bl):
+        # move the first value of level lv+1 into the last block of level lv
+        last = [i for i, b in enumerate(bl) if b.stream == 3 and b.level == lv][-1]
+        nxt = [i for i, b in enumerate(bl) if b.stream == 3 and b.level == lv + 1][0]
+        bl[last].count += 1
+        bl[last].data = values_of(bl[last].first, bl[last].first + bl[last].count)
+        bl[nxt].first += 1
+        bl[nxt].count -= 1
+        bl[nxt].data = values_of(bl[nxt].first, bl[nxt].first + bl[nxt].count)
+        assert bl[nxt].count >= 1
+
+    def dup(bl):
+        b = bl[i1]
+        bl.insert(i1 + 1, Blk(b.stream, b.level, b.first, b.count, b.data, b.codec, 0))
+
+    inv("values_overlap", rebuild_multi(overlap), "malformed", "stream.coverage",
+        "Small multiblock file (6x5x4, blocks <= 16 bytes): a values block starts one element early, so two blocks of the same level "
+        "both hold one element (the same value; all CRCs good).")
+    inv("values_gap", rebuild_multi(gap), "malformed", "stream.coverage",
+        "Small multiblock file (6x5x4, blocks <= 16 bytes): a values block holds one element less, leaving one element of the stream "
+        "in no block.")
+    inv("values_block_duplicated", rebuild_multi(dup), "malformed", "stream.coverage",
+        "Small multiblock file (6x5x4, blocks <= 16 bytes): one values block appears twice in the file (identical entry and bytes).")
+    inv("values_block_straddles_levels", rebuild_multi(straddle), "malformed", "block.level",
+        "Small multiblock file (6x5x4, blocks <= 16 bytes): the last values block of level %d also holds the first value of level %d "
+        "(coverage of the stream still exact)." % (lv, lv + 1))
+    nbs = [i for i, b in enumerate(mblocks) if b.stream == 2]
+
+    def nodes_gap(bl):
+        b = bl[nbs[-1]]
+        if b.count == 1:
+            bl.pop(nbs[-1])
+        else:
+            b.count -= 1
+            b.data = pack_nodes(mt.nodes[b.first:b.first + b.count])
+
+    inv("nodes_gap", rebuild_multi(nodes_gap), "malformed", "stream.coverage",
+        "Small multiblock file (6x5x4, blocks <= 16 bytes): the last node word of the node stream is in no block.")
+    # block too large
+    bomb = meta_bytes(DEFAULT_META)
+    bomb = bomb + b" " * (MIB64 + 1 - len(bomb))
+    bl = level_blocks(bt, CODEC_ZSTD)
+    bl.append(meta_block(bomb))
+    d, _ = assemble(bt, bl)
+    del bomb
+    inv("block_decoded_64mib_plus_1", d, "malformed", "block.too_large",
+        "The metadata block declares element_count = 64 MiB + 1 (a zstd frame of JSON plus spaces "
+        "with that content size, %d bytes stored): must be refused from the index, before "
+        "allocating or decoding (the metadata 16 MiB limit is also exceeded)." % len(bl[-1].stored_bytes()))
+    bl = level_blocks(bt, CODEC_ZSTD)
+    bl.append(meta_block(DEFAULT_META))
+    bl[vblk].ov["count"] = 0x80000000
+    d, _ = assemble(bt, bl)
+    inv("block_count_2g_values", d, "malformed", "block.too_large",
+        "A values block whose entry declares element_count = 2^31 (4 GiB decoded); the frame is small. "
+        "Must be refused without allocating (stream coverage is also broken).")
+    text = meta_bytes(DEFAULT_META)
+    text = text + b" " * (MIB16 + 1 - len(text))
+    d, *_ = simple_file(small, BINARY16, meta=text)
+    inv("metadata_16mib_plus_1", d, "malformed", "metadata.size",
+        "Metadata of 16 MiB + 1 bytes (valid JSON followed by spaces), zstd-compressed.")
+
+    # block CRCs and zstd
+    d = bytearray(base)
+    d[blay.block_offsets[vblk] + 5] ^= 0x40
+    inv("block_crc_bad", bytes(d), "checksum", "block.crc", "One byte of a values block's stored bytes changed.")
+    d = bytearray(base)
+    d[blay.block_offsets[mblk] + 5] ^= 0x01
+    inv("metadata_block_crc_bad", bytes(d), "checksum", "block.crc",
+        "One byte of the metadata block's stored bytes changed.")
+    d = bytearray(base)
+    d[blay.block_offsets[nblk1] + 3] ^= 0x10
+    inv("nodes_block_crc_bad", bytes(d), "checksum", "block.crc",
+        "One byte of a nodes block's stored bytes changed.")
+    bl = level_blocks(bt, CODEC_ZSTD)
+    bl.append(meta_block(DEFAULT_META))
+    fr = bytearray(zframe(bl[vblk].data))
+    assert zstandard.get_frame_parameters(bytes(fr)).has_checksum
+    fr[-1] ^= 0xFF
+    bl[vblk].stored = bytes(fr)
+    d, _ = assemble(bt, bl)
+    inv("zstd_content_checksum_bad", d, "checksum", "zstd.checksum",
+        "A values block whose zstd content checksum (last 4 bytes of the frame) is wrong; the block "
+        "CRC is computed over the damaged frame, so only the zstd checksum fails.")
+    bl = level_blocks(bt, CODEC_ZSTD)
+    bl.append(meta_block(DEFAULT_META))
+    bl[vblk].stored = zframe(bl[vblk].data, content_size=False)
+    assert zstandard.get_frame_parameters(bl[vblk].stored).content_size == zstandard.CONTENTSIZE_UNKNOWN
+    d, _ = assemble(bt, bl)
+    inv("zstd_no_content_size", d, "malformed", "zstd.content_size",
+        "A values block whose zstd frame has no Frame_Content_Size.")
+    bl = level_blocks(bt, CODEC_ZSTD)
+    bl.append(meta_block(DEFAULT_META))
+    bl[vblk].stored = zframe(bl[vblk].data + b"\x01\x00")
+    d, _ = assemble(bt, bl)
+    inv("zstd_content_size_mismatch", d, "malformed", "zstd.content_size",
+        "A values block whose zstd frame holds one element more than element_count.")
+    bl = level_blocks(bt, CODEC_ZSTD)
+    bl.append(meta_block(DEFAULT_META))
+    half = len(bl[vblk].data) // 2
+    bl[vblk].stored = zframe(bl[vblk].data[:half]) + zframe(bl[vblk].data[half:])
+    d, _ = assemble(bt, bl)
+    inv("zstd_two_frames", d, "malformed", "zstd.content_size",
+        "A values block stored as two zstd frames (the first frame's content size is half the block).")
+    bl = level_blocks(bt, CODEC_ZSTD)
+    bl.append(meta_block(DEFAULT_META))
+    bl[vblk].stored = zframe(bl[vblk].data) + struct.pack("<II", 0x184D2A50, 4) + b"skip"
+    d, _ = assemble(bt, bl)
+    inv("zstd_trailing_skippable_frame", d, "malformed", "zstd.extra",
+        "A values block: a correct zstd frame followed by a skippable frame.")
+
+    # nodes and values (§8, §10)
+    def tree_file(t, mutate_words=None, mutate_values=None, enc=UINT16, limit=None):
+        nodes = list(t.nodes)
+        values = list(t.values)
+        if mutate_words:
+            mutate_words(nodes)
+        if mutate_values:
+            mutate_values(values)
+        t2 = Tree()
+        t2.__dict__.update(t.__dict__)
+        t2.nodes, t2.values = nodes, values
+        bl = level_blocks(t2, CODEC_ZSTD, limit)
+        bl.append(meta_block(DEFAULT_META))
+        return assemble(t2, bl)[0]
+
+    # a level-1 inner node with children, not the first of its level
+    l1 = list(range(bt.first_inner[1], bt.first_inner[1] + bt.inner_count[1]))
+    cand = [nn for nn in l1 if (bt.nodes[nn] >> 56) and nn != l1[0]] or [nn for nn in l1 if bt.nodes[nn] >> 56]
+    nn = cand[0]
+
+    def fic_plus1(w):
+        w[nn] += 1
+        fic = w[nn] & ((1 << 56) - 1)
+        assert fic + bin(w[nn] >> 56).count("1") <= bt.first_inner[2] + bt.inner_count[2]
+
+    inv("first_inner_child_off_by_one", tree_file(bt, fic_plus1), "malformed", "first_inner_child",
+        "Node word %d (level 1): first_inner_child one too large (still inside the level-2 range)." % nn)
+
+    def fic_big(w):
+        w[nn] = (w[nn] & ~((1 << 56) - 1)) | ((1 << 56) - 1)
+
+    inv("first_inner_child_out_of_range", tree_file(bt, fic_big), "malformed", "first_inner_child",
+        "Node word %d: first_inner_child = 2^56 - 1." % nn)
+    l2 = list(range(bt.first_inner[2], bt.first_inner[2] + bt.inner_count[2]))
+
+    def mask_last(w):
+        w[l2[0]] |= 1 << 56
+
+    inv("child_mask_at_level_D_minus_1", tree_file(bt, mask_last), "malformed", "mask_at_last_level",
+        "An inner node of level D-1 = 2 with child_mask bit 0 set.")
+    # a mask bit cleared: popcount sum of level 1 != inner_count[2]
+    inner1 = [nn for nn in l1 if bt.nodes[nn] >> 56]
+    victim = inner1[-1]
+
+    def mask_clear(w):
+        mask = w[victim] >> 56
+        low = mask & -mask
+        w[victim] &= ~(low << 56)
+        running = 1                      # keep every first_inner_child consistent with the masks
+        for q in range(len(w)):
+            w[q] = (w[q] & ~((1 << 56) - 1)) | running
+            running += bin(w[q] >> 56).count("1")
+
+    inv("child_mask_bit_missing", tree_file(bt, mask_clear), "malformed", "popcount_sum",
+        "The last inner node of level 1 with children lost one child_mask bit (first_inner_child of all "
+        "nodes recomputed from the masks): the masks of level 1 announce one inner node fewer than "
+        "inner_count[2] (§8.4 popcount rule).")
+    # padding leaf value nonzero
+    pad_vi = None
+    for lv_ in bt.levels:
+        for nd in lv_:
+            if nd.w == 0:
+                pad_vi = next(i for i, x in enumerate(v for l_ in bt.levels for v in l_) if x is nd)
+                break
+        if pad_vi is not None:
+            break
+
+    def pad_val(v):
+        v[pad_vi] = 1
+
+    inv("padding_leaf_nonzero", tree_file(bt, mutate_values=pad_val), "malformed", "padding_value",
+        "The first padding leaf (value index %d, weight 0) holds 1 instead of 0." % pad_vi)
+    # padding node subdivided: root child with x_bit=1 of a 3x5x7 volume (x >= 4 is padding)
+    t357 = build_tree(src3, UINT16, force_inner={(1, 1, 0, 0)})
+    bl = level_blocks(t357, CODEC_ZSTD)
+    bl.append(meta_block(DEFAULT_META))
+    d, _ = assemble(t357, bl, scale=0.0007, offset=-1.25)
+    inv("padding_node_subdivided", d, "malformed", "padding_subdivided",
+        "3x5x7 uint16: the level-1 node (1,0,0) (x = 4..7, all padding) is subdivided into 8 padding "
+        "leaves of value 0; level table, node words and averages are otherwise consistent.")
+    # averages
+    root_wrong = lambda v: v.__setitem__(0, v[0] + 1)
+    inv("inner_average_wrong", tree_file(bt, mutate_values=root_wrong), "malformed", "average",
+        "The root value is one more than encode(m(root)). Only a reader that verifies averages "
+        "(§10) refuses it; the dense export is unaffected.", verify_only=True, dense_src=BASE)
+    ssrc = SAMPLE[0]
+    tr = build_tree(ssrc, UINT16, avg="rounded")
+    assert tr.values != SAMPLE[3].values
+    inv("inner_average_from_rounded_children", tree_file(tr), "malformed", "average",
+        "The sample volume (3x2x2 uint16) with the root value computed from the children's stored "
+        "(rounded) values, 168, instead of their unrounded means, 169 (a plausible writer bug, §10).",
+        verify_only=True, dense_src=ssrc)
+    tu = build_tree(BASE, UINT16, avg="unweighted")
+    assert tu.values != bt.values
+    inv("inner_average_unweighted", tree_file(tu), "malformed", "average",
+        "Inner values computed with every non-padding child weighted 1 instead of its voxel count "
+        "(a plausible writer bug, §10).", verify_only=True, dense_src=BASE)
+
+    # metadata
+    def meta_file(text):
+        bl = level_blocks(bt, CODEC_ZSTD)
+        bl.append(meta_block(text))
+        return assemble(bt, bl)[0]
+
+    inv("metadata_not_json", meta_file(b"{'voxel_size': [0.05, 0.05, 0.05], 'unit': 'mm'}"), "malformed",
+        "metadata.json", "Metadata text is a Python dict literal with single quotes, not JSON.")
+    inv("metadata_truncated_json", meta_file(meta_bytes(DEFAULT_META)[:-1]), "malformed", "metadata.json",
+        "Metadata JSON missing its closing brace.")
+    m2 = dict(DEFAULT_META)
+    del m2["origin"]
+    inv("metadata_missing_origin", meta_file(m2), "malformed", "metadata.origin",
+        "Metadata without the required key 'origin'.")
+    m2 = dict(DEFAULT_META)
+    m2["value"] = {"unit": "1/mm"}
+    inv("metadata_missing_quantity", meta_file(m2), "malformed", "metadata.value",
+        "Metadata 'value' object without the required key 'quantity'.")
+    inv("metadata_duplicate_key", meta_file(b'{"voxel_size":[1,1,1],"unit":"mm","unit":"um",'
+                                            b'"origin":[0,0,0],"value":{"quantity":"density"}}'),
+        "malformed", "metadata.duplicate_key", "Metadata object with the key 'unit' twice.")
+    inv("metadata_top_level_array", meta_file(b'[{"voxel_size":[1,1,1],"unit":"mm","origin":[0,0,0],'
+                                              b'"value":{"quantity":"density"}}]'),
+        "malformed", "metadata.top_level", "Metadata whose top level is an array.")
+    inv("metadata_bom", meta_file(b"\xef\xbb\xbf" + meta_bytes(DEFAULT_META)), "malformed", "metadata.bom",
+        "Metadata starting with a UTF-8 byte-order mark.")
+    inv("metadata_bad_utf8", meta_file(meta_bytes(DEFAULT_META).replace(b'"mm"', b'"\xb5m"')), "malformed",
+        "metadata.utf8", "Metadata with a Latin-1 byte 0xB5 ('µ') inside a string: not UTF-8.")
+    m2 = dict(DEFAULT_META)
+    m2["voxel_size"] = [0.05, -0.05, 0.05]
+    inv("metadata_voxel_size_negative", meta_file(m2), "malformed", "metadata.voxel_size",
+        "voxel_size with a negative component (must be 3 positive numbers).")
+    inv("metadata_nan", meta_file(b'{"voxel_size":[NaN,1,1],"unit":"mm","origin":[0,0,0],'
+                                  b'"value":{"quantity":"density"}}'),
+        "malformed", "metadata.json", "Metadata with the token NaN, which is not JSON (RFC 8259).")
+    return SAMPLE
+
+
+README_HEAD = """# .ivol 1.0 conformance vectors
+
+Generated by `make_vectors.py` from the specification `format-spec/ivol.md`
+alone. Regenerate with
+
+    /usr/bin/python3 format-spec/vectors/make_vectors.py
+
+(the Debian interpreter, which sees python3-numpy and python3-zstandard).
+The script deletes and rewrites `valid/`, `invalid/`, `manifest.json` and
+this README; running it twice gives identical bytes (fixed seeds, fixed
+metadata, no time stamps; zstd frames depend on the zstd library version,
+the one used here is reported in `manifest.json` as `zstd_version`).
+Before writing the manifest the script runs a small self-test reader of its
+own over every file; the expected outputs are not produced by that reader
+but from the source arrays.
+
+## Manifest
+
+`manifest.json`: `{"vectors": [ ... ]}`, one object per file, paths relative
+to the folder of the manifest:
+
+| key | meaning |
+|---|---|
+| `file` | the `.ivol` file |
+| `expect` | `"ok"`, or the error class of §13 a reader must report: `not-ivol`, `unsupported-version`, `unsupported-feature`, `truncated`, `checksum`, `malformed` |
+| `dense` | (valid files) the expected dense export (§12.2): raw little-endian element bits, `u16` per voxel for binary16 and uint16, `u32` for float32, in order `[z][y][x]`, x fastest |
+| `lod` | (valid files) `{"k": file}`: expected level of detail k (§12.3) for every k = 1 .. D, same layout as `dense`, array shape `ceil(size/2^k)` per axis |
+| `value_encoding`, `size` | (valid files) for convenience: the encoding name and `[size_x, size_y, size_z]` |
+| `expect_without_verify` | (some invalid files) the result for a reader that does not verify inner averages (§10): `"ok"`; `dense` then gives the dense export it must produce |
+| `description` | what the file tests |
+
+Level of detail 0 is the dense export. All comparisons are bit-exact: no
+tolerance at all, NaN payloads and the sign of zero included. For an invalid
+file the reader must refuse the file with exactly the listed class (which is
+the class of the first failing check in the order of §13: each invalid file
+has one defect, with checksums around it recomputed where needed, unless its
+description says it tests the check order).
+
+The expected levels of detail are computed from the dense source by weighted
+2x2x2 box filtering in octant order with the binary64 arithmetic of §10 and
+rounded once per cell to the encoding, except that a cell whose non-padding
+voxels all have the same bits keeps those bits (such a cell is one leaf in a
+file written with lossless merging, and §12.3 then takes the leaf's value;
+this matters only for -0 and NaN payloads).
+
+## Vectors
+"""
+
+
+def write_readme(zver):
+    lines = [README_HEAD]
+    lines.append("### Valid files (`expect: ok`)\n")
+    lines.append("| file | tests |")
+    lines.append("|---|---|")
+    for e in MANIFEST:
+        if e["expect"] == "ok":
+            lines.append("| `%s` | %s |" % (e["file"], e["description"].replace("|", "\\|")))
+    lines.append("\n### Invalid files\n")
+    lines.append("| file | expect | tests |")
+    lines.append("|---|---|---|")
+    for e in MANIFEST:
+        if e["expect"] != "ok":
+            ex = e["expect"] + (" (ok without verify)" if "expect_without_verify" in e else "")
+            lines.append("| `%s` | `%s` | %s |" % (e["file"], ex, e["description"].replace("|", "\\|")))
+    lines.append("""
+## Notes
+
+* `valid/sample.ivol` is the file of the annotated example (§16).
+* `valid/metadata_16mib.ivol` and `invalid/block_decoded_64mib_plus_1.ivol`
+  are small files whose zstd frames decode to 16 MiB and 64 MiB + 1 bytes. A
+  reader must refuse the latter from the index alone (§7), without
+  allocating. A reader that imposes lower limits of its own (§13) may report
+  its limit for `metadata_16mib` instead of reading it; that is not an error
+  of the file.
+* Invalid files marked "ok without verify" break the inner-average rule of
+  §10, which only a verifying reader checks.
+* Questions about the specification that came up while writing these vectors
+  are listed in `SPEC-NOTES.md`.
+""")
+    with open(os.path.join(HERE, "README.md"), "w", encoding="utf-8") as fh:
+        fh.write("\n".join(lines))
+
+
+def main():
+    _check_crc()
+    _check_encoders()
+    for sub in ("valid", "invalid"):
+        p = os.path.join(HERE, sub)
+        if os.path.isdir(p):
+            shutil.rmtree(p)
+        os.makedirs(p)
+    gen()
+    zver = ".".join(str(v) for v in zstandard.ZSTD_VERSION)
+    man = {"format": "ivol 1.0", "generator": "make_vectors.py", "zstd_version": zver,
+           "vectors": MANIFEST}
+    with open(os.path.join(HERE, "manifest.json"), "w", encoding="utf-8") as fh:
+        json.dump(man, fh, indent=1, ensure_ascii=False)
+        fh.write("\n")
+    write_readme(zver)
+    nv = sum(1 for e in MANIFEST if e["expect"] == "ok")
+    print("%d valid and %d invalid vectors, %d bytes of files" % (nv, len(MANIFEST) - nv, RAW_TOTAL[0]))
+
+
+if __name__ == "__main__":
+    main()
