@@ -33,18 +33,21 @@ TEST(ConformanceVectors, ManifestIsPresentAndCoversBothKinds) {
 
 TEST(ConformanceVectors, EveryVectorReadsAsExpected) {
   std::size_t checked = 0;
-  for (const auto& v : manifest()["vectors"]) {
+  const nlohmann::json all = manifest();
+  for (const auto& v : all["vectors"]) {
     const std::string file = kVectors + "/" + v["file"].get<std::string>();
     const std::string expect = v["expect"];
     SCOPED_TRACE(file);
     const CheckReport report = check_file(file);
     if (expect != "ok") {
-      ASSERT_FALSE(report.ok()) << "a reader must refuse it (" << expect << ")";
+      EXPECT_FALSE(report.ok()) << "a reader must refuse it (" << expect << ")";
+      if (report.ok()) continue;
       EXPECT_EQ(error_class_name(report.problems[0].error_class), expect) << report.problems[0].message;
       ++checked;
       continue;
     }
-    ASSERT_TRUE(report.ok()) << report.problems[0].message;
+    EXPECT_TRUE(report.ok()) << report.problems[0].message;
+    if (!report.ok()) continue;
     Reader reader(file);
     const auto dense = reader.read_box_bits(full_box(reader.layout().dims));
     EXPECT_EQ(dense, test::read_bytes(kVectors + "/" + v["dense"].get<std::string>()));
@@ -57,7 +60,7 @@ TEST(ConformanceVectors, EveryVectorReadsAsExpected) {
       }
     ++checked;
   }
-  EXPECT_EQ(checked, manifest()["vectors"].size());
+  EXPECT_EQ(checked, all["vectors"].size());
 }
 
 }  // namespace

@@ -79,7 +79,7 @@ TEST_F(Refusal, TextModeDamageToTheSignature) {
 
 TEST_F(Refusal, UnknownMajorVersion) {
   bytes_[8] = 2;
-  expect_refused(ErrorClass::UnsupportedVersion, "version 2.0");
+  expect_refused(ErrorClass::UnsupportedVersion, "version 2");
 }
 
 TEST_F(Refusal, UnknownRequiredFeature) {

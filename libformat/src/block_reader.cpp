@@ -29,6 +29,9 @@ std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const Bl
     std::snprintf(text, sizeof text, "CRC-32C is 0x%08X but the index says 0x%08X", actual, block.crc);
     throw Error(ErrorClass::Checksum, part + text);
   }
+  // A block of a stream this reader does not know (ignorable, or the index
+  // would have been refused): its CRC is all that can be checked.
+  if (block.stream < 1 || block.stream > 3) return stored;
   const std::size_t decoded_size = std::size_t{block.element_count} * width;
   if (block.codec == 0) return stored;
   if (block.codec != 1) throw Error(ErrorClass::UnsupportedFeature, part + "codec " + std::to_string(block.codec) + " is not known");

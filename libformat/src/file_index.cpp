@@ -54,15 +54,14 @@ class StructureReader {
     const std::size_t sig_bytes = std::min<std::size_t>(prefix, 8);
     if (std::memcmp(header_.data(), layout::kSignature.data(), sig_bytes) != 0)
       fail(ErrorClass::NotIvol, "header", "the file does not start with the .ivol signature 89 49 56 4F 4C 0D 0A 0A");
-    if (size < 8) fail(ErrorClass::Truncated, "header", "the file is only " + std::to_string(size) + " bytes long");
-    if (size < 12) fail(ErrorClass::Truncated, "header", "the file ends inside the version field");
+    if (size < 10) fail(ErrorClass::Truncated, "header", "the file is only " + std::to_string(size) + " bytes long");
     info_.version_major = load<std::uint16_t>(&header_[layout::kHeaderVersionMajor]);
-    info_.version_minor = load<std::uint16_t>(&header_[layout::kHeaderVersionMinor]);
     if (info_.version_major != layout::kVersionMajor)
       fail(ErrorClass::UnsupportedVersion, "header",
-           "format version " + std::to_string(info_.version_major) + "." + std::to_string(info_.version_minor) +
-               " is not supported (this reader reads major version 1)");
+           "format version " + std::to_string(info_.version_major) +
+               ".x is not supported (this reader reads major version 1)");
     if (size < 16) fail(ErrorClass::Truncated, "header", "the file ends inside the header");
+    info_.version_minor = load<std::uint16_t>(&header_[layout::kHeaderVersionMinor]);
     info_.header_size = load<std::uint32_t>(&header_[layout::kHeaderSizeField]);
     if (info_.header_size < layout::kHeaderSize || info_.header_size > layout::kMaxHeaderSize)
       fail(ErrorClass::Malformed, "header", "header_size " + std::to_string(info_.header_size) + " is outside 40 .. 4096");
@@ -160,17 +159,18 @@ class StructureReader {
     auto bad = [&](const std::string& what) { fail(ErrorClass::Malformed, "level table", what); };
     if (v.inner_count[0] > 1) bad("inner_count[0] is " + std::to_string(v.inner_count[0]) + ", more than one root");
     if (v.inner_count[v.depth] != 0) bad("inner_count[D] is not 0: voxels cannot be subdivided");
+    // Counts are bounded before any arithmetic on them, so nothing overflows:
+    // first_inner_child has 56 bits, so there are at most 2^56 inner nodes.
+    constexpr std::uint64_t kMaxInner = std::uint64_t{1} << 56;
     std::uint64_t total = 0;
-    for (unsigned l = 0; l < v.depth; ++l) {
-      if (v.inner_count[l + 1] > 8 * v.inner_count[l])
+    for (unsigned l = 0; l <= v.depth; ++l) {
+      if (v.inner_count[l] > kMaxInner || total + v.inner_count[l] > kMaxInner)
+        bad("more than 2^56 inner nodes in all (inner_count[" + std::to_string(l) + "])");
+      total += v.inner_count[l];
+      if (l < v.depth && v.inner_count[l + 1] > 8 * v.inner_count[l])
         bad("inner_count[" + std::to_string(l + 1) + "] = " + std::to_string(v.inner_count[l + 1]) +
             " exceeds 8 x inner_count[" + std::to_string(l) + "]");
-      total += v.inner_count[l];
     }
-    // Each inner node needs at least a few bytes of file (the arrays are
-    // compressed, but not beyond zstd's limits); refuse counts that could not
-    // be stored in a file of this size before anything is allocated from them.
-    if (total > (std::uint64_t{1} << 56)) bad("more than 2^56 inner nodes");
   }
 
   void read_block_table(const unsigned char* p, std::uint32_t count, std::uint32_t entry_size) {

@@ -187,18 +187,18 @@ class Builder {
 
     std::uint8_t mask = 0;
     double acc = 0.0;
-    std::uint64_t total = 0;
+    double total = 0.0;  // spec §10 accumulates the weights in binary64 too
     for (unsigned c = 0; c < 8; ++c) {
       if (child[c].inner) mask = static_cast<std::uint8_t>(mask | (1u << c));
       out.values[level + 1].push_back(static_cast<Stored>(child[c].bits));
       if (child[c].weight > 0) {
         acc = acc + static_cast<double>(child[c].weight) * child[c].mean;
-        total += child[c].weight;
+        total = total + static_cast<double>(child[c].weight);
         if (level + 1 == layout_.depth) ++stats.kept;
       }
     }
     out.nodes[level].push_back(make_node_word(mask, 0));
-    const double mean = acc / static_cast<double>(total);
+    const double mean = acc / total;
     return NodeResult{encode_value(layout_.encoding, mean), true, mean, weight};
   }
 

@@ -45,7 +45,7 @@ class TreeVerifier {
  private:
   double visit(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k,
                std::uint64_t value_index, std::uint64_t inner) {
-    const std::uint64_t w = layout_.weight(level, i, j, k);
+    const double w = layout_.weight_f64(level, i, j, k);
     const std::uint32_t bits = access_.value_bits(value_index);
     auto where = [&] {
       return "node at level " + std::to_string(level) + " (" + std::to_string(i) + "," +
@@ -73,7 +73,7 @@ class TreeVerifier {
     next_child_[level] += popcount8(mask);
 
     double acc = 0.0;
-    std::uint64_t total_weight = 0;
+    double total_weight = 0.0;
     for (unsigned c = 0; c < 8; ++c) {
       const std::uint32_t ci = 2 * i + (c & 1u);
       const std::uint32_t cj = 2 * j + ((c >> 1) & 1u);
@@ -81,13 +81,13 @@ class TreeVerifier {
       const std::uint64_t child_inner =
           (mask >> c) & 1u ? first + popcount8(mask & ((1u << c) - 1u)) : kNoInner;
       const double m = visit(level + 1, ci, cj, ck, 1 + 8 * inner + c, child_inner);
-      const std::uint64_t wc = layout_.weight(level + 1, ci, cj, ck);
+      const double wc = layout_.weight_f64(level + 1, ci, cj, ck);
       if (wc > 0) {
-        acc = acc + static_cast<double>(wc) * m;
-        total_weight += wc;
+        acc = acc + wc * m;
+        total_weight = total_weight + wc;
       }
     }
-    const double mean = acc / static_cast<double>(total_weight);
+    const double mean = acc / total_weight;
     const std::uint32_t expected = encode_value(layout_.encoding, mean);
     if (expected != bits)
       throw Error(ErrorClass::Malformed, where() + ": stored average " + hex_bits(bits) +

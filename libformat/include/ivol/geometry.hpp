@@ -50,6 +50,8 @@ struct VolumeLayout {
   std::uint64_t level_values(unsigned level) const;
   // Non-padding voxels covered by node (i, j, k) of `level` (§8.1).
   std::uint64_t weight(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k) const;
+  // The same as a binary64 product, as spec §10 evaluates it (exact below 2^53).
+  double weight_f64(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k) const;
   double physical(double decoded) const { return value_offset + value_scale * decoded; }
 };
 
