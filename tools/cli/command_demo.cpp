@@ -83,10 +83,14 @@ Runner add_demo_command(CLI::App& app, const GlobalOptions& global) {
   auto* cmd = app.add_subcommand("demo", "Write a synthetic CT volume as .ivol, read it back, report the savings");
   auto s = std::make_shared<DemoSettings>();
   cmd->add_option("--size", s->size, "Voxels per side")->check(CLI::Range(8u, 2048u))->capture_default_str();
-  cmd->add_option("--object", s->object, "pencil-holder, board or pipe")->capture_default_str();
+  cmd->add_option("--object", s->object, "The synthetic object")
+      ->check(CLI::IsMember({"pencil-holder", "board", "pipe"}))
+      ->capture_default_str();
   cmd->add_option("--noise", s->noise, "Noise sigma, 1/mm")->check(CLI::Range(0.0f, 1.0f))->capture_default_str();
   cmd->add_option("--margin", s->margin, "Full-resolution margin around the object, voxels")->capture_default_str();
-  cmd->add_option("--encoding", s->encoding, "binary16 or float32")->capture_default_str();
+  cmd->add_option("--encoding", s->encoding, "Value encoding")
+      ->check(CLI::IsMember({"binary16", "float32"}))
+      ->capture_default_str();
   cmd->add_option("-o,--output-dir", s->output_dir, "Where the .ivol files go")->capture_default_str();
   return [s, &global]() {
     synthetic::VolumeSpec spec;

@@ -25,6 +25,14 @@ int main(int argc, char** argv) {
   add(add_info_command);
   add(add_verify_command);
 
+  if (argc > 1 && argv[1][0] != '-') {
+    bool known = false;
+    for (auto& [sub, run] : runners) known = known || sub->get_name() == argv[1];
+    if (!known) {
+      std::cerr << "ivol: unknown command '" << argv[1] << "' (see ivol --help)\n";
+      return kExitUsage;
+    }
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
