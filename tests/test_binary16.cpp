@@ -20,8 +20,10 @@ TEST(Binary16, DecodesEveryPatternExactly) {
   for (std::uint32_t b = 0; b < 0x10000; ++b) {
     const double expected = reference_decode(ValueEncoding::Binary16, b);
     const double got = ivol::binary16_to_double(static_cast<std::uint16_t>(b));
-    if (std::isnan(expected)) ASSERT_TRUE(std::isnan(got)) << b;
-    else ASSERT_EQ(got, expected) << b;
+    if (std::isnan(expected))
+      ASSERT_TRUE(std::isnan(got)) << b;
+    else
+      ASSERT_EQ(got, expected) << b;
   }
 }
 

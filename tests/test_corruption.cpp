@@ -39,7 +39,8 @@ class Corruption : public ::testing::Test {
     if (offset >= info_.file_size - 32) return "footer";
     if (offset >= info_.index_offset) return "index";
     for (std::size_t b = 0; b < info_.blocks.size(); ++b)
-      if (offset < info_.blocks[b].file_offset + info_.blocks[b].stored_size) return "block " + std::to_string(b) + " (";
+      if (offset < info_.blocks[b].file_offset + info_.blocks[b].stored_size)
+        return "block " + std::to_string(b) + " (";
     return "?";
   }
 

@@ -183,9 +183,10 @@ TEST_F(Refusal, WrongAverage) {
 }
 
 TEST_F(Refusal, MetadataNotJsonOrMissingKeys) {
-  for (const std::string& text : {std::string("{\"voxel_size\": [1,1,1], \"unit\": \"mm\""),
-                                  std::string("{\"unit\": \"mm\", \"origin\": [0,0,0], \"value\": {\"quantity\": \"x\"}}"),
-                                  std::string("{\"a\": 1, \"a\": 2}")}) {
+  for (const std::string& text :
+       {std::string("{\"voxel_size\": [1,1,1], \"unit\": \"mm\""),
+        std::string("{\"unit\": \"mm\", \"origin\": [0,0,0], \"value\": {\"quantity\": \"x\"}}"),
+        std::string("{\"a\": 1, \"a\": 2}")}) {
     EXPECT_THROW(Metadata::parse(text), Error) << text;
   }
   const Metadata ok = Metadata::parse(

@@ -73,16 +73,15 @@ std::uint16_t double_to_binary16(double value) {
     return static_cast<std::uint16_t>(sign | static_cast<std::uint16_t>(units));
   }
   int e2 = 0;
-  std::frexp(a, &e2);  // a = f · 2^e2, f in [0.5, 1)
-  int exponent = e2 - 1;  // a in [2^exponent, 2^(exponent+1))
+  std::frexp(a, &e2);                                                 // a = f · 2^e2, f in [0.5, 1)
+  int exponent = e2 - 1;                                              // a in [2^exponent, 2^(exponent+1))
   double significand = std::nearbyint(std::ldexp(a, 10 - exponent));  // in [1024, 2048]
   if (significand >= 2048.0) {
     significand = 1024.0;
     ++exponent;
   }
   if (exponent > 15) return static_cast<std::uint16_t>(sign | 0x7C00);
-  const auto bits = static_cast<std::uint16_t>(((exponent + 15) << 10) |
-                                               (static_cast<int>(significand) - 1024));
+  const auto bits = static_cast<std::uint16_t>(((exponent + 15) << 10) | (static_cast<int>(significand) - 1024));
   return static_cast<std::uint16_t>(sign | bits);
 }
 

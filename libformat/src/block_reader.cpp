@@ -15,8 +15,8 @@ constexpr unsigned char kZstdMagic[4] = {0x28, 0xB5, 0x2F, 0xFD};
 
 }  // namespace
 
-std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const BlockInfo& block,
-                                                std::size_t index, std::size_t width) {
+std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const BlockInfo& block, std::size_t index,
+                                                std::size_t width) {
   const std::string part = file.path() + ": block " + std::to_string(index) + " (" + stream_name(block.stream) +
                            ", level " + std::to_string(block.level) + ", elements " +
                            std::to_string(block.first_element) + " .. " +
@@ -34,7 +34,8 @@ std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const Bl
   if (block.stream < 1 || block.stream > 3) return stored;
   const std::size_t decoded_size = std::size_t{block.element_count} * width;
   if (block.codec == 0) return stored;
-  if (block.codec != 1) throw Error(ErrorClass::UnsupportedFeature, part + "codec " + std::to_string(block.codec) + " is not known");
+  if (block.codec != 1)
+    throw Error(ErrorClass::UnsupportedFeature, part + "codec " + std::to_string(block.codec) + " is not known");
 
   if (stored.size() < 4 || std::memcmp(stored.data(), kZstdMagic, 4) != 0)
     throw Error(ErrorClass::Malformed, part + "the stored bytes are not a zstd frame");
@@ -43,8 +44,8 @@ std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const Bl
     throw Error(ErrorClass::Malformed, part + "the zstd frame does not carry Frame_Content_Size");
   if (content == ZSTD_CONTENTSIZE_ERROR) throw Error(ErrorClass::Malformed, part + "the zstd frame header is invalid");
   if (content != decoded_size)
-    throw Error(ErrorClass::Malformed, part + "the zstd frame holds " + std::to_string(content) + " bytes, the index says " +
-                                           std::to_string(decoded_size));
+    throw Error(ErrorClass::Malformed, part + "the zstd frame holds " + std::to_string(content) +
+                                           " bytes, the index says " + std::to_string(decoded_size));
   if (ZSTD_getDictID_fromFrame(stored.data(), stored.size()) != 0)
     throw Error(ErrorClass::Malformed, part + "the zstd frame needs a dictionary");
   const std::size_t frame_size = ZSTD_findFrameCompressedSize(stored.data(), stored.size());
@@ -53,14 +54,16 @@ std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const Bl
 
   thread_local std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> context(ZSTD_createDCtx(), ZSTD_freeDCtx);
   std::vector<std::uint8_t> decoded(decoded_size);
-  const std::size_t got = ZSTD_decompressDCtx(context.get(), decoded.data(), decoded.size(), stored.data(), stored.size());
+  const std::size_t got =
+      ZSTD_decompressDCtx(context.get(), decoded.data(), decoded.size(), stored.data(), stored.size());
   if (ZSTD_isError(got)) {
     if (ZSTD_getErrorCode(got) == ZSTD_error_checksum_wrong)
       throw Error(ErrorClass::Checksum, part + "the zstd content checksum does not match");
     throw Error(ErrorClass::Malformed, part + "zstd cannot decode it: " + ZSTD_getErrorName(got));
   }
   if (got != decoded_size)
-    throw Error(ErrorClass::Malformed, part + "decoded to " + std::to_string(got) + " bytes, expected " + std::to_string(decoded_size));
+    throw Error(ErrorClass::Malformed,
+                part + "decoded to " + std::to_string(got) + " bytes, expected " + std::to_string(decoded_size));
   return decoded;
 }
 

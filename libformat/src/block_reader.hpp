@@ -15,8 +15,8 @@ namespace ivol::detail {
 
 // Reads, checks and decodes block `index` of the block table; `width` is the
 // element width of its stream.
-std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const BlockInfo& block,
-                                                std::size_t index, std::size_t width);
+std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const BlockInfo& block, std::size_t index,
+                                                std::size_t width);
 
 using BlockData = std::shared_ptr<const std::vector<std::uint8_t>>;
 

@@ -40,8 +40,8 @@ std::uint32_t extend_portable(std::uint32_t state, const unsigned char* p, std::
     std::memcpy(&lo, p, 4);
     std::memcpy(&hi, p + 4, 4);
     lo ^= state;  // little-endian host assumed (checked in CMake-independent test)
-    state = t[7][lo & 0xFF] ^ t[6][(lo >> 8) & 0xFF] ^ t[5][(lo >> 16) & 0xFF] ^ t[4][lo >> 24] ^
-            t[3][hi & 0xFF] ^ t[2][(hi >> 8) & 0xFF] ^ t[1][(hi >> 16) & 0xFF] ^ t[0][hi >> 24];
+    state = t[7][lo & 0xFF] ^ t[6][(lo >> 8) & 0xFF] ^ t[5][(lo >> 16) & 0xFF] ^ t[4][lo >> 24] ^ t[3][hi & 0xFF] ^
+            t[2][(hi >> 8) & 0xFF] ^ t[1][(hi >> 16) & 0xFF] ^ t[0][hi >> 24];
     p += 8;
     n -= 8;
   }
@@ -50,9 +50,8 @@ std::uint32_t extend_portable(std::uint32_t state, const unsigned char* p, std::
 }
 
 #ifdef IVOL_HAVE_SSE42_PATH
-__attribute__((target("sse4.2"))) std::uint32_t extend_sse42(std::uint32_t state,
-                                                              const unsigned char* p,
-                                                              std::size_t n) {
+__attribute__((target("sse4.2"))) std::uint32_t extend_sse42(std::uint32_t state, const unsigned char* p,
+                                                             std::size_t n) {
   std::uint64_t s = state;
   while (n >= 8) {
     std::uint64_t v;

@@ -7,15 +7,16 @@
 
 namespace ivol {
 
-std::size_t encoding_width(ValueEncoding encoding) {
-  return encoding == ValueEncoding::Float32 ? 4 : 2;
-}
+std::size_t encoding_width(ValueEncoding encoding) { return encoding == ValueEncoding::Float32 ? 4 : 2; }
 
 const char* encoding_name(ValueEncoding encoding) {
   switch (encoding) {
-    case ValueEncoding::Binary16: return "binary16";
-    case ValueEncoding::UInt16: return "uint16";
-    case ValueEncoding::Float32: return "float32";
+    case ValueEncoding::Binary16:
+      return "binary16";
+    case ValueEncoding::UInt16:
+      return "uint16";
+    case ValueEncoding::Float32:
+      return "float32";
   }
   return "unknown";
 }
@@ -31,9 +32,10 @@ bool is_known_encoding(std::uint8_t code) { return code >= 1 && code <= 3; }
 
 std::uint32_t encode_value(ValueEncoding encoding, double value) {
   switch (encoding) {
-    case ValueEncoding::Binary16: return double_to_binary16(value);
+    case ValueEncoding::Binary16:
+      return double_to_binary16(value);
     case ValueEncoding::UInt16: {
-      if (std::isnan(value)) return 0;  // cannot occur for averages of codes
+      if (std::isnan(value)) return 0;               // cannot occur for averages of codes
       const double rounded = std::nearbyint(value);  // ties to even in the default mode
       if (rounded <= 0.0) return 0;
       if (rounded >= 65535.0) return 65535;
@@ -56,8 +58,10 @@ std::uint32_t encode_value(ValueEncoding encoding, double value) {
 
 double decode_value(ValueEncoding encoding, std::uint32_t bits) {
   switch (encoding) {
-    case ValueEncoding::Binary16: return binary16_to_double(static_cast<std::uint16_t>(bits));
-    case ValueEncoding::UInt16: return static_cast<double>(bits & 0xFFFFu);
+    case ValueEncoding::Binary16:
+      return binary16_to_double(static_cast<std::uint16_t>(bits));
+    case ValueEncoding::UInt16:
+      return static_cast<double>(bits & 0xFFFFu);
     case ValueEncoding::Float32: {
       float f;
       std::memcpy(&f, &bits, 4);

@@ -12,10 +12,14 @@ namespace ivol {
 
 const char* stream_name(std::uint8_t stream) {
   switch (stream) {
-    case 1: return "metadata";
-    case 2: return "nodes";
-    case 3: return "values";
-    default: return "unknown stream";
+    case 1:
+      return "metadata";
+    case 2:
+      return "nodes";
+    case 3:
+      return "values";
+    default:
+      return "unknown stream";
   }
 }
 
@@ -64,10 +68,11 @@ class StructureReader {
     info_.version_minor = load<std::uint16_t>(&header_[layout::kHeaderVersionMinor]);
     info_.header_size = load<std::uint32_t>(&header_[layout::kHeaderSizeField]);
     if (info_.header_size < layout::kHeaderSize || info_.header_size > layout::kMaxHeaderSize)
-      fail(ErrorClass::Malformed, "header", "header_size " + std::to_string(info_.header_size) + " is outside 40 .. 4096");
+      fail(ErrorClass::Malformed, "header",
+           "header_size " + std::to_string(info_.header_size) + " is outside 40 .. 4096");
     if (size < std::uint64_t{info_.header_size} + layout::kFooterSize)
-      fail(ErrorClass::Truncated, "header", "the file (" + std::to_string(size) +
-                                               " bytes) is shorter than its header and a footer");
+      fail(ErrorClass::Truncated, "header",
+           "the file (" + std::to_string(size) + " bytes) is shorter than its header and a footer");
     const std::uint32_t stored = load<std::uint32_t>(&header_[info_.header_size - 4]);
     const std::uint32_t actual = crc32c(header_.data(), info_.header_size - 4);
     if (stored != actual)
@@ -80,7 +85,8 @@ class StructureReader {
       std::string bits;
       for (int b = 0; b < 64; ++b)
         if ((info_.required_features >> b) & 1u) bits += (bits.empty() ? "" : ", ") + std::to_string(b);
-      fail(ErrorClass::UnsupportedFeature, "header", "required feature bit(s) " + bits + " are not known to this reader");
+      fail(ErrorClass::UnsupportedFeature, "header",
+           "required feature bit(s) " + bits + " are not known to this reader");
     }
   }
 
@@ -88,7 +94,8 @@ class StructureReader {
     const std::uint64_t size = file_.size();
     const auto footer = file_.read(size - layout::kFooterSize, layout::kFooterSize);
     if (std::memcmp(&footer[layout::kFooterEndSignature], layout::kEndSignature.data(), 8) != 0)
-      fail(ErrorClass::Truncated, "footer", "the file does not end with IVOL_END (truncated, extended or damaged at its end)");
+      fail(ErrorClass::Truncated, "footer",
+           "the file does not end with IVOL_END (truncated, extended or damaged at its end)");
     const std::uint32_t stored = load<std::uint32_t>(&footer[layout::kFooterCrc]);
     const std::uint32_t actual = crc32c(footer.data(), layout::kFooterCrc);
     if (stored != actual)
@@ -99,9 +106,9 @@ class StructureReader {
     const std::uint64_t room = size - layout::kFooterSize;
     if (info_.index_offset < info_.header_size || info_.index_offset > room ||
         info_.index_size != room - info_.index_offset)
-      fail(ErrorClass::Malformed, "footer", "index at offset " + std::to_string(info_.index_offset) + " with size " +
-                                                std::to_string(info_.index_size) + " does not end where the footer begins (" +
-                                                std::to_string(room) + ")");
+      fail(ErrorClass::Malformed, "footer",
+           "index at offset " + std::to_string(info_.index_offset) + " with size " + std::to_string(info_.index_size) +
+               " does not end where the footer begins (" + std::to_string(room) + ")");
   }
 
   void read_index() {
@@ -110,16 +117,19 @@ class StructureReader {
     const auto index = file_.read(info_.index_offset, static_cast<std::size_t>(info_.index_size));
     const std::uint32_t actual = crc32c(index.data(), index.size());
     if (actual != index_crc_)
-      fail(ErrorClass::Checksum, "index", "CRC-32C is " + hex32(actual) + " but the footer's index_crc says " + hex32(index_crc_));
+      fail(ErrorClass::Checksum, "index",
+           "CRC-32C is " + hex32(actual) + " but the footer's index_crc says " + hex32(index_crc_));
     const unsigned char* p = index.data();
     if (std::memcmp(p, layout::kIndexSignature.data(), 4) != 0)
       fail(ErrorClass::Malformed, "index", "does not start with IVIX");
     const std::uint32_t fixed_size = load<std::uint32_t>(p + layout::kIndexFixedSizeField);
     if (fixed_size < layout::kIndexFixedSize || fixed_size > layout::kMaxIndexFixedSize || fixed_size > index.size())
-      fail(ErrorClass::Malformed, "index", "fixed_size " + std::to_string(fixed_size) + " is outside 48 .. 4096 or the index");
+      fail(ErrorClass::Malformed, "index",
+           "fixed_size " + std::to_string(fixed_size) + " is outside 48 .. 4096 or the index");
     const std::uint8_t structure = p[layout::kIndexStructureKind];
     if (structure != layout::kStructureOctree)
-      fail(ErrorClass::UnsupportedFeature, "index", "structure_kind " + std::to_string(structure) + " is not known (1 = octree)");
+      fail(ErrorClass::UnsupportedFeature, "index",
+           "structure_kind " + std::to_string(structure) + " is not known (1 = octree)");
     const std::uint8_t encoding = p[layout::kIndexValueEncoding];
     if (!is_known_encoding(encoding))
       fail(ErrorClass::UnsupportedFeature, "index", "value_encoding " + std::to_string(encoding) + " is not known");
@@ -132,8 +142,9 @@ class StructureReader {
       if (v.dims[a] == 0) fail(ErrorClass::Malformed, "index", std::string("size_") + "xyz"[a] + " is 0");
     }
     if (v.depth > layout::kMaxDepth || v.depth != depth_for(v.dims))
-      fail(ErrorClass::Malformed, "index", "depth " + std::to_string(v.depth) + " is not the smallest D with 2^D >= " +
-                                               std::to_string(std::max({v.dims[0], v.dims[1], v.dims[2]})));
+      fail(ErrorClass::Malformed, "index",
+           "depth " + std::to_string(v.depth) +
+               " is not the smallest D with 2^D >= " + std::to_string(std::max({v.dims[0], v.dims[1], v.dims[2]})));
     v.value_scale = load<double>(p + layout::kIndexScale);
     v.value_offset = load<double>(p + layout::kIndexOffset);
     if (!std::isfinite(v.value_scale) || v.value_scale == 0.0)
@@ -141,13 +152,15 @@ class StructureReader {
     if (!std::isfinite(v.value_offset)) fail(ErrorClass::Malformed, "index", "value_offset is not finite");
     const std::uint32_t block_count = load<std::uint32_t>(p + layout::kIndexBlockCount);
     const std::uint32_t entry_size = load<std::uint32_t>(p + layout::kIndexBlockEntrySize);
-    if (block_count < 2) fail(ErrorClass::Malformed, "index", "block_count " + std::to_string(block_count) + " is below 2");
+    if (block_count < 2)
+      fail(ErrorClass::Malformed, "index", "block_count " + std::to_string(block_count) + " is below 2");
     if (entry_size < layout::kBlockEntrySize || entry_size > layout::kMaxBlockEntrySize)
       fail(ErrorClass::Malformed, "index", "block_entry_size " + std::to_string(entry_size) + " is outside 32 .. 4096");
-    const std::uint64_t expected = std::uint64_t{fixed_size} + 8ull * (v.depth + 1) + std::uint64_t{block_count} * entry_size;
+    const std::uint64_t expected =
+        std::uint64_t{fixed_size} + 8ull * (v.depth + 1) + std::uint64_t{block_count} * entry_size;
     if (expected != index.size())
-      fail(ErrorClass::Malformed, "index", "index_size is " + std::to_string(index.size()) + " but its fields need " +
-                                               std::to_string(expected));
+      fail(ErrorClass::Malformed, "index",
+           "index_size is " + std::to_string(index.size()) + " but its fields need " + std::to_string(expected));
     read_level_table(p + fixed_size);
     read_block_table(p + fixed_size + 8ull * (v.depth + 1), block_count, entry_size);
   }
@@ -203,8 +216,8 @@ class StructureReader {
       if (blk.flags & ~layout::kFlagIgnorable) bad(ErrorClass::Malformed, "reserved flag bits are set");
       if (!is_known_stream(blk.stream)) {
         if (!(blk.flags & layout::kFlagIgnorable))
-          bad(ErrorClass::UnsupportedFeature, "stream " + std::to_string(blk.stream) +
-                                                  " is not known and the block is not marked ignorable");
+          bad(ErrorClass::UnsupportedFeature,
+              "stream " + std::to_string(blk.stream) + " is not known and the block is not marked ignorable");
         continue;  // an ignorable block of a stream we do not know: skipped
       }
       if (blk.flags != 0) bad(ErrorClass::Malformed, "blocks of known streams must have flags 0");
@@ -240,10 +253,12 @@ class StructureReader {
                                        std::to_string(lo) + " .. " + std::to_string(hi));
     }
     if (expected_offset != info_.index_offset)
-      fail(ErrorClass::Malformed, "block table", "blocks end at " + std::to_string(expected_offset) +
-                                                     " but the index begins at " + std::to_string(info_.index_offset));
+      fail(ErrorClass::Malformed, "block table",
+           "blocks end at " + std::to_string(expected_offset) + " but the index begins at " +
+               std::to_string(info_.index_offset));
     if (metadata_blocks != 1)
-      fail(ErrorClass::Malformed, "block table", std::to_string(metadata_blocks) + " metadata blocks (exactly 1 required)");
+      fail(ErrorClass::Malformed, "block table",
+           std::to_string(metadata_blocks) + " metadata blocks (exactly 1 required)");
     check_coverage(2, v.total_inner());
     check_coverage(3, v.total_values());
   }
@@ -264,9 +279,9 @@ class StructureReader {
       next += b->element_count;
     }
     if (next != total)
-      fail(ErrorClass::Malformed, "block table", std::string(stream_name(stream)) + ": blocks hold " +
-                                                     std::to_string(next) + " elements, the level table needs " +
-                                                     std::to_string(total));
+      fail(ErrorClass::Malformed, "block table",
+           std::string(stream_name(stream)) + ": blocks hold " + std::to_string(next) +
+               " elements, the level table needs " + std::to_string(total));
   }
 
   RandomAccessFile& file_;
@@ -281,10 +296,14 @@ bool is_known_stream(std::uint8_t stream) { return stream >= 1 && stream <= 3; }
 
 std::size_t stream_width(std::uint8_t stream, ValueEncoding encoding) {
   switch (stream) {
-    case 1: return 1;
-    case 2: return 8;
-    case 3: return encoding_width(encoding);
-    default: return 1;
+    case 1:
+      return 1;
+    case 2:
+      return 8;
+    case 3:
+      return encoding_width(encoding);
+    default:
+      return 1;
   }
 }
 

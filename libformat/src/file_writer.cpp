@@ -28,9 +28,8 @@ std::string directory_of(const std::string& path) {
 
 }  // namespace
 
-EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_element,
-                          std::uint32_t element_count, std::size_t width, const void* data,
-                          const WriteOptions& options) {
+EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_element, std::uint32_t element_count,
+                          std::size_t width, const void* data, const WriteOptions& options) {
   EncodedBlock block;
   block.stream = stream;
   block.level = static_cast<std::uint8_t>(level);
@@ -65,8 +64,7 @@ EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_ele
   return block;
 }
 
-FileWriter::FileWriter(const std::string& path, const VolumeLayout& layout)
-    : path_(path), layout_(layout) {
+FileWriter::FileWriter(const std::string& path, const VolumeLayout& layout) : path_(path), layout_(layout) {
   temp_path_ = directory_of(path) + "/." + path.substr(path.find_last_of('/') + 1) + ".tmp-XXXXXX";
   std::vector<char> name(temp_path_.begin(), temp_path_.end());
   name.push_back('\0');
@@ -105,9 +103,8 @@ void FileWriter::append(const EncodedBlock& block) {
   if (finished_) throw Error(ErrorClass::InvalidArgument, path_ + ": append after finish");
   const std::uint64_t at = offset_;
   write_all(block.bytes.data(), block.bytes.size(), "block");
-  entries_.push_back(Entry{at, block.first_element, block.element_count,
-                           static_cast<std::uint32_t>(block.bytes.size()), block.crc,
-                           static_cast<std::uint8_t>(block.stream), static_cast<std::uint8_t>(block.codec),
+  entries_.push_back(Entry{at, block.first_element, block.element_count, static_cast<std::uint32_t>(block.bytes.size()),
+                           block.crc, static_cast<std::uint8_t>(block.stream), static_cast<std::uint8_t>(block.codec),
                            block.level});
 }
 
@@ -118,21 +115,19 @@ void FileWriter::finish(const Metadata& metadata, const std::vector<std::uint64_
   if (json.size() > layout::kMaxMetadataBytes)
     throw Error(ErrorClass::InvalidArgument, path_ + ": metadata exceeds 16 MiB");
   WriteOptions metadata_options;
-  append(encode_block(Stream::Metadata, 0, 0, static_cast<std::uint32_t>(json.size()), 1, json.data(),
-                      metadata_options));
+  append(
+      encode_block(Stream::Metadata, 0, 0, static_cast<std::uint32_t>(json.size()), 1, json.data(), metadata_options));
 
   const std::uint64_t index_offset = offset_;
   const std::size_t level_bytes = 8 * inner_count.size();
-  std::vector<unsigned char> index(layout::kIndexFixedSize + level_bytes +
-                                   entries_.size() * layout::kBlockEntrySize);
+  std::vector<unsigned char> index(layout::kIndexFixedSize + level_bytes + entries_.size() * layout::kBlockEntrySize);
   unsigned char* p = index.data();
   std::memcpy(p, layout::kIndexSignature.data(), 4);
   layout::store<std::uint32_t>(p + layout::kIndexFixedSizeField, layout::kIndexFixedSize);
   p[layout::kIndexStructureKind] = layout::kStructureOctree;
   p[layout::kIndexValueEncoding] = static_cast<std::uint8_t>(layout_.encoding);
   p[layout::kIndexDepth] = static_cast<std::uint8_t>(layout_.depth);
-  for (int a = 0; a < 3; ++a)
-    layout::store<std::uint32_t>(p + layout::kIndexSizeX + 4 * a, layout_.dims[a]);
+  for (int a = 0; a < 3; ++a) layout::store<std::uint32_t>(p + layout::kIndexSizeX + 4 * a, layout_.dims[a]);
   layout::store<double>(p + layout::kIndexScale, layout_.value_scale);
   layout::store<double>(p + layout::kIndexOffset, layout_.value_offset);
   layout::store<std::uint32_t>(p + layout::kIndexBlockCount, static_cast<std::uint32_t>(entries_.size()));

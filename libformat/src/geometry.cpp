@@ -14,8 +14,7 @@ bool Box::empty() const { return hi[0] <= lo[0] || hi[1] <= lo[1] || hi[2] <= lo
 
 std::string Box::to_string() const {
   std::ostringstream s;
-  s << "[" << lo[0] << "," << lo[1] << "," << lo[2] << " .. " << hi[0] << "," << hi[1] << ","
-    << hi[2] << ")";
+  s << "[" << lo[0] << "," << lo[1] << "," << lo[2] << " .. " << hi[0] << "," << hi[1] << "," << hi[2] << ")";
   return s.str();
 }
 
@@ -66,12 +65,9 @@ std::uint64_t VolumeLayout::first_value(unsigned level) const {
   return level == 0 ? 0 : 1 + 8 * first_inner(level - 1);
 }
 
-std::uint64_t VolumeLayout::level_values(unsigned level) const {
-  return level == 0 ? 1 : 8 * inner_count[level - 1];
-}
+std::uint64_t VolumeLayout::level_values(unsigned level) const { return level == 0 ? 1 : 8 * inner_count[level - 1]; }
 
-std::uint64_t VolumeLayout::weight(unsigned level, std::uint32_t i, std::uint32_t j,
-                                   std::uint32_t k) const {
+std::uint64_t VolumeLayout::weight(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k) const {
   const std::uint64_t side = std::uint64_t{1} << (depth - level);
   auto overlap = [side](std::uint64_t a, std::uint64_t n) -> std::uint64_t {
     const std::uint64_t lo = a * side;

@@ -17,9 +17,12 @@ void dilate_axis(std::vector<std::uint8_t>& mask, const Dims& dims, int axis, un
   for (std::uint64_t li = 0; li < lines; ++li) {
     // Index of the first voxel of line li.
     std::uint64_t base;
-    if (axis == 0) base = li * n;
-    else if (axis == 1) base = (li / dims[0]) * dims[0] * dims[1] + li % dims[0];
-    else base = li;
+    if (axis == 0)
+      base = li * n;
+    else if (axis == 1)
+      base = (li / dims[0]) * dims[0] * dims[1] + li % dims[0];
+    else
+      base = li;
     for (std::uint64_t t = 0; t < n; ++t) line[t] = mask[base + t * stride];
     std::uint64_t count = 0;  // ones in the window [t - radius, t + radius]
     for (std::uint64_t t = 0; t < std::min<std::uint64_t>(n, radius); ++t) count += line[t];
@@ -33,8 +36,7 @@ void dilate_axis(std::vector<std::uint8_t>& mask, const Dims& dims, int axis, un
 
 }  // namespace
 
-std::vector<std::uint8_t> threshold_keep_mask(const float* data, const Dims& dims, float threshold,
-                                              unsigned margin) {
+std::vector<std::uint8_t> threshold_keep_mask(const float* data, const Dims& dims, float threshold, unsigned margin) {
   const std::uint64_t n = voxel_count(dims);
   std::vector<std::uint8_t> mask(n);
   for (std::uint64_t i = 0; i < n; ++i) mask[i] = data[i] > threshold ? 1 : 0;

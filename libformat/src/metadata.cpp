@@ -12,9 +12,7 @@ namespace {
 
 using nlohmann::json;
 
-[[noreturn]] void fail(const std::string& what) {
-  throw Error(ErrorClass::Malformed, "metadata: " + what);
-}
+[[noreturn]] void fail(const std::string& what) { throw Error(ErrorClass::Malformed, "metadata: " + what); }
 
 std::array<double, 3> triple(const json& j, const char* key, bool positive) {
   const auto it = j.find(key);
@@ -26,8 +24,8 @@ std::array<double, 3> triple(const json& j, const char* key, bool positive) {
     if (!v.is_number()) fail(std::string("\"") + key + "\" must be an array of 3 numbers");
     out[a] = v.get<double>();
     if (!std::isfinite(out[a]) || (positive && out[a] <= 0))
-      fail(std::string("\"") + key + "\"[" + std::to_string(a) + "] must be a " +
-           (positive ? "positive" : "finite") + " number");
+      fail(std::string("\"") + key + "\"[" + std::to_string(a) + "] must be a " + (positive ? "positive" : "finite") +
+           " number");
   }
   return out;
 }
@@ -87,16 +85,16 @@ Metadata Metadata::from_json(const json& j) {
   m.provenance = optional_object(j, "provenance");
   m.user = optional_object(j, "user");
   for (const auto& [key, v] : j.items()) {
-    if (key != "voxel_size" && key != "origin" && key != "unit" && key != "value" &&
-        key != "structure" && key != "provenance" && key != "user")
+    if (key != "voxel_size" && key != "origin" && key != "unit" && key != "value" && key != "structure" &&
+        key != "provenance" && key != "user")
       m.other[key] = v;
   }
   return m;
 }
 
 Metadata Metadata::parse(const std::string& text) {
-  if (text.size() >= 3 && static_cast<unsigned char>(text[0]) == 0xEF &&
-      static_cast<unsigned char>(text[1]) == 0xBB && static_cast<unsigned char>(text[2]) == 0xBF)
+  if (text.size() >= 3 && static_cast<unsigned char>(text[0]) == 0xEF && static_cast<unsigned char>(text[1]) == 0xBB &&
+      static_cast<unsigned char>(text[2]) == 0xBF)
     fail("the JSON text starts with a byte-order mark");
   // Track the keys of every open object to refuse duplicates, which
   // nlohmann::json would otherwise resolve silently.
@@ -104,16 +102,18 @@ Metadata Metadata::parse(const std::string& text) {
   std::string duplicate;
   const json::parser_callback_t on_event = [&](int /*depth*/, json::parse_event_t event, json& parsed) {
     switch (event) {
-      case json::parse_event_t::object_start: open_objects.emplace_back(); break;
+      case json::parse_event_t::object_start:
+        open_objects.emplace_back();
+        break;
       case json::parse_event_t::object_end:
         if (!open_objects.empty()) open_objects.pop_back();
         break;
       case json::parse_event_t::key:
-        if (!open_objects.empty() && !open_objects.back().insert(parsed.get<std::string>()).second &&
-            duplicate.empty())
+        if (!open_objects.empty() && !open_objects.back().insert(parsed.get<std::string>()).second && duplicate.empty())
           duplicate = parsed.get<std::string>();
         break;
-      default: break;
+      default:
+        break;
     }
     return true;
   };

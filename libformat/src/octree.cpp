@@ -57,9 +57,7 @@ std::vector<float> Octree::read_box(const Box& box, unsigned lod) const {
   return out;
 }
 
-MemoryUsage Octree::memory() const {
-  return MemoryUsage{nodes_.size() * sizeof(std::uint64_t), values_.size()};
-}
+MemoryUsage Octree::memory() const { return MemoryUsage{nodes_.size() * sizeof(std::uint64_t), values_.size()}; }
 
 std::uint64_t Octree::leaf_count() const { return layout_.total_values() - layout_.total_inner(); }
 

@@ -103,8 +103,8 @@ class Builder {
 
   const VolumeLayout& layout() const { return layout_; }
 
-  NodeResult build(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k,
-                   LevelArrays<Stored>& out, BuildStats& stats) const {
+  NodeResult build(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k, LevelArrays<Stored>& out,
+                   BuildStats& stats) const {
     NodeResult r;
     r.weight = layout_.weight(level, i, j, k);
     if (r.weight == 0) return r;
@@ -131,8 +131,7 @@ class Builder {
   }
 
   // A node without kept voxels becomes one leaf holding their mean.
-  NodeResult coarsen(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k,
-                     BuildStats& stats) const {
+  NodeResult coarsen(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k, BuildStats& stats) const {
     const Dims& d = layout_.dims;
     const std::uint64_t side = std::uint64_t{1} << (layout_.depth - level);
     const std::uint64_t lo[3] = {i * side, j * side, k * side};
@@ -172,16 +171,19 @@ class Builder {
 
   // Decides between a merged leaf and an inner node once the children are
   // known; appends an inner node to the arrays.
-  NodeResult combine(unsigned level, const NodeResult* child, std::uint64_t weight,
-                     LevelArrays<Stored>& out, BuildStats& stats) const {
+  NodeResult combine(unsigned level, const NodeResult* child, std::uint64_t weight, LevelArrays<Stored>& out,
+                     BuildStats& stats) const {
     bool mergeable = true;
     bool have = false;
     std::uint32_t common = 0;
     for (unsigned c = 0; c < 8 && mergeable; ++c) {
       if (child[c].weight == 0) continue;
-      if (child[c].inner) mergeable = false;
-      else if (!have) common = child[c].bits, have = true;
-      else if (child[c].bits != common) mergeable = false;
+      if (child[c].inner || (have && child[c].bits != common)) {
+        mergeable = false;
+      } else if (!have) {
+        common = child[c].bits;
+        have = true;
+      }
     }
     if (mergeable) return NodeResult{common, false, decode_value(layout_.encoding, common), weight};
 
@@ -293,8 +295,8 @@ class ParallelBuild {
   }
 
   // Builds the levels above the split from the subtrees' results.
-  NodeResult top(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k,
-                 LevelArrays<Stored>& out, BuildStats& stats) const {
+  NodeResult top(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k, LevelArrays<Stored>& out,
+                 BuildStats& stats) const {
     if (level == split_) return results_[morton_index(split_, i, j, k)];
     if (b_.layout().weight(level, i, j, k) == 0) return NodeResult{};
     if (!b_.keeps(level, i, j, k)) return b_.coarsen(level, i, j, k, stats);
@@ -346,12 +348,16 @@ BuildResult build(const Source* data, const Dims& dims, const BuildOptions& opti
   VolumeLayout layout = builder.layout();
   layout.inner_count.assign(depth + 1, 0);
   auto level_nodes = [&](unsigned l, auto&& visit) {
-    if (l < parallel.split()) visit(top.nodes[l]);
-    else for (auto& a : parallel.arrays()) visit(a.nodes[l]);
+    if (l < parallel.split())
+      visit(top.nodes[l]);
+    else
+      for (auto& a : parallel.arrays()) visit(a.nodes[l]);
   };
   auto level_values = [&](unsigned l, auto&& visit) {
-    if (l <= parallel.split()) visit(top.values[l]);
-    else for (auto& a : parallel.arrays()) visit(a.values[l]);
+    if (l <= parallel.split())
+      visit(top.values[l]);
+    else
+      for (auto& a : parallel.arrays()) visit(a.values[l]);
   };
   for (unsigned l = 0; l <= depth; ++l)
     level_nodes(l, [&](const std::vector<std::uint64_t>& v) { layout.inner_count[l] += v.size(); });

@@ -3,8 +3,8 @@
 // small batches and appended in order, so memory stays bounded by a batch.
 #include <algorithm>
 #include <atomic>
-#include <mutex>
 #include <chrono>
+#include <mutex>
 #include <thread>
 
 #include "ivol/error.hpp"
@@ -26,8 +26,8 @@ std::vector<PendingBlock> plan_blocks(const Octree& octree, std::uint32_t block_
   const VolumeLayout& layout = octree.layout();
   const std::size_t value_width = encoding_width(layout.encoding);
   std::vector<PendingBlock> plan;
-  auto split = [&](Stream stream, unsigned level, std::uint64_t first, std::uint64_t count,
-                   std::size_t width, const std::uint8_t* base) {
+  auto split = [&](Stream stream, unsigned level, std::uint64_t first, std::uint64_t count, std::size_t width,
+                   const std::uint8_t* base) {
     const std::uint64_t per_block = std::max<std::uint64_t>(1, block_bytes / width);
     for (std::uint64_t at = 0; at < count; at += per_block) {
       const auto n = static_cast<std::uint32_t>(std::min(per_block, count - at));
@@ -66,7 +66,8 @@ WriteStats write_octree(const Octree& octree, const Metadata& metadata, const st
       for (std::size_t i; (i = next.fetch_add(1)) < end;) {
         const PendingBlock& b = plan[i];
         try {
-          encoded[i - begin] = encode_block(b.stream, b.level, b.first_element, b.element_count, b.width, b.data, options);
+          encoded[i - begin] =
+              encode_block(b.stream, b.level, b.first_element, b.element_count, b.width, b.data, options);
         } catch (...) {
           std::lock_guard<std::mutex> lock(failure_mutex);
           failure = std::current_exception();

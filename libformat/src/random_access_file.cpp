@@ -31,7 +31,9 @@ void RandomAccessFile::read(std::uint64_t offset, void* out, std::size_t size) {
   while (size > 0) {
     const ssize_t n = ::pread(fd_, p, size, static_cast<off_t>(offset));
     if (n < 0 && errno == EINTR) continue;
-    if (n < 0) throw Error(ErrorClass::Io, path_ + ": read failed at offset " + std::to_string(offset) + ": " + std::strerror(errno));
+    if (n < 0)
+      throw Error(ErrorClass::Io,
+                  path_ + ": read failed at offset " + std::to_string(offset) + ": " + std::strerror(errno));
     if (n == 0)
       throw Error(ErrorClass::Truncated, path_ + ": the file ended at offset " + std::to_string(offset) +
                                              " while reading (did it change while open?)");

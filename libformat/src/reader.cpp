@@ -4,16 +4,14 @@
 #include <cmath>
 #include <cstring>
 
-#include "reader_impl.hpp"
 #include "ivol/error.hpp"
 #include "layout.hpp"
+#include "reader_impl.hpp"
 #include "tree_walk.hpp"
 
 namespace ivol {
 
-
-Reader::Reader(const std::string& path, const ReaderOptions& options)
-    : impl_(std::make_unique<Impl>(path, options)) {}
+Reader::Reader(const std::string& path, const ReaderOptions& options) : impl_(std::make_unique<Impl>(path, options)) {}
 Reader::~Reader() = default;
 Reader::Reader(Reader&&) noexcept = default;
 Reader& Reader::operator=(Reader&&) noexcept = default;
@@ -61,9 +59,10 @@ std::vector<std::uint8_t> Reader::read_box_bits(const Box& box, unsigned lod) {
   std::vector<std::uint8_t> out(box.voxel_count() * width);
   detail::ImplAccess access{impl_.get()};
   detail::walk_box(access, v, impl_->ranges, box, lod, [&](const Box& region, std::uint32_t bits) {
-    if (width == 2) detail::fill_region(reinterpret_cast<std::uint16_t*>(out.data()), box, region,
-                                        static_cast<std::uint16_t>(bits));
-    else detail::fill_region(reinterpret_cast<std::uint32_t*>(out.data()), box, region, bits);
+    if (width == 2)
+      detail::fill_region(reinterpret_cast<std::uint16_t*>(out.data()), box, region, static_cast<std::uint16_t>(bits));
+    else
+      detail::fill_region(reinterpret_cast<std::uint32_t*>(out.data()), box, region, bits);
   });
   return out;
 }

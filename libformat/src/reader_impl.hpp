@@ -72,9 +72,8 @@ struct Reader::Impl {
         break;
       }
     if (found == SIZE_MAX) {
-      auto it = std::upper_bound(list.begin(), list.end(), element, [&](std::uint64_t e, std::size_t b) {
-        return e < info.blocks[b].first_element;
-      });
+      auto it = std::upper_bound(list.begin(), list.end(), element,
+                                 [&](std::uint64_t e, std::size_t b) { return e < info.blocks[b].first_element; });
       if (it == list.begin()) throw Error(ErrorClass::Malformed, file.path() + ": element outside every block");
       found = *(it - 1);
       hint[stream][info.blocks[found].level] = found;

@@ -20,21 +20,20 @@ struct LevelRanges {
   std::vector<std::uint64_t> first_inner;  // depth + 2 entries; [l, l+1) is level l
   explicit LevelRanges(const VolumeLayout& layout) {
     first_inner.resize(layout.depth + 2, 0);
-    for (unsigned l = 0; l <= layout.depth; ++l)
-      first_inner[l + 1] = first_inner[l] + layout.inner_count[l];
+    for (unsigned l = 0; l <= layout.depth; ++l) first_inner[l + 1] = first_inner[l] + layout.inner_count[l];
   }
 };
 
 inline unsigned popcount8(unsigned v) { return static_cast<unsigned>(__builtin_popcount(v & 0xFFu)); }
 
 // Rules a reader checks for every inner node it visits (§8.3, §8.4).
-inline void check_node_word(const VolumeLayout& layout, const LevelRanges& ranges, unsigned level,
-                            std::uint64_t index, std::uint64_t word) {
+inline void check_node_word(const VolumeLayout& layout, const LevelRanges& ranges, unsigned level, std::uint64_t index,
+                            std::uint64_t word) {
   const unsigned mask = child_mask(word);
   const std::uint64_t first = first_inner_child(word);
   auto fail = [&](const std::string& what) {
-    throw Error(ErrorClass::Malformed, "node " + std::to_string(index) + " (level " +
-                                           std::to_string(level) + "): " + what);
+    throw Error(ErrorClass::Malformed,
+                "node " + std::to_string(index) + " (level " + std::to_string(level) + "): " + what);
   };
   if (level + 1 > layout.depth) fail("an inner node at the deepest level");
   if (level + 1 == layout.depth && mask != 0)
@@ -43,13 +42,13 @@ inline void check_node_word(const VolumeLayout& layout, const LevelRanges& range
   const std::uint64_t hi = ranges.first_inner[level + 2];
   if (first < lo || first > hi || first + popcount8(mask) > hi)
     fail("first_inner_child " + std::to_string(first) + " with " + std::to_string(popcount8(mask)) +
-         " inner children lies outside level " + std::to_string(level + 1) + "'s nodes [" +
-         std::to_string(lo) + ", " + std::to_string(hi) + ")");
+         " inner children lies outside level " + std::to_string(level + 1) + "'s nodes [" + std::to_string(lo) + ", " +
+         std::to_string(hi) + ")");
 }
 
 template <class Access>
-std::uint32_t lookup_bits(Access& access, const VolumeLayout& layout, const LevelRanges& ranges,
-                          std::uint32_t x, std::uint32_t y, std::uint32_t z, unsigned lod) {
+std::uint32_t lookup_bits(Access& access, const VolumeLayout& layout, const LevelRanges& ranges, std::uint32_t x,
+                          std::uint32_t y, std::uint32_t z, unsigned lod) {
   const unsigned target = layout.depth - lod;
   std::uint64_t value_index = 0;
   std::uint64_t inner = layout.inner_count[0] ? 0 : kNoInner;
@@ -69,8 +68,8 @@ std::uint32_t lookup_bits(Access& access, const VolumeLayout& layout, const Leve
 // meets `box`, with `region` the part of the box it covers, in the
 // coordinates of level of detail `lod`.
 template <class Access, class Sink>
-void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ranges, const Box& box,
-              unsigned lod, Sink&& sink) {
+void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ranges, const Box& box, unsigned lod,
+              Sink&& sink) {
   const unsigned target = layout.depth - lod;
   struct Frame {
     unsigned level;
@@ -110,10 +109,9 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
     // keeps block accesses sequential within each level.
     for (int c = 7; c >= 0; --c) {
       const auto cu = static_cast<unsigned>(c);
-      const std::uint64_t child_inner =
-          (mask >> cu) & 1u ? first + popcount8(mask & ((1u << cu) - 1u)) : kNoInner;
-      stack.push_back({f.level + 1, 2 * f.i + (cu & 1u), 2 * f.j + ((cu >> 1) & 1u),
-                       2 * f.k + ((cu >> 2) & 1u), 1 + 8 * f.inner + cu, child_inner});
+      const std::uint64_t child_inner = (mask >> cu) & 1u ? first + popcount8(mask & ((1u << cu) - 1u)) : kNoInner;
+      stack.push_back({f.level + 1, 2 * f.i + (cu & 1u), 2 * f.j + ((cu >> 1) & 1u), 2 * f.k + ((cu >> 2) & 1u),
+                       1 + 8 * f.inner + cu, child_inner});
     }
   }
 }

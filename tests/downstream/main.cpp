@@ -1,11 +1,10 @@
 // Writes and reads a tiny volume through the installed public headers.
 #include <cstdio>
-#include <vector>
-
 #include <ivol/build.hpp>
 #include <ivol/check.hpp>
 #include <ivol/reader.hpp>
 #include <ivol/writer.hpp>
+#include <vector>
 
 int main(int argc, char** argv) {
   if (argc != 2) return 2;

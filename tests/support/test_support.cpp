@@ -99,7 +99,8 @@ double reference_decode(ValueEncoding encoding, std::uint32_t bits) {
       if (exponent == 31) return mantissa ? std::numeric_limits<double>::quiet_NaN() : sign * INFINITY;
       return sign * std::ldexp(1024 + mantissa, exponent - 25);
     }
-    case ValueEncoding::UInt16: return bits & 0xFFFF;
+    case ValueEncoding::UInt16:
+      return bits & 0xFFFF;
     case ValueEncoding::Float32: {
       float f;
       std::memcpy(&f, &bits, 4);
@@ -125,9 +126,12 @@ std::uint32_t reference_encode(ValueEncoding encoding, double value) {
       const double up = it->first - a;
       const double down = a - below->first;
       std::uint16_t bits;
-      if (up < down) bits = it->second;
-      else if (down < up) bits = below->second;
-      else bits = (it->second & 1) ? below->second : it->second;  // tie: even significand
+      if (up < down)
+        bits = it->second;
+      else if (down < up)
+        bits = below->second;
+      else
+        bits = (it->second & 1) ? below->second : it->second;  // tie: even significand
       return sign | bits;
     }
     case ValueEncoding::UInt16: {

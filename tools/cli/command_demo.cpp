@@ -22,9 +22,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
+double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
 struct DemoSettings {
   std::uint32_t size = 256;
@@ -48,9 +46,8 @@ struct Outcome {
   double max_error_kept = 0;  // over the voxels kept at full resolution
 };
 
-Outcome run_mode(const std::string& label, const std::string& path, const std::vector<float>& volume,
-                 const Dims& dims, const BuildOptions& options, const std::vector<std::uint8_t>* keep,
-                 const Metadata& metadata) {
+Outcome run_mode(const std::string& label, const std::string& path, const std::vector<float>& volume, const Dims& dims,
+                 const BuildOptions& options, const std::vector<std::uint8_t>* keep, const Metadata& metadata) {
   Outcome out;
   out.label = label;
   out.path = path;
@@ -59,7 +56,9 @@ Outcome run_mode(const std::string& label, const std::string& path, const std::v
   out.memory_bytes = built.octree.memory().total();
   out.kept = built.kept_voxels;
   Metadata m = metadata;
-  m.structure = {{"kind", "octree"}, {"lossless", built.lossless}, {"source_encoding", "float32"},
+  m.structure = {{"kind", "octree"},
+                 {"lossless", built.lossless},
+                 {"source_encoding", "float32"},
                  {"max_abs_error", built.max_abs_error}};
   if (keep) m.structure["keep"] = metadata.structure["keep"];
   out.write_seconds = write_octree(built.octree, m, path).seconds;
@@ -117,38 +116,37 @@ Runner add_demo_command(CLI::App& app, const GlobalOptions& global) {
     metadata.value_unit = "1/mm";
     metadata.provenance = default_provenance();
     metadata.provenance["command"] = "ivol demo";
-    metadata.provenance["sources"] = {{{"synthetic", synthetic::object_name(spec.object)},
-                                       {"noise_sigma", spec.noise_sigma},
-                                       {"seed", spec.seed}}};
+    metadata.provenance["sources"] = {
+        {{"synthetic", synthetic::object_name(spec.object)}, {"noise_sigma", spec.noise_sigma}, {"seed", spec.seed}}};
     metadata.structure["keep"] = {{"rule", "threshold"}, {"threshold", threshold}, {"margin", s->margin}};
 
     BuildOptions options;
     options.encoding = *encoding;
-    const Outcome lossless = run_mode("lossless", s->output_dir + "/demo-lossless.ivol", volume, spec.dims, options,
-                                      nullptr, metadata);
+    const Outcome lossless =
+        run_mode("lossless", s->output_dir + "/demo-lossless.ivol", volume, spec.dims, options, nullptr, metadata);
     options.keep_mask = keep.data();
-    const Outcome octree = run_mode("octree", s->output_dir + "/demo-octree.ivol", volume, spec.dims, options, &keep,
-                                    metadata);
+    const Outcome octree =
+        run_mode("octree", s->output_dir + "/demo-octree.ivol", volume, spec.dims, options, &keep, metadata);
 
     if (global.quiet) return kExitOk;
     const std::uint64_t voxels = voxel_count(spec.dims);
     const std::uint64_t dense32 = voxels * 4;
-    std::cout << "ivol demo: " << synthetic::object_name(spec.object) << ", " << s->size << "^3 voxels of "
-              << voxel_mm << " mm, attenuation " << spec.material << "/mm, noise sigma " << spec.noise_sigma
-              << "/mm, values " << s->encoding << " (volume made in " << make_seconds << " s)\n"
+    std::cout << "ivol demo: " << synthetic::object_name(spec.object) << ", " << s->size << "^3 voxels of " << voxel_mm
+              << " mm, attenuation " << spec.material << "/mm, noise sigma " << spec.noise_sigma << "/mm, values "
+              << s->encoding << " (volume made in " << make_seconds << " s)\n"
               << "  dense float32: " << human_bytes(dense32) << ", dense uint16: " << human_bytes(voxels * 2) << "\n\n";
     std::printf("  %-9s %-30s %11s %8s %8s %10s %9s %9s %8s %11s %11s\n", "mode", "file", "file", "vs f32", "vs u16",
                 "in memory", "full-res", "build s", "write s", "read s", "max error");
     for (const Outcome* o : {&lossless, &octree}) {
       std::printf("  %-9s %-30s %11s %7.1fx %7.1fx %10s %8.1f%% %9.2f %8.2f %11.2f %11.3g\n", o->label.c_str(),
-                  o->path.c_str(), human_bytes(o->file_bytes).c_str(),
-                  static_cast<double>(dense32) / o->file_bytes, static_cast<double>(voxels * 2) / o->file_bytes,
-                  human_bytes(o->memory_bytes).c_str(), 100.0 * o->kept / voxels, o->build_seconds, o->write_seconds,
-                  o->read_seconds, o->max_error);
+                  o->path.c_str(), human_bytes(o->file_bytes).c_str(), static_cast<double>(dense32) / o->file_bytes,
+                  static_cast<double>(voxels * 2) / o->file_bytes, human_bytes(o->memory_bytes).c_str(),
+                  100.0 * o->kept / voxels, o->build_seconds, o->write_seconds, o->read_seconds, o->max_error);
     }
-    std::printf("\n  octree: full resolution kept within %u voxels of the object (threshold %.3g/mm); largest error\n"
-                "  there %.3g/mm (binary16 rounding), elsewhere the air's noise is averaged away (largest change %.3g/mm).\n",
-                s->margin, threshold, octree.max_error_kept, octree.max_error);
+    std::printf(
+        "\n  octree: full resolution kept within %u voxels of the object (threshold %.3g/mm); largest error\n"
+        "  there %.3g/mm (binary16 rounding), elsewhere the air's noise is averaged away (largest change %.3g/mm).\n",
+        s->margin, threshold, octree.max_error_kept, octree.max_error);
     return kExitOk;
   };
 }

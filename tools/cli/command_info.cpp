@@ -27,13 +27,11 @@ Runner add_info_command(CLI::App& app, const GlobalOptions& /*global*/) {
               << "  dimensions     " << dims[0] << " x " << dims[1] << " x " << dims[2] << " voxels of "
               << d["voxel_size"][0] << " x " << d["voxel_size"][1] << " x " << d["voxel_size"][2] << " "
               << d["unit"].get<std::string>() << "\n"
-              << "  values         " << d["value_encoding"].get<std::string>() << " (physical = "
-              << d["value_offset"] << " + " << d["value_scale"] << " x stored), "
-              << reader.metadata().quantity
+              << "  values         " << d["value_encoding"].get<std::string>() << " (physical = " << d["value_offset"]
+              << " + " << d["value_scale"] << " x stored), " << reader.metadata().quantity
               << (reader.metadata().value_unit.empty() ? "" : " in " + reader.metadata().value_unit) << "\n"
               << "  file           " << human_bytes(d["file_bytes"]) << " (dense float32 "
-              << human_bytes(d["dense_float32_bytes"]) << ", ratio " << d["ratio_vs_float32"].get<double>()
-              << ")\n"
+              << human_bytes(d["dense_float32_bytes"]) << ", ratio " << d["ratio_vs_float32"].get<double>() << ")\n"
               << "  in memory      " << human_bytes(d["in_memory_bytes"]) << " (" << d["inner_nodes"]
               << " inner nodes, " << d["values"] << " values)\n"
               << "  blocks         " << d["blocks"] << " (index " << human_bytes(d["index_bytes"]) << ")\n"

@@ -6,7 +6,9 @@
 #include "ivol/error.hpp"
 #include "ivol/metadata.hpp"
 
-int main(int argc, char** argv) {
+namespace {
+
+int run(int argc, char** argv) {
   using namespace ivol::cli;
   CLI::App app{"ivol — archival storage of CT volumes with inhomogeneous resolution (.ivol files)"};
   app.require_subcommand(1);
@@ -59,4 +61,15 @@ int main(int argc, char** argv) {
     }
   }
   return kExitUsage;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return run(argc, argv);
+  } catch (const std::exception& e) {
+    std::cerr << "ivol: error: " << e.what() << "\n";
+    return ivol::cli::kExitFailure;
+  }
 }

@@ -21,8 +21,8 @@ float occupancy(Object object, double u, double v, double w) {
       // A grid of small components on top of the board.
       const double cu = std::fmod(u + 1.0, 0.25) - 0.125;
       const double cv = std::fmod(v + 1.0, 0.25) - 0.125;
-      const bool part = w >= 0.04 && w < 0.12 && std::fabs(cu) < 0.04 && std::fabs(cv) < 0.03 &&
-                        std::fabs(u) < 0.75 && std::fabs(v) < 0.55;
+      const bool part = w >= 0.04 && w < 0.12 && std::fabs(cu) < 0.04 && std::fabs(cv) < 0.03 && std::fabs(u) < 0.75 &&
+                        std::fabs(v) < 0.55;
       return (board || part) ? 1.0f : 0.0f;
     }
     case Object::Pipe: {
@@ -37,9 +37,12 @@ float occupancy(Object object, double u, double v, double w) {
 
 const char* object_name(Object object) {
   switch (object) {
-    case Object::PencilHolder: return "pencil-holder";
-    case Object::Board: return "board";
-    case Object::Pipe: return "pipe";
+    case Object::PencilHolder:
+      return "pencil-holder";
+    case Object::Board:
+      return "board";
+    case Object::Pipe:
+      return "pipe";
   }
   return "unknown";
 }

@@ -20,7 +20,7 @@ enum class Object {
 struct VolumeSpec {
   Dims dims{256, 256, 256};
   Object object = Object::PencilHolder;
-  float material = 0.05f;    // linear attenuation of the object, 1/mm
+  float material = 0.05f;      // linear attenuation of the object, 1/mm
   float noise_sigma = 0.002f;  // Gaussian noise everywhere, 1/mm (0: none)
   std::uint64_t seed = 1;
 };

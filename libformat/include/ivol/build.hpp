@@ -28,7 +28,7 @@ struct BuildResult {
   // Largest |source − stored physical value| over all voxels: the value
   // encoding's rounding, and the coarsening when a keep mask is given.
   double max_abs_error = 0.0;
-  bool lossless = true;  // every voxel holds exactly its source value
+  bool lossless = true;           // every voxel holds exactly its source value
   std::uint64_t kept_voxels = 0;  // voxels held by leaves of one voxel
   double seconds = 0.0;
 };

@@ -18,10 +18,10 @@ struct CheckProblem {
 
 struct CheckReport {
   std::vector<CheckProblem> problems;
-  std::optional<FileInfo> info;      // present when the header, footer and index could be read
+  std::optional<FileInfo> info;  // present when the header, footer and index could be read
   std::size_t blocks_checked = 0;
   std::size_t blocks_damaged = 0;
-  bool tree_checked = false;         // structure and every inner average verified
+  bool tree_checked = false;  // structure and every inner average verified
   bool ok() const { return problems.empty(); }
 };
 

@@ -25,8 +25,7 @@ const char* error_class_name(ErrorClass error_class);
 
 class Error : public std::runtime_error {
  public:
-  Error(ErrorClass error_class, const std::string& message)
-      : std::runtime_error(message), class_(error_class) {}
+  Error(ErrorClass error_class, const std::string& message) : std::runtime_error(message), class_(error_class) {}
   ErrorClass error_class() const noexcept { return class_; }
 
  private:

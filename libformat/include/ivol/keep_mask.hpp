@@ -11,8 +11,7 @@ namespace ivol {
 
 // 1 where the voxel lies within `margin` voxels (Chebyshev distance) of a voxel
 // whose value exceeds `threshold`, else 0.
-std::vector<std::uint8_t> threshold_keep_mask(const float* data, const Dims& dims, float threshold,
-                                              unsigned margin);
+std::vector<std::uint8_t> threshold_keep_mask(const float* data, const Dims& dims, float threshold, unsigned margin);
 
 // Otsu's threshold over a histogram of the values (ignores NaN).
 float otsu_threshold(const float* data, std::uint64_t count, unsigned bins = 256);

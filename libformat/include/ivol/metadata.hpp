@@ -3,9 +3,8 @@
 #pragma once
 
 #include <array>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 namespace ivol {
 
@@ -13,8 +12,8 @@ struct Metadata {
   std::array<double, 3> voxel_size{1.0, 1.0, 1.0};
   std::string unit = "mm";
   std::array<double, 3> origin{0.0, 0.0, 0.0};  // centre of voxel (0, 0, 0)
-  std::string quantity = "grey_value";           // e.g. "linear_attenuation"
-  std::string value_unit;                        // e.g. "1/mm"; empty for grey values
+  std::string quantity = "grey_value";          // e.g. "linear_attenuation"
+  std::string value_unit;                       // e.g. "1/mm"; empty for grey values
   nlohmann::json structure = nlohmann::json::object();
   nlohmann::json provenance = nlohmann::json::object();
   nlohmann::json user = nlohmann::json::object();

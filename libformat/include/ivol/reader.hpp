@@ -50,8 +50,8 @@ struct FileInfo {
 };
 
 struct IoStats {
-  std::uint64_t bytes_read = 0;       // bytes read from the file, all parts
-  std::uint64_t blocks_decoded = 0;   // blocks read, checked and decompressed
+  std::uint64_t bytes_read = 0;      // bytes read from the file, all parts
+  std::uint64_t blocks_decoded = 0;  // blocks read, checked and decompressed
   std::uint64_t cache_hits = 0;
 };
 
@@ -91,7 +91,7 @@ class Reader {
   const IoStats& io_stats() const;
   void reset_io_stats();
 
- struct Impl;  // internal
+  struct Impl;  // internal
 
  private:
   friend CheckReport check_file(const std::string& path);

@@ -20,8 +20,8 @@ enum class Codec : std::uint8_t { Stored = 0, Zstd = 1 };
 struct WriteOptions {
   std::uint32_t block_bytes = 64 * 1024;  // decoded bytes per block, at most
   int zstd_level = 3;
-  bool compress = true;   // false: every block stored (codec 0)
-  unsigned threads = 0;   // compression threads; 0: all hardware threads
+  bool compress = true;  // false: every block stored (codec 0)
+  unsigned threads = 0;  // compression threads; 0: all hardware threads
 };
 
 // One block, compressed and checksummed, ready to be appended.
@@ -37,9 +37,8 @@ struct EncodedBlock {
 
 // Compresses `element_count` elements of `width` bytes (zstd with content size
 // and checksum; stored when zstd does not make them smaller).
-EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_element,
-                          std::uint32_t element_count, std::size_t width, const void* data,
-                          const WriteOptions& options);
+EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_element, std::uint32_t element_count,
+                          std::size_t width, const void* data, const WriteOptions& options);
 
 class FileWriter {
  public:

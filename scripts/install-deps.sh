@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Installs the Debian packages ivol needs to build and test. Idempotent and
+# quick when everything is there; non-interactive.
+set -euo pipefail
+
+packages=(
+  build-essential cmake ninja-build pkg-config
+  libzstd-dev nlohmann-json3-dev libcli11-dev
+  libgtest-dev
+  python3 python3-numpy python3-zstandard
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  exit 0
+fi
+echo "install-deps: installing ${missing[*]}" >&2
+sudo=""
+[ "$(id -u)" -eq 0 ] || sudo="sudo"
+export DEBIAN_FRONTEND=noninteractive
+$sudo apt-get update -qq
+$sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
