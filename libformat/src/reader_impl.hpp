@@ -23,9 +23,16 @@ struct Reader::Impl {
   std::uint64_t bytes_baseline = 0;  // file.bytes_read at the last reset
   // Blocks of the nodes and values streams, sorted by first element.
   std::vector<std::size_t> stream_blocks[4];
-  // The block last used for each stream and level: walks stay within one
-  // block per level for long stretches.
-  std::vector<std::size_t> hint[4];
+  // The block last used for each stream and level, held here as well as in
+  // the cache: walks stay within one block per level for long stretches, and
+  // then find their element without a cache lookup.
+  struct Hint {
+    std::size_t block = SIZE_MAX;
+    std::uint64_t first = 0;
+    std::uint64_t count = 0;
+    detail::BlockData data;
+  };
+  std::vector<Hint> hint[4];
 
   Impl(const std::string& path, const ReaderOptions& options)
       : file(path), info(detail::read_file_structure(file)), ranges(info.layout), cache(options.cache_bytes) {
@@ -35,7 +42,7 @@ struct Reader::Impl {
       std::sort(list.begin(), list.end(), [&](std::size_t a, std::size_t b) {
         return info.blocks[a].first_element < info.blocks[b].first_element;
       });
-    for (auto& h : hint) h.assign(info.layout.depth + 1, SIZE_MAX);
+    for (auto& h : hint) h.assign(info.layout.depth + 1, Hint{});
     const auto text = block(stream_blocks[1].front());
     try {
       metadata = Metadata::parse(std::string(text->begin(), text->end()));
@@ -57,40 +64,29 @@ struct Reader::Impl {
     return data;
   }
 
-  // Pointer to element `element` of `stream` in a decoded block. `keep` holds
-  // the block alive while the caller uses the pointer.
-  const std::uint8_t* element(std::uint8_t stream, std::uint64_t element, detail::BlockData& keep) {
-    const auto& list = stream_blocks[stream];
-    auto contains = [&](std::size_t b) {
-      const BlockInfo& blk = info.blocks[b];
-      return element >= blk.first_element && element - blk.first_element < blk.element_count;
-    };
-    std::size_t found = SIZE_MAX;
-    for (auto& h : hint[stream])
-      if (h != SIZE_MAX && contains(h)) {
-        found = h;
-        break;
-      }
-    if (found == SIZE_MAX) {
-      auto it = std::upper_bound(list.begin(), list.end(), element,
-                                 [&](std::uint64_t e, std::size_t b) { return e < info.blocks[b].first_element; });
-      if (it == list.begin()) throw Error(ErrorClass::Malformed, file.path() + ": element outside every block");
-      found = *(it - 1);
-      hint[stream][info.blocks[found].level] = found;
-    }
-    keep = block(found);
+  // Pointer to element `element` of `stream` in a decoded block, which stays
+  // alive until the next call.
+  const std::uint8_t* element(std::uint8_t stream, std::uint64_t element) {
     const std::size_t width = detail::stream_width(stream, info.layout.encoding);
-    return keep->data() + (element - info.blocks[found].first_element) * width;
+    for (const Hint& h : hint[stream])
+      if (h.data && element - h.first < h.count) return h.data->data() + (element - h.first) * width;
+    const auto& list = stream_blocks[stream];
+    auto it = std::upper_bound(list.begin(), list.end(), element,
+                               [&](std::uint64_t e, std::size_t b) { return e < info.blocks[b].first_element; });
+    if (it == list.begin()) throw Error(ErrorClass::Malformed, file.path() + ": element outside every block");
+    const std::size_t found = *(it - 1);
+    const BlockInfo& blk = info.blocks[found];
+    if (element - blk.first_element >= blk.element_count)
+      throw Error(ErrorClass::Malformed, file.path() + ": element outside every block");
+    Hint& h = hint[stream][blk.level];
+    h = Hint{found, blk.first_element, blk.element_count, block(found)};
+    return h.data->data() + (element - blk.first_element) * width;
   }
 
-  std::uint64_t node_word(std::uint64_t index) {
-    detail::BlockData keep;
-    return layout::load<std::uint64_t>(element(2, index, keep));
-  }
+  std::uint64_t node_word(std::uint64_t index) { return layout::load<std::uint64_t>(element(2, index)); }
 
   std::uint32_t value_bits(std::uint64_t index) {
-    detail::BlockData keep;
-    const std::uint8_t* p = element(3, index, keep);
+    const std::uint8_t* p = element(3, index);
     if (info.layout.encoding == ValueEncoding::Float32) return layout::load<std::uint32_t>(p);
     return layout::load<std::uint16_t>(p);
   }

@@ -105,6 +105,23 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
     check_node_word(layout, ranges, f.level, f.inner, word);
     const unsigned mask = child_mask(word);
     const std::uint64_t first = first_inner_child(word);
+    if (f.level + 1 == target) {
+      // The children are at the target level: report them directly instead
+      // of pushing eight frames (most of the work of a full-resolution read).
+      const std::uint32_t half = static_cast<std::uint32_t>(side / 2);
+      for (unsigned c = 0; c < 8; ++c) {
+        Box child = region;
+        bool inside = true;
+        for (int a = 0; a < 3; ++a) {
+          const std::uint64_t lo = origin[a] + (((c >> a) & 1u) ? half : 0);
+          child.lo[a] = static_cast<std::uint32_t>(std::max<std::uint64_t>(lo, region.lo[a]));
+          child.hi[a] = static_cast<std::uint32_t>(std::min<std::uint64_t>(lo + half, region.hi[a]));
+          inside = inside && child.lo[a] < child.hi[a];
+        }
+        if (inside) sink(child, access.value_bits(1 + 8 * f.inner + c));
+      }
+      continue;
+    }
     // Push in reverse so that children are visited in octant order, which
     // keeps block accesses sequential within each level.
     for (int c = 7; c >= 0; --c) {
