@@ -53,8 +53,9 @@ class StructureReader {
 
   void read_header() {
     const std::uint64_t size = file_.size();
-    const std::size_t prefix = static_cast<std::size_t>(std::min<std::uint64_t>(size, layout::kMaxHeaderSize));
-    header_ = file_.read(0, prefix);
+    // The first 16 bytes say how long the header is; read no more until then.
+    header_ = file_.read(0, static_cast<std::size_t>(std::min<std::uint64_t>(size, 16)));
+    const std::size_t prefix = header_.size();
     const std::size_t sig_bytes = std::min<std::size_t>(prefix, 8);
     if (std::memcmp(header_.data(), layout::kSignature.data(), sig_bytes) != 0)
       fail(ErrorClass::NotIvol, "header", "the file does not start with the .ivol signature 89 49 56 4F 4C 0D 0A 0A");
@@ -73,6 +74,7 @@ class StructureReader {
     if (size < std::uint64_t{info_.header_size} + layout::kFooterSize)
       fail(ErrorClass::Truncated, "header",
            "the file (" + std::to_string(size) + " bytes) is shorter than its header and a footer");
+    header_ = file_.read(0, info_.header_size);
     const std::uint32_t stored = load<std::uint32_t>(&header_[info_.header_size - 4]);
     const std::uint32_t actual = crc32c(header_.data(), info_.header_size - 4);
     if (stored != actual)

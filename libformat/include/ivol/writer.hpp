@@ -18,7 +18,10 @@ enum class Stream : std::uint8_t { Metadata = 1, Nodes = 2, Values = 3 };
 enum class Codec : std::uint8_t { Stored = 0, Zstd = 1 };
 
 struct WriteOptions {
-  std::uint32_t block_bytes = 64 * 1024;  // decoded bytes per block, at most
+  // Decoded bytes per block, at most. Small blocks make slices and regions
+  // cheap to read; 16 KiB keeps a 512^3 slice near 10 % of an octree file and
+  // a 64^3 region under 5 %, for 1 % more file than 1 MiB blocks (bench/).
+  std::uint32_t block_bytes = 16 * 1024;
   int zstd_level = 3;
   bool compress = true;  // false: every block stored (codec 0)
   unsigned threads = 0;  // compression threads; 0: all hardware threads
