@@ -33,6 +33,7 @@ struct Reader::Impl {
     detail::BlockData data;
   };
   std::vector<Hint> hint[4];
+  std::size_t last_level[4] = {0, 0, 0, 0};  // the hint that served the last lookup
 
   Impl(const std::string& path, const ReaderOptions& options)
       : file(path), info(detail::read_file_structure(file)), ranges(info.layout), cache(options.cache_bytes) {
@@ -68,8 +69,15 @@ struct Reader::Impl {
   // alive until the next call.
   const std::uint8_t* element(std::uint8_t stream, std::uint64_t element) {
     const std::size_t width = detail::stream_width(stream, info.layout.encoding);
-    for (const Hint& h : hint[stream])
-      if (h.data && element - h.first < h.count) return h.data->data() + (element - h.first) * width;
+    const Hint& last = hint[stream][last_level[stream]];
+    if (last.data && element - last.first < last.count) return last.data->data() + (element - last.first) * width;
+    for (std::size_t l = 0; l < hint[stream].size(); ++l) {
+      const Hint& h = hint[stream][l];
+      if (h.data && element - h.first < h.count) {
+        last_level[stream] = l;
+        return h.data->data() + (element - h.first) * width;
+      }
+    }
     const auto& list = stream_blocks[stream];
     auto it = std::upper_bound(list.begin(), list.end(), element,
                                [&](std::uint64_t e, std::size_t b) { return e < info.blocks[b].first_element; });
@@ -80,6 +88,7 @@ struct Reader::Impl {
       throw Error(ErrorClass::Malformed, file.path() + ": element outside every block");
     Hint& h = hint[stream][blk.level];
     h = Hint{found, blk.first_element, blk.element_count, block(found)};
+    last_level[stream] = blk.level;
     return h.data->data() + (element - blk.first_element) * width;
   }
 

@@ -139,6 +139,10 @@ template <class T>
 void fill_region(T* out, const Box& box, const Box& region, T value) {
   const std::uint64_t nx = box.hi[0] - box.lo[0];
   const std::uint64_t ny = box.hi[1] - box.lo[1];
+  if (region.hi[0] - region.lo[0] == 1 && region.hi[1] - region.lo[1] == 1 && region.hi[2] - region.lo[2] == 1) {
+    out[((region.lo[2] - box.lo[2]) * ny + (region.lo[1] - box.lo[1])) * nx + (region.lo[0] - box.lo[0])] = value;
+    return;  // most leaves of a full-resolution read are single voxels
+  }
   for (std::uint32_t z = region.lo[2]; z < region.hi[2]; ++z)
     for (std::uint32_t y = region.lo[1]; y < region.hi[1]; ++y) {
       T* row = out + ((z - box.lo[2]) * ny + (y - box.lo[1])) * nx + (region.lo[0] - box.lo[0]);
