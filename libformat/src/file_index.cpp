@@ -57,7 +57,7 @@ class StructureReader {
     header_ = file_.read(0, static_cast<std::size_t>(std::min<std::uint64_t>(size, 16)));
     const std::size_t prefix = header_.size();
     const std::size_t sig_bytes = std::min<std::size_t>(prefix, 8);
-    if (std::memcmp(header_.data(), layout::kSignature.data(), sig_bytes) != 0)
+    if (sig_bytes > 0 && std::memcmp(header_.data(), layout::kSignature.data(), sig_bytes) != 0)
       fail(ErrorClass::NotIvol, "header", "the file does not start with the .ivol signature 89 49 56 4F 4C 0D 0A 0A");
     if (size < 10) fail(ErrorClass::Truncated, "header", "the file is only " + std::to_string(size) + " bytes long");
     info_.version_major = load<std::uint16_t>(&header_[layout::kHeaderVersionMajor]);

@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# Builds the libFuzzer harness with clang, ASan and UBSan, and runs it on a
+# corpus seeded with the conformance vectors. Arguments go to libFuzzer
+# (e.g. -max_total_time=60 or -runs=10000000).
+set -euo pipefail
+root=$(cd "$(dirname "$0")/../.." && pwd)
+out=${IVOL_FUZZ_DIR:-$root/build-fuzz}
+mkdir -p "$out/corpus"
+flags="-std=c++17 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined -ffp-contract=off"
+clang++ $flags -DIVOL_VERSION_STRING='"fuzz"' -I"$root/libformat/include" -I"$root/libformat/src" \
+  "$root"/libformat/src/*.cpp "$root/tests/fuzz/fuzz_check_file.cpp" -lzstd -o "$out/fuzz_check_file"
+cp -n "$root"/format-spec/vectors/valid/*.ivol "$root"/format-spec/vectors/invalid/*.ivol "$out/corpus/" 2>/dev/null || true
+"$out/fuzz_check_file" "$out/corpus" -max_len=65536 -rss_limit_mb=4096 "$@"
