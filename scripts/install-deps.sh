@@ -5,9 +5,9 @@ set -euo pipefail
 
 packages=(
   build-essential cmake ninja-build pkg-config
-  libzstd-dev nlohmann-json3-dev libcli11-dev
+  libzstd-dev nlohmann-json3-dev libcli11-dev libtiff-dev libpng-dev
   libgtest-dev
-  python3 python3-numpy python3-zstandard
+  python3 python3-numpy python3-zstandard python3-tifffile libtiff-tools
 )
 
 missing=()

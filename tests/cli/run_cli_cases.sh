@@ -59,5 +59,28 @@ case_ verify-not-ivol    2 "not-ivol"                -- "$IVOL" verify "$work/te
 case_ info-not-ivol      2 "signature"               -- "$IVOL" info "$work/text.ivol"
 case_ verify-mixed       2 "OK"                      -- "$IVOL" verify "$work/demo/demo-octree.ivol" "$work/text.ivol"
 
+# Converters and views.
+case_ convert-to-raw     0 "raw f32 32x32x32"        -- "$IVOL" convert "$work/demo/demo-octree.ivol" "$work/v.raw"
+case_ convert-no-clobber 2 "exists"                  -- "$IVOL" convert "$work/demo/demo-octree.ivol" "$work/v.raw"
+case_ convert-raw-dims   2 "--dims"                  -- "$IVOL" convert "$work/v.raw" "$work/x.ivol"
+case_ convert-raw-size   2 "need 126976"             -- "$IVOL" convert "$work/v.raw" "$work/x.ivol" --dims 32,32,31 --type f32
+test ! -e "$work/x.ivol" && case_ no-partial-output 0 "" -- true
+case_ convert-raw-ivol   0 "lossless"                -- "$IVOL" convert "$work/v.raw" "$work/v.ivol" --dims 32,32,32 --type f32 --voxel-size 0.5
+python3 -c "import struct; open('$work/f.raw','wb').write(struct.pack('<4096f', *[i * 0.001 for i in range(4096)]))"
+case_ convert-lossy      0 "lossy: f32 rounded to binary16" -- "$IVOL" convert "$work/f.raw" "$work/h.ivol" --dims 16,16,16 --encoding binary16
+case_ convert-keep       0 "coarsened"               -- "$IVOL" convert "$work/v.raw" "$work/k.ivol" --dims 32,32,32 --keep threshold=otsu,margin=1
+case_ convert-bad-keep   2 "--keep"                  -- "$IVOL" convert "$work/v.raw" "$work/k2.ivol" --dims 32,32,32 --keep margin=1
+case_ convert-to-tiff    0 "tiff f32"                -- "$IVOL" convert "$work/v.ivol" "$work/v.tif"
+case_ convert-tiff-ivol  0 "lossless"                -- "$IVOL" convert "$work/v.tif" "$work/t.ivol"
+case_ verify-converted   0 "OK"                      -- "$IVOL" verify "$work/v.ivol" "$work/t.ivol" "$work/k.ivol"
+case_ info-voxel-size    0 "0.5 x 0.5 x 0.5 mm"      -- "$IVOL" info "$work/v.ivol"
+case_ unknown-format     2 "cannot tell the format"  -- "$IVOL" convert "$work/v.ivol" "$work/v.xyz"
+case_ extract-tiff       0 "f32 8x4x2"               -- "$IVOL" extract "$work/v.ivol" --box 0,0,0,8,4,2 -o "$work/e.tif"
+case_ extract-level      0 "f32 16x16x16"            -- "$IVOL" extract "$work/v.ivol" --box 0,0,0,16,16,16 --level 1 -o "$work/l.raw"
+case_ extract-outside    2 "outside the volume"      -- "$IVOL" extract "$work/v.ivol" --box 0,0,0,40,4,2 -o "$work/o.raw"
+case_ slice-png          0 "32x32 slice z=5"         -- "$IVOL" slice "$work/k.ivol" --axis z --index 5 --borders -o "$work/s.png"
+case_ slice-is-png       0 "PNG image data, 32 x 32" -- file "$work/s.png"
+case_ slice-bad-index    2 "--index"                 -- "$IVOL" slice "$work/k.ivol" --axis y --index 99 -o "$work/s2.png"
+
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]

@@ -22,5 +22,8 @@ using Runner = std::function<int()>;
 Runner add_demo_command(CLI::App& app, const GlobalOptions& global);
 Runner add_info_command(CLI::App& app, const GlobalOptions& global);
 Runner add_verify_command(CLI::App& app, const GlobalOptions& global);
+Runner add_convert_command(CLI::App& app, const GlobalOptions& global);
+Runner add_extract_command(CLI::App& app, const GlobalOptions& global);
+Runner add_slice_command(CLI::App& app, const GlobalOptions& global);
 
 }  // namespace ivol::cli

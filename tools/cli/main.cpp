@@ -12,6 +12,7 @@ int run(int argc, char** argv) {
   using namespace ivol::cli;
   CLI::App app{"ivol — archival storage of CT volumes with inhomogeneous resolution (.ivol files)"};
   app.require_subcommand(1);
+  app.fallthrough();  // -q and -v also after the subcommand
   app.set_version_flag("--version", std::string("ivol ") + ivol::library_version());
   GlobalOptions global;
   app.add_flag("-q,--quiet", global.quiet, "Print nothing but errors");
@@ -26,6 +27,9 @@ int run(int argc, char** argv) {
   add(add_demo_command);
   add(add_info_command);
   add(add_verify_command);
+  add(add_convert_command);
+  add(add_extract_command);
+  add(add_slice_command);
 
   if (argc > 1 && argv[1][0] != '-') {
     bool known = false;

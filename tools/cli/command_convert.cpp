@@ -1,0 +1,147 @@
+// ivol convert IN OUT: between .ivol and raw, TIFF stacks, HDF5 and OpenVDB.
+#include <chrono>
+#include <filesystem>
+#include <iostream>
+
+#include "commands.hpp"
+#include "formats.hpp"
+#include "ivol/error.hpp"
+#include "ivol_io.hpp"
+#include "option_parsing.hpp"
+#include "report.hpp"
+
+namespace ivol::cli {
+namespace {
+
+struct ConvertSettings {
+  std::string input, output, from, to;
+  std::string dims, type = "f32", endian = "little", voxel_size, origin, unit;
+  std::uint64_t header_bytes = 0;
+  std::string dataset = "/exchange/data", grid;
+  float background = 0.0f;
+  std::string encoding, keep, quantity, value_unit;
+  std::uint32_t block_bytes = 0;
+  std::string out_type;
+  unsigned level = 0;
+  bool force = false;
+};
+
+std::string describe(const convert::DenseVolume& v) {
+  return std::string(convert::sample_type_name(v.type)) + " " + std::to_string(v.dims[0]) + "x" +
+         std::to_string(v.dims[1]) + "x" + std::to_string(v.dims[2]);
+}
+
+}  // namespace
+
+Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
+  auto* cmd = app.add_subcommand("convert", "Convert between .ivol and raw, TIFF stacks, HDF5 and OpenVDB");
+  auto s = std::make_shared<ConvertSettings>();
+  cmd->add_option("IN", s->input, "Input file (or folder of TIFF slices)")->required();
+  cmd->add_option("OUT", s->output, "Output file")->required();
+  cmd->add_option("--from", s->from, "Input format: ivol, raw, tiff, hdf5, vdb (default: by extension)");
+  cmd->add_option("--to", s->to, "Output format (default: by extension)");
+  cmd->add_flag("-f,--force", s->force, "Replace OUT if it exists");
+  auto* raw = cmd->add_option_group("raw input");
+  raw->add_option("--dims", s->dims, "X,Y,Z voxels");
+  raw->add_option("--type", s->type, "Sample type of a raw input: u8, u16, i16, f16, f32")->capture_default_str();
+  raw->add_option("--endian", s->endian, "little or big")
+      ->check(CLI::IsMember({"little", "big"}))
+      ->capture_default_str();
+  raw->add_option("--header-bytes", s->header_bytes, "Bytes to skip before the first sample");
+  auto* geometry = cmd->add_option_group("geometry");
+  geometry->add_option("--voxel-size", s->voxel_size, "S or SX,SY,SZ (overrides the input's)");
+  geometry->add_option("--origin", s->origin, "X,Y,Z of the centre of voxel 0");
+  geometry->add_option("--unit", s->unit, "Length unit, e.g. mm");
+  cmd->add_option("--dataset", s->dataset, "HDF5 dataset")->capture_default_str();
+  cmd->add_option("--grid", s->grid, "OpenVDB grid (default: the first float grid)");
+  cmd->add_option("--background", s->background, "OpenVDB output: background value");
+  auto* into = cmd->add_option_group("into .ivol");
+  into->add_option("--encoding", s->encoding, "binary16, uint16 or float32 (default: lossless for the input)")
+      ->check(CLI::IsMember({"binary16", "uint16", "float32"}));
+  into->add_option("--keep", s->keep, "threshold=T|otsu,margin=M: full resolution only around the object");
+  into->add_option("--block-size", s->block_bytes, "Decoded bytes per block");
+  into->add_option("--quantity", s->quantity, "What the values are, e.g. linear_attenuation");
+  into->add_option("--value-unit", s->value_unit, "Unit of the values, e.g. 1/mm");
+  auto* out_of = cmd->add_option_group("out of .ivol");
+  out_of->add_option("--out-type", s->out_type, "u8, u16, i16, f16, f32 (default: u16 for uint16 files, else f32)");
+  out_of->add_option("--level", s->level, "Level of detail: 1/2^K resolution");
+
+  return [s, &global]() {
+    const auto start = std::chrono::steady_clock::now();
+    const Format from = detect_format(s->input, s->from, "--from");
+    const Format to = detect_format(s->output, s->to, "--to");
+    if (std::filesystem::exists(s->output) && !s->force)
+      throw Error(ErrorClass::InvalidArgument, s->output + ": exists (use --force to replace it)");
+    if (from == Format::Ivol && to == Format::Ivol)
+      throw Error(ErrorClass::InvalidArgument, "ivol to ivol: nothing to convert");
+
+    ForeignOptions foreign;
+    foreign.dataset = s->dataset;
+    foreign.grid = s->grid;
+    foreign.background = s->background;
+    foreign.big_endian = s->endian == "big";
+    if (!s->dims.empty()) {
+      foreign.raw.dims = parse_dims(s->dims, "--dims");
+      foreign.raw_dims_given = true;
+    }
+    if (!convert::parse_sample_type(s->type, foreign.raw.type))
+      throw Error(ErrorClass::InvalidArgument, "--type: '" + s->type + "' is not u8, u16, i16, f16 or f32");
+    foreign.raw.big_endian = s->endian == "big";
+    foreign.raw.header_bytes = s->header_bytes;
+
+    if (to == Format::Ivol) {
+      convert::DenseVolume volume = read_dense(s->input, from, foreign);
+      apply_geometry(volume, s->voxel_size, s->origin, s->unit);
+      convert::ImportOptions options;
+      if (!s->encoding.empty()) options.encoding = parse_encoding(s->encoding);
+      if (!s->keep.empty()) options.keep = convert::parse_keep_rule(s->keep);
+      options.block_bytes = s->block_bytes;
+      options.metadata.provenance = default_provenance();
+      options.metadata.provenance["command"] = "ivol convert " + s->input + " " + s->output;
+      options.metadata.provenance["sources"] = {
+          {{"path", s->input}, {"format", format_name(from)}, {"sample_type", convert::sample_type_name(volume.type)}}};
+      if (!s->quantity.empty()) options.metadata.quantity = s->quantity;
+      if (!s->value_unit.empty()) options.metadata.value_unit = s->value_unit;
+      const convert::ImportReport r = convert::import_to_ivol(volume, s->output, options);
+      if (!global.quiet) {
+        const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        if (!r.lossless) {
+          std::string steps;
+          if (r.encoding != convert::lossless_encoding(volume.type))
+            steps = std::string(convert::sample_type_name(volume.type)) + " rounded to " + encoding_name(r.encoding);
+          if (options.keep)
+            steps += std::string(steps.empty() ? "" : ", ") + "coarsened outside the kept region (threshold " +
+                     std::to_string(r.threshold) + ")";
+          std::cerr << "ivol convert: lossy: " << steps << "; largest error " << r.max_abs_error << "\n";
+        }
+        std::cout << s->input << " (" << format_name(from) << " " << describe(volume) << ", "
+                  << human_bytes(volume.data.size()) << ") -> " << s->output << " (ivol " << encoding_name(r.encoding)
+                  << ", " << human_bytes(r.file_bytes) << ", " << static_cast<double>(volume.data.size()) / r.file_bytes
+                  << "x smaller" << (r.lossless ? ", lossless" : "") << ") in " << seconds << " s\n";
+      }
+      return kExitOk;
+    }
+
+    if (from != Format::Ivol) {
+      convert::DenseVolume volume = read_dense(s->input, from, foreign);
+      apply_geometry(volume, s->voxel_size, s->origin, s->unit);
+      write_dense(volume, s->output, to, foreign);
+      if (!global.quiet) std::cout << s->input << " -> " << s->output << " (" << describe(volume) << ")\n";
+      return kExitOk;
+    }
+
+    Reader reader(s->input);
+    convert::SampleType type = convert::natural_sample_type(reader);
+    if (!s->out_type.empty() && !convert::parse_sample_type(s->out_type, type))
+      throw Error(ErrorClass::InvalidArgument, "--out-type: '" + s->out_type + "' is not u8, u16, i16, f16 or f32");
+    convert::DenseVolume volume = convert::export_from_ivol(reader, Box{}, s->level, type);
+    apply_geometry(volume, s->voxel_size, s->origin, s->unit);
+    write_dense(volume, s->output, to, foreign);
+    if (!global.quiet)
+      std::cout << s->input << " -> " << s->output << " (" << format_name(to) << " " << describe(volume)
+                << (s->level ? ", level of detail " + std::to_string(s->level) : std::string()) << ")\n";
+    return kExitOk;
+  };
+}
+
+}  // namespace ivol::cli

@@ -1,0 +1,51 @@
+// ivol extract FILE --box ... -o OUT: a region, at full resolution or at a
+// level of detail, as raw or TIFF (or HDF5/OpenVDB).
+#include <filesystem>
+#include <iostream>
+
+#include "commands.hpp"
+#include "formats.hpp"
+#include "ivol/error.hpp"
+#include "ivol_io.hpp"
+#include "option_parsing.hpp"
+
+namespace ivol::cli {
+
+Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
+  auto* cmd = app.add_subcommand("extract", "Write a region of an .ivol file as raw, TIFF, HDF5 or OpenVDB");
+  struct Settings {
+    std::string file, box, output, to, type, endian = "little";
+    unsigned level = 0;
+    bool force = false;
+  };
+  auto s = std::make_shared<Settings>();
+  cmd->add_option("FILE", s->file, "The .ivol file")->required();
+  cmd->add_option("--box", s->box, "x0,y0,z0,x1,y1,z1 (half-open, in voxels of the chosen level)")->required();
+  cmd->add_option("--level", s->level, "Level of detail: 1/2^K resolution");
+  cmd->add_option("-o,--output", s->output, "Output file: .raw, .tif, .h5, .vdb")->required();
+  cmd->add_option("--to", s->to, "Output format (default: by extension)");
+  cmd->add_option("--type", s->type, "u8, u16, i16, f16, f32 (default: u16 for uint16 files, else f32)");
+  cmd->add_option("--endian", s->endian, "Raw output byte order")->check(CLI::IsMember({"little", "big"}));
+  cmd->add_flag("-f,--force", s->force, "Replace the output if it exists");
+  return [s, &global]() {
+    const Format to = detect_format(s->output, s->to, "--to");
+    if (to == Format::Ivol) throw Error(ErrorClass::InvalidArgument, "-o: extract writes dense formats, not .ivol");
+    if (std::filesystem::exists(s->output) && !s->force)
+      throw Error(ErrorClass::InvalidArgument, s->output + ": exists (use --force to replace it)");
+    Reader reader(s->file);
+    convert::SampleType type = convert::natural_sample_type(reader);
+    if (!s->type.empty() && !convert::parse_sample_type(s->type, type))
+      throw Error(ErrorClass::InvalidArgument, "--type: '" + s->type + "' is not u8, u16, i16, f16 or f32");
+    const convert::DenseVolume volume = convert::export_from_ivol(reader, parse_box(s->box, "--box"), s->level, type);
+    ForeignOptions options;
+    options.big_endian = s->endian == "big";
+    write_dense(volume, s->output, to, options);
+    if (!global.quiet)
+      std::cout << s->output << ": " << convert::sample_type_name(type) << " " << volume.dims[0] << "x"
+                << volume.dims[1] << "x" << volume.dims[2] << " from " << s->file << " (read "
+                << reader.io_stats().bytes_read << " of " << reader.info().file_size << " bytes)\n";
+    return kExitOk;
+  };
+}
+
+}  // namespace ivol::cli

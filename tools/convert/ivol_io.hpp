@@ -1,0 +1,57 @@
+// Dense volumes into and out of .ivol, through libformat's public API.
+#pragma once
+
+#include <optional>
+#include <string>
+
+#include "dense_volume.hpp"
+#include "ivol/encoding.hpp"
+#include "ivol/metadata.hpp"
+#include "ivol/reader.hpp"
+
+namespace ivol::convert {
+
+// Where full resolution is kept (the paper's rule): voxels above `threshold`
+// (or above Otsu's threshold) grown by `margin` voxels; the rest is coarsened.
+struct KeepRule {
+  bool otsu = false;
+  float threshold = 0.0f;
+  unsigned margin = 0;
+};
+// Parses "threshold=T,margin=M" (T a number or "otsu"); throws InvalidArgument.
+KeepRule parse_keep_rule(const std::string& text);
+
+struct ImportOptions {
+  std::optional<ValueEncoding> encoding;  // default: lossless for the sample type
+  std::optional<KeepRule> keep;           // default: lossless (equal leaves merge)
+  std::uint32_t block_bytes = 0;          // 0: the library's default
+  Metadata metadata;                      // provenance etc.; geometry from the volume
+};
+
+struct ImportReport {
+  ValueEncoding encoding = ValueEncoding::Binary16;
+  double value_scale = 1.0;
+  double value_offset = 0.0;
+  bool lossless = true;
+  double max_abs_error = 0.0;
+  float threshold = 0.0f;  // when a keep rule was applied
+  std::uint64_t kept_voxels = 0;
+  std::uint64_t file_bytes = 0;
+  double seconds = 0.0;
+};
+
+// The encoding that holds a sample type without loss: uint16 for u8/u16 (and
+// i16 with an offset of -32768), binary16 for f16, float32 for f32.
+ValueEncoding lossless_encoding(SampleType type);
+
+ImportReport import_to_ivol(const DenseVolume& volume, const std::string& path, const ImportOptions& options);
+
+// A box of an .ivol file (full box when `box` is empty) at level of detail
+// `lod`, as `type` samples (physical values, rounded and clamped for
+// integers) with the file's geometry (voxel size scaled by 2^lod).
+DenseVolume export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type);
+// The sample type that holds a file's values without loss when there is one
+// (uint16 codes with scale 1 and offset 0), else f32.
+SampleType natural_sample_type(const Reader& reader);
+
+}  // namespace ivol::convert
