@@ -83,6 +83,15 @@ std::vector<std::uint8_t> Reader::read_box_bits(const Box& box, unsigned lod) {
   return out;
 }
 
+void Reader::visit_leaves(const Box& box, unsigned lod, const std::function<void(const Box&, double)>& visit) {
+  impl_->check_box(box, lod);
+  const VolumeLayout& v = impl_->info.layout;
+  detail::ImplAccess access{impl_.get()};
+  detail::walk_box(access, v, impl_->ranges, box, lod, [&](const Box& region, std::uint32_t bits) {
+    visit(region, v.physical(decode_value(v.encoding, bits)));
+  });
+}
+
 std::vector<float> Reader::read_slice(Axis axis, std::uint32_t index) {
   return read_box(slice_box(impl_->info.layout.dims, axis, index));
 }

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -81,6 +82,11 @@ class Reader {
   std::vector<float> read_slice(Axis axis, std::uint32_t index);
   // The whole volume at 1/2^lod resolution (spec §12.3).
   std::vector<float> read_lod(unsigned lod);
+  // Calls visit(region, value) for every leaf that meets `box` (and, at a
+  // level of detail, every node of that level), with `region` the part of the
+  // box it covers and `value` its physical value: the structure itself, e.g.
+  // to draw where resolution was kept.
+  void visit_leaves(const Box& box, unsigned lod, const std::function<void(const Box&, double)>& visit);
   // Trilinear interpolation between voxel centres at a world position (spec
   // §12.1); positions outside the volume take the nearest border voxel.
   double sample(double world_x, double world_y, double world_z);

@@ -1,0 +1,74 @@
+// Writing an octree from slabs of a volume that need not fit in memory.
+//
+// The volume arrives as slabs of 2^s slices (z increasing). Each slab is cut
+// into subtrees of side 2^s, built at once (in parallel), and spilled to a
+// temporary file next to the output. finish() builds the levels above the
+// subtrees from their roots and writes the file level by level, reading the
+// spilled subtrees in Morton order. Peak memory: one slab of samples (and its
+// keep mask), one subtree per thread, the subtrees' roots and spill index
+// (about 32·(s + 2) bytes per subtree), the levels above them, and one batch
+// of blocks. The temporary spill file holds the octree uncompressed.
+//
+// The result is the same file, bit for bit, as build_octree + write_octree
+// give for the same volume and options (tested).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "ivol/build.hpp"
+#include "ivol/metadata.hpp"
+#include "ivol/writer.hpp"
+
+namespace ivol {
+
+struct StreamingOptions {
+  BuildOptions build;  // its keep_mask is ignored: masks come with each slab
+  WriteOptions write;
+  // Slab thickness in slices, a power of two; 0: the largest one whose float32
+  // samples fit in `slab_budget_bytes` (at least 8 slices, or the volume).
+  std::uint32_t slab_slices = 0;
+  std::uint64_t slab_budget_bytes = 512ull << 20;
+  std::string spill_directory;  // empty: the output's directory
+};
+
+struct StreamingResult {
+  WriteStats write;
+  double max_abs_error = 0.0;
+  bool lossless = true;
+  std::uint64_t kept_voxels = 0;
+  std::uint64_t spill_bytes = 0;  // largest size of the temporary spill file
+  double build_seconds = 0.0;     // building subtrees and the top levels
+};
+
+class StreamingOctreeWriter {
+ public:
+  StreamingOctreeWriter(const std::string& path, const Dims& dims, const StreamingOptions& options);
+  ~StreamingOctreeWriter();  // an unfinished writer leaves nothing behind
+  StreamingOctreeWriter(const StreamingOctreeWriter&) = delete;
+  StreamingOctreeWriter& operator=(const StreamingOctreeWriter&) = delete;
+
+  std::uint32_t slab_slices() const;
+  // Slices z0 .. z0 + slices of the next slab (the last slab may be thinner).
+  std::uint32_t next_slab_first() const;
+  std::uint32_t next_slab_count() const;
+
+  // Adds the next slab: next_slab_count() slices of size_y x size_x samples,
+  // [z][y][x]; `keep` (optional, same shape) marks voxels whose full
+  // resolution must be kept, the rest being coarsened (null: lossless).
+  // Either every slab has a mask or none.
+  void add_slab(const float* samples, const std::uint8_t* keep = nullptr);
+  void add_slab(const std::uint16_t* samples, const std::uint8_t* keep = nullptr);
+
+  // After the last slab: writes the file and renames it into place.
+  StreamingResult finish(const Metadata& metadata);
+
+  struct Impl;
+
+ private:
+  std::unique_ptr<Impl> impl_;
+  std::unique_ptr<struct StreamingState> pending_;
+};
+
+}  // namespace ivol

@@ -1,0 +1,77 @@
+#include "block_pipeline.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <exception>
+#include <mutex>
+#include <thread>
+
+namespace ivol::detail {
+
+BlockPipeline::BlockPipeline(FileWriter& writer, const WriteOptions& options)
+    : writer_(writer),
+      options_(options),
+      threads_(std::max(1u, options.threads ? options.threads : std::thread::hardware_concurrency())) {}
+
+void BlockPipeline::add(Stream stream, unsigned level, std::uint64_t first_element, std::uint32_t element_count,
+                        std::size_t width, std::vector<std::uint8_t> raw) {
+  decoded_bytes_ += raw.size();
+  pending_.push_back({stream, level, first_element, element_count, width, std::move(raw)});
+  if (pending_.size() >= 4 * threads_) flush();
+}
+
+void BlockPipeline::flush() {
+  std::vector<EncodedBlock> encoded(pending_.size());
+  std::atomic<std::size_t> next{0};
+  std::exception_ptr failure;
+  std::mutex failure_mutex;
+  auto work = [&] {
+    for (std::size_t i; (i = next.fetch_add(1)) < pending_.size();) {
+      const Pending& p = pending_[i];
+      try {
+        encoded[i] = encode_block(p.stream, p.level, p.first_element, p.element_count, p.width, p.raw.data(), options_);
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(failure_mutex);
+        failure = std::current_exception();
+      }
+    }
+  };
+  std::vector<std::thread> pool;
+  for (unsigned t = 1; t < std::min<std::size_t>(threads_, pending_.size()); ++t) pool.emplace_back(work);
+  work();
+  for (auto& th : pool) th.join();
+  if (failure) std::rethrow_exception(failure);
+  for (const EncodedBlock& block : encoded) writer_.append(block);
+  pending_.clear();
+}
+
+BlockAssembler::BlockAssembler(BlockPipeline& pipeline, Stream stream, unsigned level, std::uint64_t first_element,
+                               std::size_t width, std::uint32_t block_bytes)
+    : pipeline_(pipeline),
+      stream_(stream),
+      level_(level),
+      next_element_(first_element),
+      width_(width),
+      per_block_(std::max<std::uint64_t>(1, block_bytes / width)) {}
+
+void BlockAssembler::append(const void* elements, std::uint64_t count) {
+  const auto* p = static_cast<const std::uint8_t*>(elements);
+  while (count > 0) {
+    const std::uint64_t room = per_block_ - buffer_.size() / width_;
+    const std::uint64_t take = std::min(room, count);
+    buffer_.insert(buffer_.end(), p, p + take * width_);
+    p += take * width_;
+    count -= take;
+    if (buffer_.size() / width_ == per_block_) finish();
+  }
+}
+
+void BlockAssembler::finish() {
+  if (buffer_.empty()) return;
+  const auto count = static_cast<std::uint32_t>(buffer_.size() / width_);
+  pipeline_.add(stream_, level_, next_element_, count, width_, std::move(buffer_));
+  next_element_ += count;
+  buffer_ = {};
+}
+
+}  // namespace ivol::detail

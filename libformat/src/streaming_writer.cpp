@@ -1,0 +1,402 @@
+// StreamingOctreeWriter: subtrees built slab by slab and spilled to disk, the
+// levels above them built at the end, the file written level by level.
+#include "ivol/streaming_writer.hpp"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <mutex>
+#include <thread>
+
+#include "block_pipeline.hpp"
+#include "ivol/error.hpp"
+#include "octree_builder.hpp"
+
+namespace ivol {
+namespace {
+
+using detail::BuildStats;
+using detail::KeepPyramid;
+using detail::LevelArrays;
+using detail::NodeResult;
+using detail::RegionStats;
+
+std::string directory_of(const std::string& path) {
+  const auto slash = path.find_last_of('/');
+  return slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
+}
+
+// A temporary file, unlinked at once so that nothing is left behind whatever
+// happens; read and written with pread/pwrite.
+class SpillFile {
+ public:
+  explicit SpillFile(const std::string& directory) {
+    std::string name = directory + "/.ivol-spill-XXXXXX";
+    fd_ = mkstemp(name.data());
+    if (fd_ < 0) throw Error(ErrorClass::Io, directory + ": cannot create a spill file: " + std::strerror(errno));
+    ::unlink(name.c_str());
+  }
+  ~SpillFile() { ::close(fd_); }
+  std::uint64_t append(const void* data, std::size_t size) {
+    const std::uint64_t at = size_;
+    const auto* p = static_cast<const std::uint8_t*>(data);
+    for (std::size_t done = 0; done < size;) {
+      const ssize_t n = ::pwrite(fd_, p + done, size - done, static_cast<off_t>(at + done));
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) throw Error(ErrorClass::Io, std::string("spill file: write failed: ") + std::strerror(errno));
+      done += static_cast<std::size_t>(n);
+    }
+    size_ += size;
+    return at;
+  }
+  void read(std::uint64_t at, void* out, std::size_t size) const {
+    auto* p = static_cast<std::uint8_t*>(out);
+    for (std::size_t done = 0; done < size;) {
+      const ssize_t n = ::pread(fd_, p + done, size - done, static_cast<off_t>(at + done));
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) throw Error(ErrorClass::Io, std::string("spill file: read failed: ") + std::strerror(errno));
+      done += static_cast<std::size_t>(n);
+    }
+  }
+  std::uint64_t size() const { return size_; }
+
+ private:
+  int fd_ = -1;
+  std::uint64_t size_ = 0;
+};
+
+}  // namespace
+
+// The part of the writer that does not depend on the sample type.
+struct StreamingOctreeWriter::Impl {
+  virtual ~Impl() = default;
+  virtual void add(const void* samples, const std::uint8_t* keep) = 0;
+  virtual StreamingResult finish(const Metadata& metadata) = 0;
+  std::uint32_t slab_slices = 0;
+  std::uint32_t slabs_done = 0;
+  Dims dims{};
+  bool is_float = true;
+};
+
+namespace {
+
+template <typename Source, typename Stored>
+class Engine final : public StreamingOctreeWriter::Impl {
+ public:
+  Engine(const std::string& path, const Dims& volume_dims, const StreamingOptions& options, std::uint32_t slab)
+      : path_(path),
+        options_(options),
+        builder_(nullptr, volume_dims, options.build, nullptr),
+        spill_(options.spill_directory.empty() ? directory_of(path) : options.spill_directory) {
+    dims = volume_dims;
+    slab_slices = slab;
+    is_float = std::is_same_v<Source, float>;
+    depth_ = builder_.layout().depth;
+    unsigned s = 0;
+    while ((1u << s) < slab) ++s;
+    subtree_level_ = depth_ - s;
+    for (int a = 0; a < 3; ++a) grid_[a] = (dims[a] + slab - 1) / slab;
+    const std::uint64_t count = std::uint64_t{grid_[0]} * grid_[1] * grid_[2];
+    records_.resize(count);
+    levels_ = depth_ - subtree_level_ + 1;
+    counts_.assign(count * levels_ * 2, 0);
+    threads_ = std::max(1u, options.build.threads ? options.build.threads : std::thread::hardware_concurrency());
+  }
+
+  void add(const void* samples, const std::uint8_t* keep) override {
+    const auto start = std::chrono::steady_clock::now();
+    const std::uint32_t k = slabs_done;
+    if (k >= grid_[2]) throw Error(ErrorClass::InvalidArgument, path_ + ": more slabs than the volume holds");
+    if (k > 0 && (keep != nullptr) != with_keep_)
+      throw Error(ErrorClass::InvalidArgument, path_ + ": either every slab has a keep mask or none");
+    with_keep_ = keep != nullptr;
+    const std::uint32_t z0 = k * slab_slices;
+    const std::uint32_t slices = std::min(slab_slices, dims[2] - z0);
+    std::unique_ptr<KeepPyramid> pyramid;
+    if (keep) pyramid = std::make_unique<KeepPyramid>(keep, Dims{dims[0], dims[1], slices}, depth_, z0, subtree_level_);
+    builder_.set_slab(static_cast<const Source*>(samples), z0, pyramid.get());
+
+    std::atomic<std::uint32_t> next{0};
+    std::mutex spill_mutex;
+    std::exception_ptr failure;
+    std::vector<BuildStats> thread_stats(threads_);
+    auto work = [&](unsigned t) {
+      const std::uint32_t per_slab = grid_[0] * grid_[1];
+      for (std::uint32_t n; (n = next.fetch_add(1)) < per_slab;) {
+        try {
+          const std::uint32_t i = n % grid_[0], j = n / grid_[0];
+          LevelArrays<Stored> arrays(depth_);
+          Record record;
+          record.root = builder_.build(subtree_level_, i, j, k, arrays, thread_stats[t]);
+          // The levels above can only coarsen when there is a keep mask.
+          if (keep) record.stats = builder_.region_stats(subtree_level_, i, j, k);
+          record.any_kept = !pyramid || pyramid->any(subtree_level_, i, j, k);
+          const std::uint64_t index = (std::uint64_t{k} * grid_[1] + j) * grid_[0] + i;
+          std::lock_guard<std::mutex> lock(spill_mutex);
+          record.spill_offset = spill_.size();
+          for (unsigned l = subtree_level_; l <= depth_; ++l) {
+            const auto& nodes = arrays.nodes[l];
+            const auto& values = arrays.values[l];
+            spill_.append(nodes.data(), nodes.size() * 8);
+            spill_.append(values.data(), values.size() * sizeof(Stored));
+            counts_[(index * levels_ + (l - subtree_level_)) * 2] = nodes.size();
+            counts_[(index * levels_ + (l - subtree_level_)) * 2 + 1] = values.size();
+          }
+          records_[index] = record;
+        } catch (...) {
+          std::lock_guard<std::mutex> lock(spill_mutex);
+          failure = std::current_exception();
+        }
+      }
+    };
+    std::vector<std::thread> pool;
+    for (unsigned t = 1; t < threads_; ++t) pool.emplace_back(work, t);
+    work(0);
+    for (auto& th : pool) th.join();
+    if (failure) std::rethrow_exception(failure);
+    for (const auto& s : thread_stats) stats_.merge(s);
+    builder_.set_slab(nullptr, 0, nullptr);
+    ++slabs_done;
+    build_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
+
+  StreamingResult finish(const Metadata& metadata) override {
+    if (slabs_done != grid_[2])
+      throw Error(ErrorClass::InvalidArgument,
+                  path_ + ": " + std::to_string(slabs_done) + " of " + std::to_string(grid_[2]) + " slabs given");
+    const auto start = std::chrono::steady_clock::now();
+    LevelArrays<Stored> top(depth_);
+    RegionStats ignored;
+    bool ignored_kept = false;
+    const NodeResult root = top_node(0, 0, 0, 0, top, ignored, ignored_kept);
+    build_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+
+    VolumeLayout layout = builder_.layout();
+    layout.inner_count.assign(depth_ + 1, 0);
+    if (root.inner) {
+      for (unsigned l = 0; l < subtree_level_; ++l) layout.inner_count[l] = top.nodes[l].size();
+      for (std::uint64_t s = 0; s < records_.size(); ++s)
+        for (unsigned l = subtree_level_; l <= depth_; ++l) layout.inner_count[l] += count(s, l, 0);
+    }
+    FileWriter writer(path_, layout);
+    detail::BlockPipeline pipeline(writer, options_.write);
+    const std::uint32_t block = options_.write.block_bytes;
+    std::uint64_t next_child = 1;  // breadth-first first_inner_child, across levels
+    std::vector<std::uint8_t> buffer;
+    for (unsigned l = 0; l <= depth_; ++l) {
+      detail::BlockAssembler values(pipeline, Stream::Values, l, layout.first_value(l), sizeof(Stored), block);
+      if (l == 0) {
+        const auto bits = static_cast<Stored>(root.bits);
+        values.append(&bits, 1);
+      } else if (root.inner && l <= subtree_level_) {
+        values.append(top.values[l].data(), top.values[l].size());
+      } else if (root.inner) {
+        for_each_subtree([&](std::uint64_t s) {
+          const std::uint64_t n = count(s, l, 1);
+          buffer.resize(n * sizeof(Stored));
+          spill_.read(spill_offset(s, l, 1), buffer.data(), buffer.size());
+          values.append(buffer.data(), n);
+        });
+      }
+      values.finish();
+      if (!root.inner) continue;
+      detail::BlockAssembler nodes(pipeline, Stream::Nodes, l, layout.first_inner(l), 8, block);
+      auto emit_nodes = [&](std::uint64_t* words, std::uint64_t n) {
+        for (std::uint64_t w = 0; w < n; ++w) {
+          const std::uint8_t mask = child_mask(words[w]);
+          words[w] = make_node_word(mask, next_child);
+          next_child += static_cast<unsigned>(__builtin_popcount(mask));
+        }
+        nodes.append(words, n);
+      };
+      if (l < subtree_level_) {
+        emit_nodes(top.nodes[l].data(), top.nodes[l].size());
+      } else {
+        for_each_subtree([&](std::uint64_t s) {
+          const std::uint64_t n = count(s, l, 0);
+          std::vector<std::uint64_t> words(n);
+          spill_.read(spill_offset(s, l, 0), words.data(), n * 8);
+          emit_nodes(words.data(), n);
+        });
+      }
+      nodes.finish();
+    }
+    pipeline.flush();
+    writer.finish(metadata, layout.inner_count);
+
+    StreamingResult result;
+    result.write.file_bytes = writer.bytes_written();
+    result.write.block_count = writer.block_count();
+    result.write.decoded_bytes = pipeline.decoded_bytes();
+    result.write.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    result.max_abs_error = stats_.max_abs_error;
+    result.lossless = stats_.max_abs_error == 0.0 && !stats_.coarsened;
+    result.kept_voxels = stats_.kept + (depth_ == 0 ? 1 : 0);
+    result.spill_bytes = spill_.size();
+    result.build_seconds = build_seconds_;
+    return result;
+  }
+
+ private:
+  struct Record {
+    NodeResult root;
+    RegionStats stats;
+    bool any_kept = false;
+    std::uint64_t spill_offset = 0;
+  };
+
+  std::uint64_t count(std::uint64_t subtree, unsigned level, int stream) const {
+    return counts_[(subtree * levels_ + (level - subtree_level_)) * 2 + stream];
+  }
+
+  // Where a subtree's nodes (stream 0) or values (stream 1) of `level` lie in
+  // the spill file: after its earlier levels.
+  std::uint64_t spill_offset(std::uint64_t subtree, unsigned level, int stream) const {
+    std::uint64_t at = records_[subtree].spill_offset;
+    for (unsigned l = subtree_level_; l < level; ++l)
+      at += count(subtree, l, 0) * 8 + count(subtree, l, 1) * sizeof(Stored);
+    if (stream == 1) at += count(subtree, level, 0) * 8;
+    return at;
+  }
+
+  // Visits the subtrees in Morton order of their roots: the breadth-first
+  // order of their nodes within every level.
+  template <class F>
+  void for_each_subtree(F&& visit) const {
+    const std::uint64_t total = std::uint64_t{1} << (3 * subtree_level_);
+    for (std::uint64_t t = 0; t < total; ++t) {
+      std::uint32_t i = 0, j = 0, k = 0;
+      for (unsigned b = 0; b < subtree_level_; ++b) {
+        const auto c = static_cast<std::uint32_t>((t >> (3 * (subtree_level_ - 1 - b))) & 7u);
+        i = (i << 1) | (c & 1u);
+        j = (j << 1) | ((c >> 1) & 1u);
+        k = (k << 1) | ((c >> 2) & 1u);
+      }
+      if (i < grid_[0] && j < grid_[1] && k < grid_[2]) visit((std::uint64_t{k} * grid_[1] + j) * grid_[0] + i);
+    }
+  }
+
+  NodeResult top_node(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k, LevelArrays<Stored>& out,
+                      RegionStats& stats, bool& any_kept) {
+    if (level == subtree_level_) {
+      if (i >= grid_[0] || j >= grid_[1] || k >= grid_[2]) return NodeResult{};
+      const Record& r = records_[(std::uint64_t{k} * grid_[1] + j) * grid_[0] + i];
+      stats = r.stats;
+      any_kept = r.any_kept;
+      return r.root;
+    }
+    const std::uint64_t weight = builder_.layout().weight(level, i, j, k);
+    if (weight == 0) return NodeResult{};
+    NodeResult child[8];
+    stats = RegionStats{};
+    any_kept = false;
+    for (unsigned c = 0; c < 8; ++c) {
+      RegionStats child_stats;
+      bool child_kept = false;
+      child[c] = top_node(level + 1, 2 * i + (c & 1u), 2 * j + ((c >> 1) & 1u), 2 * k + ((c >> 2) & 1u), out,
+                          child_stats, child_kept);
+      stats.merge(child_stats);
+      any_kept = any_kept || child_kept;
+    }
+    if (with_keep_ && !any_kept) return builder_.leaf_from_stats(stats, weight, stats_);
+    return builder_.combine(level, child, weight, out, stats_);
+  }
+
+  std::string path_;
+  StreamingOptions options_;
+  detail::Builder<Source, Stored> builder_;
+  SpillFile spill_;
+  unsigned depth_ = 0;
+  unsigned subtree_level_ = 0;
+  unsigned levels_ = 0;
+  unsigned threads_ = 1;
+  std::uint32_t grid_[3] = {1, 1, 1};
+  std::vector<Record> records_;
+  std::vector<std::uint64_t> counts_;  // per subtree, level, stream (nodes, values)
+  BuildStats stats_;
+  bool with_keep_ = false;
+  double build_seconds_ = 0.0;
+};
+
+std::uint32_t choose_slab(const Dims& dims, const StreamingOptions& options) {
+  const unsigned depth = depth_for(dims);
+  const std::uint32_t side = 1u << depth;
+  if (options.slab_slices) {
+    const std::uint32_t s = options.slab_slices;
+    if ((s & (s - 1)) != 0) throw Error(ErrorClass::InvalidArgument, "streaming: slab_slices must be a power of two");
+    return std::min(s, side);
+  }
+  const std::uint64_t slice_bytes = std::uint64_t{dims[0]} * dims[1] * 4;
+  std::uint32_t s = 8;
+  while (s < side && 2 * s * slice_bytes <= options.slab_budget_bytes) s *= 2;
+  return std::min(s, side);
+}
+
+template <typename Source>
+std::unique_ptr<StreamingOctreeWriter::Impl> make_engine(const std::string& path, const Dims& dims,
+                                                         const StreamingOptions& options) {
+  const std::uint32_t slab = choose_slab(dims, options);
+  if (options.build.encoding == ValueEncoding::Float32)
+    return std::make_unique<Engine<Source, std::uint32_t>>(path, dims, options, slab);
+  return std::make_unique<Engine<Source, std::uint16_t>>(path, dims, options, slab);
+}
+
+}  // namespace
+
+struct StreamingState {
+  std::string path;
+  Dims dims;
+  StreamingOptions options;
+};
+
+StreamingOctreeWriter::StreamingOctreeWriter(const std::string& path, const Dims& dims,
+                                             const StreamingOptions& options) {
+  for (auto n : dims)
+    if (n == 0 || n > (1u << 31))
+      throw Error(ErrorClass::InvalidArgument, "streaming: each dimension must be 1 .. 2^31");
+  if (!std::isfinite(options.build.value_scale) || options.build.value_scale == 0.0 ||
+      !std::isfinite(options.build.value_offset))
+    throw Error(ErrorClass::InvalidArgument, "streaming: value scale must be finite and non-zero, offset finite");
+  // The engine is made for the sample type of the first slab; until then keep
+  // what it needs.
+  pending_ = std::make_unique<StreamingState>(StreamingState{path, dims, options});
+}
+
+StreamingOctreeWriter::~StreamingOctreeWriter() = default;
+
+std::uint32_t StreamingOctreeWriter::slab_slices() const {
+  return impl_ ? impl_->slab_slices : choose_slab(pending_->dims, pending_->options);
+}
+
+std::uint32_t StreamingOctreeWriter::next_slab_first() const {
+  return impl_ ? impl_->slabs_done * impl_->slab_slices : 0;
+}
+
+std::uint32_t StreamingOctreeWriter::next_slab_count() const {
+  const Dims& d = impl_ ? impl_->dims : pending_->dims;
+  const std::uint32_t first = next_slab_first();
+  return first >= d[2] ? 0 : std::min(slab_slices(), d[2] - first);
+}
+
+void StreamingOctreeWriter::add_slab(const float* samples, const std::uint8_t* keep) {
+  if (!impl_) impl_ = make_engine<float>(pending_->path, pending_->dims, pending_->options);
+  if (!impl_->is_float) throw Error(ErrorClass::InvalidArgument, "streaming: slabs must all have one sample type");
+  impl_->add(samples, keep);
+}
+
+void StreamingOctreeWriter::add_slab(const std::uint16_t* samples, const std::uint8_t* keep) {
+  if (!impl_) impl_ = make_engine<std::uint16_t>(pending_->path, pending_->dims, pending_->options);
+  if (impl_->is_float) throw Error(ErrorClass::InvalidArgument, "streaming: slabs must all have one sample type");
+  impl_->add(samples, keep);
+}
+
+StreamingResult StreamingOctreeWriter::finish(const Metadata& metadata) {
+  if (!impl_) throw Error(ErrorClass::InvalidArgument, "streaming: finish() before any slab");
+  return impl_->finish(metadata);
+}
+
+}  // namespace ivol
