@@ -9,36 +9,142 @@
 #include <fstream>
 
 #include "ivol/error.hpp"
+#include "slab_io.hpp"
 
 namespace ivol::convert {
 namespace {
 
-void swap_bytes(std::vector<std::uint8_t>& data, std::size_t width) {
+void swap_bytes(std::uint8_t* data, std::size_t size, std::size_t width) {
   if (width == 1) return;
-  for (std::size_t i = 0; i + width <= data.size(); i += width)
+  for (std::size_t i = 0; i + width <= size; i += width)
     for (std::size_t a = 0, b = width - 1; a < b; ++a, --b) std::swap(data[i + a], data[i + b]);
 }
 
 }  // namespace
 
+namespace {
+
+class RawSlabReader final : public SlabReader {
+ public:
+  RawSlabReader(const std::string& path, const RawLayout& layout) : path_(path), layout_(layout) {
+    for (auto n : layout.dims)
+      if (n == 0) throw Error(ErrorClass::InvalidArgument, path + ": --dims must give three positive sizes");
+    struct stat st {};
+    if (::stat(path.c_str(), &st) != 0) throw Error(ErrorClass::Io, path + ": cannot open: " + std::strerror(errno));
+    const std::uint64_t expected = layout.header_bytes + voxel_count(layout.dims) * sample_size(layout.type);
+    if (static_cast<std::uint64_t>(st.st_size) != expected)
+      throw Error(ErrorClass::InvalidArgument,
+                  path + ": the file has " + std::to_string(st.st_size) + " bytes, but " +
+                      std::to_string(layout.dims[0]) + "x" + std::to_string(layout.dims[1]) + "x" +
+                      std::to_string(layout.dims[2]) + " samples of " + sample_type_name(layout.type) + " after " +
+                      std::to_string(layout.header_bytes) + " header bytes need " + std::to_string(expected));
+    in_.open(path, std::ios::binary);
+    if (!in_) throw Error(ErrorClass::Io, path + ": cannot open for reading");
+    shape_.dims = layout.dims;
+    shape_.type = layout.type;
+  }
+
+  void read(std::uint32_t z0, std::uint32_t count, void* out) override {
+    const std::uint64_t slice = std::uint64_t{layout_.dims[0]} * layout_.dims[1] * sample_size(layout_.type);
+    in_.seekg(static_cast<std::streamoff>(layout_.header_bytes + z0 * slice));
+    in_.read(static_cast<char*>(out), static_cast<std::streamsize>(count * slice));
+    if (!in_) throw Error(ErrorClass::Io, path_ + ": read failed at slice " + std::to_string(z0));
+    if (layout_.big_endian) swap_bytes(static_cast<std::uint8_t*>(out), count * slice, sample_size(layout_.type));
+  }
+
+ private:
+  std::string path_;
+  RawLayout layout_;
+  std::ifstream in_;
+};
+
+class RawSlabWriter final : public SlabWriter {
+ public:
+  RawSlabWriter(const std::string& path, const DenseVolume& shape, bool big_endian)
+      : path_(path), shape_(shape), big_endian_(big_endian) {
+    const auto slash = path.find_last_of('/');
+    const std::string dir = slash == std::string::npos ? "." : path.substr(0, slash);
+    temp_ = dir + "/.ivol-tmp-XXXXXX";
+    fd_ = mkstemp(temp_.data());
+    if (fd_ < 0)
+      throw Error(ErrorClass::Io, path + ": cannot create a temporary file in " + dir + ": " + std::strerror(errno));
+    fchmod(fd_, 0644);
+  }
+  ~RawSlabWriter() override {
+    if (fd_ >= 0) ::close(fd_);
+    if (!finished_) ::unlink(temp_.c_str());
+  }
+  void write(const void* samples, std::uint32_t count) override {
+    const std::size_t bytes = std::size_t{count} * shape_.dims[0] * shape_.dims[1] * sample_size(shape_.type);
+    std::vector<std::uint8_t> swapped;
+    const auto* p = static_cast<const std::uint8_t*>(samples);
+    if (big_endian_) {
+      swapped.assign(p, p + bytes);
+      swap_bytes(swapped.data(), bytes, sample_size(shape_.type));
+      p = swapped.data();
+    }
+    for (std::size_t done = 0; done < bytes;) {
+      const ssize_t n = ::write(fd_, p + done, bytes - done);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) throw Error(ErrorClass::Io, path_ + ": write failed: " + std::strerror(errno));
+      done += static_cast<std::size_t>(n);
+    }
+    slices_ += count;
+  }
+  void finish() override {
+    if (slices_ != shape_.dims[2])
+      throw Error(ErrorClass::InvalidArgument,
+                  path_ + ": " + std::to_string(slices_) + " of " + std::to_string(shape_.dims[2]) + " slices written");
+    const bool ok = ::fsync(fd_) == 0 && ::close(fd_) == 0;
+    fd_ = -1;
+    if (!ok || ::rename(temp_.c_str(), path_.c_str()) != 0)
+      throw Error(ErrorClass::Io, path_ + ": cannot finish the file: " + std::strerror(errno));
+    finished_ = true;
+  }
+
+ private:
+  std::string path_;
+  std::string temp_;
+  DenseVolume shape_;
+  bool big_endian_;
+  int fd_ = -1;
+  std::uint32_t slices_ = 0;
+  bool finished_ = false;
+};
+
+class MemorySlabReader final : public SlabReader {
+ public:
+  explicit MemorySlabReader(DenseVolume volume) : volume_(std::move(volume)) {
+    shape_ = volume_;
+    shape_.data.clear();
+  }
+  void read(std::uint32_t z0, std::uint32_t count, void* out) override {
+    const std::size_t slice = std::size_t{volume_.dims[0]} * volume_.dims[1] * sample_size(volume_.type);
+    std::memcpy(out, volume_.data.data() + z0 * slice, count * slice);
+  }
+
+ private:
+  DenseVolume volume_;
+};
+
+}  // namespace
+
+std::unique_ptr<SlabReader> open_raw_slabs(const std::string& path, const RawLayout& layout) {
+  return std::make_unique<RawSlabReader>(path, layout);
+}
+
+std::unique_ptr<SlabReader> memory_slabs(DenseVolume volume) {
+  return std::make_unique<MemorySlabReader>(std::move(volume));
+}
+
+std::unique_ptr<SlabWriter> create_raw_slabs(const std::string& path, const DenseVolume& shape, bool big_endian) {
+  return std::make_unique<RawSlabWriter>(path, shape, big_endian);
+}
+
 DenseVolume read_raw(const std::string& path, const RawLayout& layout) {
-  for (auto n : layout.dims)
-    if (n == 0) throw Error(ErrorClass::InvalidArgument, path + ": --dims must give three positive sizes");
-  struct stat st {};
-  if (::stat(path.c_str(), &st) != 0) throw Error(ErrorClass::Io, path + ": cannot open: " + std::strerror(errno));
-  const std::uint64_t expected = layout.header_bytes + voxel_count(layout.dims) * sample_size(layout.type);
-  if (static_cast<std::uint64_t>(st.st_size) != expected)
-    throw Error(ErrorClass::InvalidArgument,
-                path + ": the file has " + std::to_string(st.st_size) + " bytes, but " +
-                    std::to_string(layout.dims[0]) + "x" + std::to_string(layout.dims[1]) + "x" +
-                    std::to_string(layout.dims[2]) + " samples of " + sample_type_name(layout.type) + " after " +
-                    std::to_string(layout.header_bytes) + " header bytes need " + std::to_string(expected));
+  auto reader = open_raw_slabs(path, layout);
   DenseVolume v = make_dense(layout.dims, layout.type);
-  std::ifstream in(path, std::ios::binary);
-  in.seekg(static_cast<std::streamoff>(layout.header_bytes));
-  in.read(reinterpret_cast<char*>(v.data.data()), static_cast<std::streamsize>(v.data.size()));
-  if (!in) throw Error(ErrorClass::Io, path + ": read failed");
-  if (layout.big_endian) swap_bytes(v.data, sample_size(layout.type));
+  reader->read(0, layout.dims[2], v.data.data());
   return v;
 }
 
@@ -72,13 +178,9 @@ void write_file_atomically(const std::string& path, const void* bytes, std::size
 }
 
 void write_raw(const DenseVolume& volume, const std::string& path, bool big_endian) {
-  if (!big_endian) {
-    write_file_atomically(path, volume.data.data(), volume.data.size());
-    return;
-  }
-  std::vector<std::uint8_t> swapped = volume.data;
-  swap_bytes(swapped, sample_size(volume.type));
-  write_file_atomically(path, swapped.data(), swapped.size());
+  auto writer = create_raw_slabs(path, volume, big_endian);
+  writer->write(volume.data.data(), volume.dims[2]);
+  writer->finish();
 }
 
 }  // namespace ivol::convert

@@ -9,6 +9,7 @@
 #include <memory>
 
 #include "ivol/error.hpp"
+#include "slab_io.hpp"
 
 namespace ivol::convert {
 namespace {
@@ -146,111 +147,171 @@ std::vector<std::string> natural_sorted_files(const std::string& folder) {
   return names;
 }
 
+namespace {
+
+// Pages of one multi-page file or of a folder of files, read in order; going
+// back (for the halo of a slab) reopens.
+class TiffSlabReader final : public SlabReader {
+ public:
+  explicit TiffSlabReader(const std::string& path) {
+    if (std::filesystem::is_directory(path)) {
+      for (const auto& name : natural_sorted_files(path)) files_.push_back(path + "/" + name);
+      if (files_.empty()) fail(path, "the folder holds no .tif or .tiff files");
+    } else {
+      files_.push_back(path);
+    }
+    // Count the pages and check that they agree.
+    for (std::size_t f = 0; f < files_.size(); ++f) {
+      TiffHandle tif = open_tiff(files_[f], "r");
+      do {
+        const std::string where = files_[f] + " page " + std::to_string(pages_.size());
+        const PageFormat page = page_format(tif.get(), where);
+        if (pages_.empty())
+          format_ = page;
+        else if (page.width != format_.width || page.height != format_.height || page.type != format_.type)
+          fail(where, std::to_string(page.width) + "x" + std::to_string(page.height) + " " +
+                          sample_type_name(page.type) + " differs from the first page's " +
+                          std::to_string(format_.width) + "x" + std::to_string(format_.height) + " " +
+                          sample_type_name(format_.type));
+        pages_.push_back({f, TIFFCurrentDirectory(tif.get())});
+      } while (TIFFReadDirectory(tif.get()));
+    }
+    shape_.dims = Dims{format_.width, format_.height, static_cast<std::uint32_t>(pages_.size())};
+    shape_.type = format_.type;
+  }
+
+  void read(std::uint32_t z0, std::uint32_t count, void* out) override {
+    const std::size_t page_bytes = std::size_t{format_.width} * format_.height * sample_size(format_.type);
+    for (std::uint32_t z = z0; z < z0 + count; ++z) {
+      const Page& page = pages_.at(z);
+      if (!open_ || open_file_ != page.file) {
+        open_ = open_tiff(files_[page.file], "r");
+        open_file_ = page.file;
+      }
+      if (TIFFCurrentDirectory(open_.get()) != page.directory && !TIFFSetDirectory(open_.get(), page.directory))
+        fail(files_[page.file], "cannot find page " + std::to_string(page.directory));
+      read_page(open_.get(), format_, static_cast<std::uint8_t*>(out) + (z - z0) * page_bytes,
+                files_[page.file] + " page " + std::to_string(z));
+    }
+  }
+
+ private:
+  struct Page {
+    std::size_t file;
+    tdir_t directory;
+  };
+  std::vector<std::string> files_;
+  std::vector<Page> pages_;
+  PageFormat format_;
+  TiffHandle open_;
+  std::size_t open_file_ = 0;
+};
+
+class TiffSlabWriter final : public SlabWriter {
+ public:
+  TiffSlabWriter(const std::string& path, const DenseVolume& shape, bool compress)
+      : path_(path), dims_(shape.dims), type_(shape.type), compress_(compress) {
+    install_handlers();
+    const auto slash = path.find_last_of('/');
+    const std::string dir = slash == std::string::npos ? "." : path.substr(0, slash);
+    temp_ = dir + "/.ivol-tmp-XXXXXX";
+    const int fd = mkstemp(temp_.data());
+    if (fd < 0) fail(path, "cannot create a temporary file in " + dir);
+    ::close(fd);
+    // BigTIFF well before the 4 GiB limit of classic TIFF.
+    const bool big = voxel_count(dims_) * sample_size(type_) > (3ull << 30);
+    tif_.reset(TIFFOpen(temp_.c_str(), big ? "w8" : "w"));
+    if (!tif_) {
+      ::unlink(temp_.c_str());
+      fail(path, "cannot write: " + last_tiff_message);
+    }
+  }
+
+  ~TiffSlabWriter() override {
+    tif_.reset();
+    if (!finished_) ::unlink(temp_.c_str());
+  }
+
+  void write(const void* samples, std::uint32_t count) override {
+    const std::size_t sample = sample_size(type_);
+    const std::uint16_t bits = static_cast<std::uint16_t>(8 * sample);
+    std::uint16_t format = SAMPLEFORMAT_UINT;
+    if (type_ == SampleType::Int16) format = SAMPLEFORMAT_INT;
+    if (type_ == SampleType::Float16 || type_ == SampleType::Float32) format = SAMPLEFORMAT_IEEEFP;
+    const std::uint32_t rows_per_strip =
+        std::max<std::uint32_t>(1, static_cast<std::uint32_t>((64u << 10) / (dims_[0] * sample)));
+    for (std::uint32_t n = 0; n < count; ++n, ++z_) {
+      TIFF* tif = tif_.get();
+      TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, dims_[0]);
+      TIFFSetField(tif, TIFFTAG_IMAGELENGTH, dims_[1]);
+      TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, bits);
+      TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, 1);
+      TIFFSetField(tif, TIFFTAG_SAMPLEFORMAT, format);
+      TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_MINISBLACK);
+      TIFFSetField(tif, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
+      TIFFSetField(tif, TIFFTAG_ROWSPERSTRIP, rows_per_strip);
+      TIFFSetField(tif, TIFFTAG_SUBFILETYPE, FILETYPE_PAGE);
+      TIFFSetField(tif, TIFFTAG_PAGENUMBER, z_, dims_[2]);
+      if (compress_) {
+        TIFFSetField(tif, TIFFTAG_COMPRESSION, COMPRESSION_ADOBE_DEFLATE);
+        // Horizontal differencing helps integer slices; the floating-point
+        // predictor would help floats but many readers lack it, so floats go
+        // without one.
+        if (format != SAMPLEFORMAT_IEEEFP) TIFFSetField(tif, TIFFTAG_PREDICTOR, PREDICTOR_HORIZONTAL);
+      } else {
+        TIFFSetField(tif, TIFFTAG_COMPRESSION, COMPRESSION_NONE);
+      }
+      const auto* page = static_cast<const std::uint8_t*>(samples) + std::size_t{n} * dims_[0] * dims_[1] * sample;
+      for (std::uint32_t y0 = 0, s = 0; y0 < dims_[1]; y0 += rows_per_strip, ++s) {
+        const std::uint32_t rows = std::min(rows_per_strip, dims_[1] - y0);
+        // libtiff's predictor works in place; give it a copy.
+        std::vector<std::uint8_t> strip(page + std::size_t{y0} * dims_[0] * sample,
+                                        page + (std::size_t{y0} + rows) * dims_[0] * sample);
+        if (TIFFWriteEncodedStrip(tif, s, strip.data(), static_cast<tmsize_t>(strip.size())) < 0)
+          fail(path_, "cannot write slice " + std::to_string(z_) + ": " + last_tiff_message);
+      }
+      if (!TIFFWriteDirectory(tif)) fail(path_, "cannot write slice " + std::to_string(z_) + ": " + last_tiff_message);
+    }
+  }
+
+  void finish() override {
+    if (z_ != dims_[2]) fail(path_, std::to_string(z_) + " of " + std::to_string(dims_[2]) + " slices written");
+    tif_.reset();
+    if (::rename(temp_.c_str(), path_.c_str()) != 0)
+      throw Error(ErrorClass::Io, path_ + ": cannot rename the finished file into place");
+    finished_ = true;
+  }
+
+ private:
+  std::string path_;
+  std::string temp_;
+  Dims dims_;
+  SampleType type_;
+  bool compress_;
+  TiffHandle tif_;
+  std::uint32_t z_ = 0;
+  bool finished_ = false;
+};
+
+}  // namespace
+
+std::unique_ptr<SlabReader> open_tiff_slabs(const std::string& path) { return std::make_unique<TiffSlabReader>(path); }
+
+std::unique_ptr<SlabWriter> create_tiff_slabs(const std::string& path, const DenseVolume& shape, bool compress) {
+  return std::make_unique<TiffSlabWriter>(path, shape, compress);
+}
+
 DenseVolume read_tiff(const std::string& path) {
-  std::vector<std::string> files;
-  if (std::filesystem::is_directory(path)) {
-    for (const auto& name : natural_sorted_files(path)) files.push_back(path + "/" + name);
-    if (files.empty()) fail(path, "the folder holds no .tif or .tiff files");
-  } else {
-    files.push_back(path);
-  }
-  // First pass: count the pages and check that they agree.
-  PageFormat first;
-  std::uint32_t pages = 0;
-  for (const auto& file : files) {
-    TiffHandle tif = open_tiff(file, "r");
-    do {
-      const std::string where = file + " page " + std::to_string(pages);
-      const PageFormat f = page_format(tif.get(), where);
-      if (pages == 0)
-        first = f;
-      else if (f.width != first.width || f.height != first.height || f.type != first.type)
-        fail(where, std::to_string(f.width) + "x" + std::to_string(f.height) + " " + sample_type_name(f.type) +
-                        " differs from the first page's " + std::to_string(first.width) + "x" +
-                        std::to_string(first.height) + " " + sample_type_name(first.type));
-      ++pages;
-    } while (TIFFReadDirectory(tif.get()));
-  }
-  DenseVolume v = make_dense(Dims{first.width, first.height, pages}, first.type);
-  const std::size_t page_bytes = std::size_t{first.width} * first.height * sample_size(first.type);
-  std::uint32_t z = 0;
-  for (const auto& file : files) {
-    TiffHandle tif = open_tiff(file, "r");
-    do {
-      read_page(tif.get(), first, v.data.data() + z * page_bytes, file + " page " + std::to_string(z));
-      ++z;
-    } while (TIFFReadDirectory(tif.get()));
-  }
+  auto reader = open_tiff_slabs(path);
+  DenseVolume v = make_dense(reader->shape().dims, reader->shape().type);
+  reader->read(0, v.dims[2], v.data.data());
   return v;
 }
 
 void write_tiff(const DenseVolume& volume, const std::string& path, const TiffWriteOptions& options) {
-  install_handlers();
-  const auto slash = path.find_last_of('/');
-  const std::string dir = slash == std::string::npos ? "." : path.substr(0, slash);
-  std::string temp = dir + "/.ivol-tmp-XXXXXX";
-  const int fd = mkstemp(temp.data());
-  if (fd < 0) fail(path, "cannot create a temporary file in " + dir);
-  ::close(fd);
-  // BigTIFF well before the 4 GiB limit of classic TIFF.
-  const bool big = volume.data.size() > (3ull << 30);
-  TIFF* raw = TIFFOpen(temp.c_str(), big ? "w8" : "w");
-  if (!raw) {
-    ::unlink(temp.c_str());
-    fail(path, "cannot write: " + last_tiff_message);
-  }
-  TiffHandle tif(raw);
-  const Dims& d = volume.dims;
-  const std::size_t sample = sample_size(volume.type);
-  const std::uint16_t bits = static_cast<std::uint16_t>(8 * sample);
-  std::uint16_t format = SAMPLEFORMAT_UINT;
-  if (volume.type == SampleType::Int16) format = SAMPLEFORMAT_INT;
-  if (volume.type == SampleType::Float16 || volume.type == SampleType::Float32) format = SAMPLEFORMAT_IEEEFP;
-  const std::uint32_t rows_per_strip =
-      std::max<std::uint32_t>(1, static_cast<std::uint32_t>((64u << 10) / (d[0] * sample)));
-  try {
-    for (std::uint32_t z = 0; z < d[2]; ++z) {
-      TIFFSetField(tif.get(), TIFFTAG_IMAGEWIDTH, d[0]);
-      TIFFSetField(tif.get(), TIFFTAG_IMAGELENGTH, d[1]);
-      TIFFSetField(tif.get(), TIFFTAG_BITSPERSAMPLE, bits);
-      TIFFSetField(tif.get(), TIFFTAG_SAMPLESPERPIXEL, 1);
-      TIFFSetField(tif.get(), TIFFTAG_SAMPLEFORMAT, format);
-      TIFFSetField(tif.get(), TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_MINISBLACK);
-      TIFFSetField(tif.get(), TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
-      TIFFSetField(tif.get(), TIFFTAG_ROWSPERSTRIP, rows_per_strip);
-      TIFFSetField(tif.get(), TIFFTAG_SUBFILETYPE, FILETYPE_PAGE);
-      TIFFSetField(tif.get(), TIFFTAG_PAGENUMBER, z, d[2]);
-      if (options.compress) {
-        TIFFSetField(tif.get(), TIFFTAG_COMPRESSION, COMPRESSION_ADOBE_DEFLATE);
-        // Horizontal differencing helps integer slices; the floating-point
-        // predictor would help floats but many readers lack it, so floats go
-        // without one.
-        if (format != SAMPLEFORMAT_IEEEFP) TIFFSetField(tif.get(), TIFFTAG_PREDICTOR, PREDICTOR_HORIZONTAL);
-      } else {
-        TIFFSetField(tif.get(), TIFFTAG_COMPRESSION, COMPRESSION_NONE);
-      }
-      const std::uint8_t* page = volume.data.data() + std::size_t{z} * d[0] * d[1] * sample;
-      for (std::uint32_t y0 = 0, s = 0; y0 < d[1]; y0 += rows_per_strip, ++s) {
-        const std::uint32_t rows = std::min(rows_per_strip, d[1] - y0);
-        // libtiff's predictor works in place; give it a copy.
-        std::vector<std::uint8_t> strip(page + std::size_t{y0} * d[0] * sample,
-                                        page + (std::size_t{y0} + rows) * d[0] * sample);
-        if (TIFFWriteEncodedStrip(tif.get(), s, strip.data(), static_cast<tmsize_t>(strip.size())) < 0)
-          fail(path, "cannot write slice " + std::to_string(z) + ": " + last_tiff_message);
-      }
-      if (!TIFFWriteDirectory(tif.get()))
-        fail(path, "cannot write slice " + std::to_string(z) + ": " + last_tiff_message);
-    }
-    tif.reset();
-  } catch (...) {
-    tif.reset();
-    ::unlink(temp.c_str());
-    throw;
-  }
-  if (::rename(temp.c_str(), path.c_str()) != 0) {
-    ::unlink(temp.c_str());
-    throw Error(ErrorClass::Io, path + ": cannot rename the finished file into place");
-  }
+  auto writer = create_tiff_slabs(path, volume, options.compress);
+  writer->write(volume.data.data(), volume.dims[2]);
+  writer->finish();
 }
 
 }  // namespace ivol::convert
