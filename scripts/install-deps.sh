@@ -7,6 +7,8 @@ packages=(
   build-essential cmake ninja-build pkg-config
   libzstd-dev nlohmann-json3-dev libcli11-dev
   libgtest-dev
+  libhdf5-dev libopenvdb-dev libboost-iostreams-dev
+  hdf5-tools python3-h5py libopenvdb-tools
   python3 python3-numpy python3-zstandard
 )
 
