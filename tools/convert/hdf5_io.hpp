@@ -1,0 +1,52 @@
+// HDF5 import and export of dense volumes (DXchange / tomopy style: one 3-D
+// dataset, by default /exchange/data).
+//
+// Axis order: HDF5 stores C order, so a dataset of shape (nz, ny, nx) holds
+// [z][y][x] with x fastest, exactly as DenseVolume does; no transposition.
+//
+// Geometry attributes, on the dataset itself (DXchange has no settled place
+// for the voxel size of a reconstruction, so we read the common spellings and
+// write one):
+//   voxel_size  float64 x 3, in the dataset's axis order (z, y, x), or a
+//               single number for isotropic voxels;
+//   pixel_size  a single number, isotropic, if voxel_size is absent (DXchange
+//               and tomopy users often write this);
+//   origin      float64 x 3, (z, y, x), world position of the centre of voxel
+//               (0, 0, 0); absent means (0, 0, 0);
+//   unit        string (also read: units), e.g. "mm"; absent keeps "mm".
+// has_geometry is true when voxel_size or pixel_size is present. write_hdf5
+// writes voxel_size, origin and unit only for a volume with has_geometry.
+#pragma once
+
+#include <array>
+#include <string>
+
+#include "dense_volume.hpp"
+
+namespace ivol::convert {
+
+// What the file held, for reports: read_hdf5 may convert on the way.
+struct Hdf5SourceInfo {
+  std::string stored_type;                           // "u8", "u16", "i16", "f16", "f32", "f64"
+  bool narrowed_to_f32 = false;                      // float64 samples were rounded to float32
+  bool chunked = false;                              // chunked layout (else contiguous or compact)
+  std::array<unsigned long long, 3> chunk{0, 0, 0};  // (z, y, x), when chunked
+  std::string filters;                               // e.g. "shuffle,deflate", empty for none
+};
+
+// Reads a 3-D dataset of u8, u16, i16, 16-bit float, f32 or f64 (returned as
+// f32, reported in *source). Any layout and any filter the HDF5 library has.
+// Throws ivol::Error: Io (cannot open), Malformed (not an HDF5 file, bad
+// geometry attribute), InvalidArgument (no such dataset: the message lists
+// the 3-D datasets there are; not 3-D; unsupported sample type).
+DenseVolume read_hdf5(const std::string& path, const std::string& dataset = "/exchange/data",
+                      Hdf5SourceInfo* source = nullptr);
+
+// Writes a chunked (64^3, clipped to the volume) dataset with the shuffle and
+// deflate filters (deflate_level 0: chunked, no filters), creating the groups
+// on the way, samples little-endian. Writes a temporary file in the same
+// directory and renames it into place: never a partial file at `path`.
+void write_hdf5(const DenseVolume& volume, const std::string& path, const std::string& dataset = "/exchange/data",
+                int deflate_level = 4);
+
+}  // namespace ivol::convert

@@ -1,0 +1,54 @@
+// OpenVDB import and export of dense volumes (float grids only).
+//
+// Index space and the dense array: OpenVDB puts voxel centres at integer
+// index coordinates (i, j, k). read_vdb takes the grid's active voxel
+// bounding box [min, max] (active tiles included, evalActiveVoxelBoundingBox)
+// and maps index (i, j, k) to dense voxel (i - min.x, j - min.y, k - min.z),
+// x fastest, so that dims = max - min + 1. Geometry comes from the grid's
+// transform, which must be linear and axis-aligned (a scale and a
+// translation, no rotation, shear or mirroring; a frustum is refused):
+// voxel_size is the scale along each axis and origin the world position of
+// the centre of index min. write_vdb does the reverse with min = (0, 0, 0).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "dense_volume.hpp"
+
+namespace ivol::convert {
+
+struct VdbVolume {
+  // Float32 samples over the active bounding box; voxels outside the active
+  // set hold whatever the grid holds there (usually the background).
+  DenseVolume volume;
+  std::vector<std::uint8_t> active;     // 1 where the grid's voxel is active, per dense voxel
+  std::vector<std::uint8_t> from_tile;  // 1 where that active value comes from a tile, not a leaf voxel
+  float background = 0.0f;
+  std::string grid_name;
+  bool was_half = false;  // the file stored the values as 16-bit floats (saveFloatAsHalf)
+};
+
+// Reads the float grid `grid_name`, or when empty the first float grid in
+// the order OpenVDB's io::File lists grids: by name, as vdb_print shows them,
+// not the order they were written in.
+// Throws ivol::Error: Io (cannot open), Malformed (not a VDB file, unreadable
+// grid), InvalidArgument (no such grid or no float grid: the message lists
+// the grids and their types; a grid that is not float; a transform that is
+// not an axis-aligned linear one; a grid with no active voxel), LimitExceeded
+// (the bounding box is too large for memory).
+VdbVolume read_vdb(const std::string& path, const std::string& grid_name = "");
+
+// Writes a FloatGrid named grid_name: the voxels whose value differs from
+// `background` become active (tolerance 0), uniform 8^3 blocks become tiles
+// (tools::prune), values stored as 16-bit floats when `half` (saveFloatAsHalf:
+// values round to binary16, out-of-range ones become infinite). The transform
+// maps index (x, y, z) to origin + (x, y, z) * voxel_size (identity without
+// geometry). Grid metadata: class fog volume when the background is 0 and
+// every value lies in [0, 1] (OpenVDB's convention), else unknown; "unit".
+// Written to a temporary file in the same directory, then renamed.
+void write_vdb(const DenseVolume& volume, const std::string& path, float background,
+               const std::string& grid_name = "density", bool half = true);
+
+}  // namespace ivol::convert
