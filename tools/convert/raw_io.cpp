@@ -10,6 +10,7 @@
 
 #include "ivol/error.hpp"
 #include "slab_io.hpp"
+#include "staged_file.hpp"
 
 namespace ivol::convert {
 namespace {
@@ -61,18 +62,12 @@ class RawSlabReader final : public SlabReader {
 class RawSlabWriter final : public SlabWriter {
  public:
   RawSlabWriter(const std::string& path, const DenseVolume& shape, bool big_endian)
-      : path_(path), shape_(shape), big_endian_(big_endian) {
-    const auto slash = path.find_last_of('/');
-    const std::string dir = slash == std::string::npos ? "." : path.substr(0, slash);
-    temp_ = dir + "/.ivol-tmp-XXXXXX";
-    fd_ = mkstemp(temp_.data());
-    if (fd_ < 0)
-      throw Error(ErrorClass::Io, path + ": cannot create a temporary file in " + dir + ": " + std::strerror(errno));
-    fchmod(fd_, 0644);
+      : path_(path), shape_(shape), big_endian_(big_endian), staged_(path) {
+    fd_ = ::open(staged_.temp_path().c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC);
+    if (fd_ < 0) throw Error(ErrorClass::Io, path + ": cannot open a temporary file: " + std::strerror(errno));
   }
   ~RawSlabWriter() override {
     if (fd_ >= 0) ::close(fd_);
-    if (!finished_) ::unlink(temp_.c_str());
   }
   void write(const void* samples, std::uint32_t count) override {
     const std::size_t bytes = std::size_t{count} * shape_.dims[0] * shape_.dims[1] * sample_size(shape_.type);
@@ -95,21 +90,19 @@ class RawSlabWriter final : public SlabWriter {
     if (slices_ != shape_.dims[2])
       throw Error(ErrorClass::InvalidArgument,
                   path_ + ": " + std::to_string(slices_) + " of " + std::to_string(shape_.dims[2]) + " slices written");
-    const bool ok = ::fsync(fd_) == 0 && ::close(fd_) == 0;
+    const int fd = fd_;
     fd_ = -1;
-    if (!ok || ::rename(temp_.c_str(), path_.c_str()) != 0)
-      throw Error(ErrorClass::Io, path_ + ": cannot finish the file: " + std::strerror(errno));
-    finished_ = true;
+    if (::close(fd) != 0) throw Error(ErrorClass::Io, path_ + ": cannot close the file: " + std::strerror(errno));
+    staged_.commit();
   }
 
  private:
   std::string path_;
-  std::string temp_;
   DenseVolume shape_;
   bool big_endian_;
+  StagedFile staged_;
   int fd_ = -1;
   std::uint32_t slices_ = 0;
-  bool finished_ = false;
 };
 
 class MemorySlabReader final : public SlabReader {
@@ -146,35 +139,6 @@ DenseVolume read_raw(const std::string& path, const RawLayout& layout) {
   DenseVolume v = make_dense(layout.dims, layout.type);
   reader->read(0, layout.dims[2], v.data.data());
   return v;
-}
-
-void write_file_atomically(const std::string& path, const void* bytes, std::size_t size) {
-  const auto slash = path.find_last_of('/');
-  const std::string dir = slash == std::string::npos ? "." : path.substr(0, slash);
-  std::string temp = dir + "/.ivol-tmp-XXXXXX";
-  const int fd = mkstemp(temp.data());
-  if (fd < 0)
-    throw Error(ErrorClass::Io, path + ": cannot create a temporary file in " + dir + ": " + std::strerror(errno));
-  const auto* p = static_cast<const std::uint8_t*>(bytes);
-  std::size_t left = size;
-  while (left > 0) {
-    const ssize_t n = ::write(fd, p, left);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
-      const int saved = errno;
-      ::close(fd);
-      ::unlink(temp.c_str());
-      throw Error(ErrorClass::Io, path + ": write failed: " + std::strerror(saved));
-    }
-    p += n;
-    left -= static_cast<std::size_t>(n);
-  }
-  fchmod(fd, 0644);
-  if (::fsync(fd) != 0 || ::close(fd) != 0 || ::rename(temp.c_str(), path.c_str()) != 0) {
-    const int saved = errno;
-    ::unlink(temp.c_str());
-    throw Error(ErrorClass::Io, path + ": cannot finish the file: " + std::strerror(saved));
-  }
 }
 
 void write_raw(const DenseVolume& volume, const std::string& path, bool big_endian) {

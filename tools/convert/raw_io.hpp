@@ -20,8 +20,4 @@ DenseVolume read_raw(const std::string& path, const RawLayout& layout);
 // file renamed when complete.
 void write_raw(const DenseVolume& volume, const std::string& path, bool big_endian = false);
 
-// Writes `bytes` to `path` through a temporary file in the same directory,
-// renamed into place when complete: a failure leaves nothing at `path`.
-void write_file_atomically(const std::string& path, const void* bytes, std::size_t size);
-
 }  // namespace ivol::convert

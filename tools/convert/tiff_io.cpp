@@ -10,6 +10,7 @@
 
 #include "ivol/error.hpp"
 #include "slab_io.hpp"
+#include "staged_file.hpp"
 
 namespace ivol::convert {
 namespace {
@@ -210,26 +211,12 @@ class TiffSlabReader final : public SlabReader {
 class TiffSlabWriter final : public SlabWriter {
  public:
   TiffSlabWriter(const std::string& path, const DenseVolume& shape, bool compress)
-      : path_(path), dims_(shape.dims), type_(shape.type), compress_(compress) {
+      : path_(path), dims_(shape.dims), type_(shape.type), compress_(compress), staged_(path) {
     install_handlers();
-    const auto slash = path.find_last_of('/');
-    const std::string dir = slash == std::string::npos ? "." : path.substr(0, slash);
-    temp_ = dir + "/.ivol-tmp-XXXXXX";
-    const int fd = mkstemp(temp_.data());
-    if (fd < 0) fail(path, "cannot create a temporary file in " + dir);
-    ::close(fd);
     // BigTIFF well before the 4 GiB limit of classic TIFF.
     const bool big = voxel_count(dims_) * sample_size(type_) > (3ull << 30);
-    tif_.reset(TIFFOpen(temp_.c_str(), big ? "w8" : "w"));
-    if (!tif_) {
-      ::unlink(temp_.c_str());
-      fail(path, "cannot write: " + last_tiff_message);
-    }
-  }
-
-  ~TiffSlabWriter() override {
-    tif_.reset();
-    if (!finished_) ::unlink(temp_.c_str());
+    tif_.reset(TIFFOpen(staged_.temp_path().c_str(), big ? "w8" : "w"));
+    if (!tif_) fail(path, "cannot write: " + last_tiff_message);
   }
 
   void write(const void* samples, std::uint32_t count) override {
@@ -277,20 +264,17 @@ class TiffSlabWriter final : public SlabWriter {
   void finish() override {
     if (z_ != dims_[2]) fail(path_, std::to_string(z_) + " of " + std::to_string(dims_[2]) + " slices written");
     tif_.reset();
-    if (::rename(temp_.c_str(), path_.c_str()) != 0)
-      throw Error(ErrorClass::Io, path_ + ": cannot rename the finished file into place");
-    finished_ = true;
+    staged_.commit();
   }
 
  private:
   std::string path_;
-  std::string temp_;
   Dims dims_;
   SampleType type_;
   bool compress_;
+  StagedFile staged_;  // declared before tif_: the file closes before it is removed
   TiffHandle tif_;
   std::uint32_t z_ = 0;
-  bool finished_ = false;
 };
 
 }  // namespace
