@@ -45,19 +45,9 @@ std::vector<std::uint8_t> threshold_keep_mask(const float* data, const Dims& dim
   return mask;
 }
 
-float otsu_threshold(const float* data, std::uint64_t count, unsigned bins) {
-  float lo = INFINITY;
-  float hi = -INFINITY;
-  for (std::uint64_t i = 0; i < count; ++i)
-    if (!std::isnan(data[i])) lo = std::min(lo, data[i]), hi = std::max(hi, data[i]);
-  if (!(hi > lo)) return lo;
-  std::vector<double> histogram(bins, 0.0);
-  const double scale = bins / (static_cast<double>(hi) - lo);
-  for (std::uint64_t i = 0; i < count; ++i) {
-    if (std::isnan(data[i])) continue;
-    const auto b = std::min<std::uint64_t>(bins - 1, static_cast<std::uint64_t>((data[i] - lo) * scale));
-    histogram[b] += 1.0;
-  }
+float otsu_threshold_from_histogram(const std::vector<double>& histogram, double lo, double hi) {
+  const auto bins = static_cast<unsigned>(histogram.size());
+  if (bins < 2 || !(hi > lo)) return static_cast<float>(lo);
   double total = 0.0;
   double total_moment = 0.0;
   for (unsigned b = 0; b < bins; ++b) total += histogram[b], total_moment += b * histogram[b];
@@ -75,7 +65,23 @@ float otsu_threshold(const float* data, std::uint64_t count, unsigned bins) {
     const double between = below * above * (mean_below - mean_above) * (mean_below - mean_above);
     if (between > best) best = between, best_bin = b;
   }
-  return static_cast<float>(lo + (best_bin + 1) / scale);
+  return static_cast<float>(lo + (best_bin + 1) * (hi - lo) / bins);
+}
+
+float otsu_threshold(const float* data, std::uint64_t count, unsigned bins) {
+  float lo = INFINITY;
+  float hi = -INFINITY;
+  for (std::uint64_t i = 0; i < count; ++i)
+    if (!std::isnan(data[i])) lo = std::min(lo, data[i]), hi = std::max(hi, data[i]);
+  if (!(hi > lo)) return lo;
+  std::vector<double> histogram(bins, 0.0);
+  const double scale = bins / (static_cast<double>(hi) - lo);
+  for (std::uint64_t i = 0; i < count; ++i) {
+    if (std::isnan(data[i])) continue;
+    const auto b = std::min<std::uint64_t>(bins - 1, static_cast<std::uint64_t>((data[i] - lo) * scale));
+    histogram[b] += 1.0;
+  }
+  return otsu_threshold_from_histogram(histogram, lo, hi);
 }
 
 }  // namespace ivol

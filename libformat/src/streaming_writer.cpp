@@ -75,7 +75,7 @@ class SpillFile {
 struct StreamingOctreeWriter::Impl {
   virtual ~Impl() = default;
   virtual void add(const void* samples, const std::uint8_t* keep) = 0;
-  virtual StreamingResult finish(const Metadata& metadata) = 0;
+  virtual StreamingResult finish(const Metadata& metadata, const StreamingOctreeWriter::AmendMetadata& amend) = 0;
   std::uint32_t slab_slices = 0;
   std::uint32_t slabs_done = 0;
   Dims dims{};
@@ -164,7 +164,7 @@ class Engine final : public StreamingOctreeWriter::Impl {
     build_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
 
-  StreamingResult finish(const Metadata& metadata) override {
+  StreamingResult finish(const Metadata& given_metadata, const StreamingOctreeWriter::AmendMetadata& amend) override {
     if (slabs_done != grid_[2])
       throw Error(ErrorClass::InvalidArgument,
                   path_ + ": " + std::to_string(slabs_done) + " of " + std::to_string(grid_[2]) + " slabs given");
@@ -174,6 +174,14 @@ class Engine final : public StreamingOctreeWriter::Impl {
     bool ignored_kept = false;
     const NodeResult root = top_node(0, 0, 0, 0, top, ignored, ignored_kept);
     build_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    StreamingResult result;
+    result.max_abs_error = stats_.max_abs_error;
+    result.lossless = stats_.max_abs_error == 0.0 && !stats_.coarsened;
+    result.kept_voxels = stats_.kept + (depth_ == 0 ? 1 : 0);
+    result.spill_bytes = spill_.size();
+    result.build_seconds = build_seconds_;
+    Metadata metadata = given_metadata;
+    if (amend) amend(metadata, result);
 
     VolumeLayout layout = builder_.layout();
     layout.inner_count.assign(depth_ + 1, 0);
@@ -228,16 +236,10 @@ class Engine final : public StreamingOctreeWriter::Impl {
     pipeline.flush();
     writer.finish(metadata, layout.inner_count);
 
-    StreamingResult result;
     result.write.file_bytes = writer.bytes_written();
     result.write.block_count = writer.block_count();
     result.write.decoded_bytes = pipeline.decoded_bytes();
     result.write.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    result.max_abs_error = stats_.max_abs_error;
-    result.lossless = stats_.max_abs_error == 0.0 && !stats_.coarsened;
-    result.kept_voxels = stats_.kept + (depth_ == 0 ? 1 : 0);
-    result.spill_bytes = spill_.size();
-    result.build_seconds = build_seconds_;
     return result;
   }
 
@@ -394,9 +396,9 @@ void StreamingOctreeWriter::add_slab(const std::uint16_t* samples, const std::ui
   impl_->add(samples, keep);
 }
 
-StreamingResult StreamingOctreeWriter::finish(const Metadata& metadata) {
+StreamingResult StreamingOctreeWriter::finish(const Metadata& metadata, const AmendMetadata& amend) {
   if (!impl_) throw Error(ErrorClass::InvalidArgument, "streaming: finish() before any slab");
-  return impl_->finish(metadata);
+  return impl_->finish(metadata, amend);
 }
 
 }  // namespace ivol

@@ -82,5 +82,28 @@ case_ slice-png          0 "32x32 slice z=5"         -- "$IVOL" slice "$work/k.i
 case_ slice-is-png       0 "PNG image data, 32 x 32" -- file "$work/s.png"
 case_ slice-bad-index    2 "--index"                 -- "$IVOL" slice "$work/k.ivol" --axis y --index 99 -o "$work/s2.png"
 
+# HDF5 and OpenVDB through the command line (their libraries are tested in
+# test_hdf5_io and test_vdb_io).
+case_ convert-to-hdf5    0 "hdf5 f32 32x32x32"       -- "$IVOL" convert "$work/v.ivol" "$work/v.h5"
+case_ h5py-reads-ours    0 "(32, 32, 32) float32"    -- /usr/bin/python3 -c "import h5py; d=h5py.File('$work/v.h5')['/exchange/data']; print(d.shape, d.dtype)"
+case_ convert-hdf5-ivol  0 "lossless"                -- "$IVOL" convert "$work/v.h5" "$work/h5.ivol"
+case_ hdf5-missing-set   2 "/exchange/data"          -- "$IVOL" convert "$work/v.h5" "$work/m.ivol" --dataset /nope
+case_ convert-to-vdb     0 "vdb f32 32x32x32"        -- "$IVOL" convert "$work/v.ivol" "$work/v.vdb"
+case_ vdb-print-ours     0 "density"                 -- vdb_print "$work/v.vdb"
+case_ convert-vdb-ivol   0 "ivol"                    -- "$IVOL" convert "$work/v.vdb" "$work/vdb.ivol"
+case_ vdb-not-vdb        2 "VDB"                     -- "$IVOL" convert "$work/v.h5" "$work/x.ivol" --from vdb
+
+# Streaming: a 64 MiB input converts holding far less than 64 MiB.
+/usr/bin/python3 -c "import numpy as np; z,y,x=np.mgrid[0:1024,0:128,0:128]; ((x+y+z)%97 * 0.01).astype(np.float32).tofile('$work/big.raw')"
+case_ bounded-memory     0 "peak"                    -- /usr/bin/python3 -c "
+import resource, subprocess, sys
+subprocess.run(['$IVOL', '--version'], capture_output=True)
+baseline = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+r = subprocess.run(['$IVOL', '-q', 'convert', '$work/big.raw', '$work/big.ivol', '--dims', '128,128,1024', '--memory', '16'])
+peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+print('peak %.1f MiB above a baseline of %.1f MiB' % (peak - baseline, baseline))
+sys.exit(r.returncode or (0 if peak - baseline < 24 else 1))"
+case_ big-verifies       0 "OK"                      -- "$IVOL" verify "$work/big.ivol"
+
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]

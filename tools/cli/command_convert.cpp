@@ -21,6 +21,7 @@ struct ConvertSettings {
   float background = 0.0f;
   std::string encoding, keep, quantity, value_unit;
   std::uint32_t block_bytes = 0;
+  std::uint64_t memory_mib = 0;
   std::string out_type;
   unsigned level = 0;
   bool force = false;
@@ -60,6 +61,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember({"binary16", "uint16", "float32"}));
   into->add_option("--keep", s->keep, "threshold=T|otsu,margin=M: full resolution only around the object");
   into->add_option("--block-size", s->block_bytes, "Decoded bytes per block");
+  into->add_option("--memory", s->memory_mib, "About how many MiB the conversion may hold (default 2048)");
   into->add_option("--quantity", s->quantity, "What the values are, e.g. linear_attenuation");
   into->add_option("--value-unit", s->value_unit, "Unit of the values, e.g. 1/mm");
   auto* out_of = cmd->add_option_group("out of .ivol");
@@ -90,43 +92,66 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     foreign.raw.header_bytes = s->header_bytes;
 
     if (to == Format::Ivol) {
-      convert::DenseVolume volume = read_dense(s->input, from, foreign);
-      apply_geometry(volume, s->voxel_size, s->origin, s->unit);
+      const auto source = open_source(s->input, from, foreign);
+      convert::DenseVolume shape = source->shape();
+      apply_geometry(shape, s->voxel_size, s->origin, s->unit);
       convert::ImportOptions options;
       if (!s->encoding.empty()) options.encoding = parse_encoding(s->encoding);
       if (!s->keep.empty()) options.keep = convert::parse_keep_rule(s->keep);
       options.block_bytes = s->block_bytes;
+      // A slab's samples are held about four times over (as read, as float,
+      // the keep mask, the subtrees being built): give a quarter to the slab.
+      options.slab_budget_bytes = (s->memory_mib << 20) / 4;
       options.metadata.provenance = default_provenance();
       options.metadata.provenance["command"] = "ivol convert " + s->input + " " + s->output;
       options.metadata.provenance["sources"] = {
-          {{"path", s->input}, {"format", format_name(from)}, {"sample_type", convert::sample_type_name(volume.type)}}};
+          {{"path", s->input}, {"format", format_name(from)}, {"sample_type", convert::sample_type_name(shape.type)}}};
       if (!s->quantity.empty()) options.metadata.quantity = s->quantity;
       if (!s->value_unit.empty()) options.metadata.value_unit = s->value_unit;
-      const convert::ImportReport r = convert::import_to_ivol(volume, s->output, options);
+      if (shape.has_geometry) {
+        options.metadata.voxel_size = shape.voxel_size;
+        options.metadata.origin = shape.origin;
+        options.metadata.unit = shape.unit;
+      }
+      options.progress = progress_bar("ivol convert", global.quiet);
+      const convert::ImportReport r = convert::import_to_ivol(*source, s->output, options);
       if (!global.quiet) {
         const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        const std::uint64_t bytes = shape.voxel_count() * convert::sample_size(shape.type);
         if (!r.lossless) {
           std::string steps;
-          if (r.encoding != convert::lossless_encoding(volume.type))
-            steps = std::string(convert::sample_type_name(volume.type)) + " rounded to " + encoding_name(r.encoding);
+          if (r.encoding != convert::lossless_encoding(shape.type))
+            steps = std::string(convert::sample_type_name(shape.type)) + " rounded to " + encoding_name(r.encoding);
           if (options.keep)
             steps += std::string(steps.empty() ? "" : ", ") + "coarsened outside the kept region (threshold " +
                      std::to_string(r.threshold) + ")";
           std::cerr << "ivol convert: lossy: " << steps << "; largest error " << r.max_abs_error << "\n";
         }
-        std::cout << s->input << " (" << format_name(from) << " " << describe(volume) << ", "
-                  << human_bytes(volume.data.size()) << ") -> " << s->output << " (ivol " << encoding_name(r.encoding)
-                  << ", " << human_bytes(r.file_bytes) << ", " << static_cast<double>(volume.data.size()) / r.file_bytes
-                  << "x smaller" << (r.lossless ? ", lossless" : "") << ") in " << seconds << " s\n";
+        std::cout << s->input << " (" << format_name(from) << " " << describe(shape) << ", " << human_bytes(bytes)
+                  << ") -> " << s->output << " (ivol " << encoding_name(r.encoding) << ", " << human_bytes(r.file_bytes)
+                  << ", " << static_cast<double>(bytes) / r.file_bytes << "x smaller"
+                  << (r.lossless ? ", lossless" : "") << ") in " << seconds << " s\n";
       }
       return kExitOk;
     }
 
     if (from != Format::Ivol) {
-      convert::DenseVolume volume = read_dense(s->input, from, foreign);
-      apply_geometry(volume, s->voxel_size, s->origin, s->unit);
-      write_dense(volume, s->output, to, foreign);
-      if (!global.quiet) std::cout << s->input << " -> " << s->output << " (" << describe(volume) << ")\n";
+      const auto source = open_source(s->input, from, foreign);
+      convert::DenseVolume shape = source->shape();
+      apply_geometry(shape, s->voxel_size, s->origin, s->unit);
+      const auto sink = create_sink(s->output, to, shape, foreign);
+      const std::uint64_t slice = std::uint64_t{shape.dims[0]} * shape.dims[1] * convert::sample_size(shape.type);
+      const auto slab = static_cast<std::uint32_t>(std::max<std::uint64_t>(1, (64ull << 20) / slice));
+      std::vector<std::uint8_t> buffer(std::min<std::uint64_t>(slab, shape.dims[2]) * slice);
+      const auto progress = progress_bar("ivol convert", global.quiet);
+      for (std::uint32_t z = 0; z < shape.dims[2]; z += slab) {
+        const std::uint32_t n = std::min(slab, shape.dims[2] - z);
+        source->read(z, n, buffer.data());
+        sink->write(buffer.data(), n);
+        if (progress) progress(z + n, shape.dims[2]);
+      }
+      sink->finish();
+      if (!global.quiet) std::cout << s->input << " -> " << s->output << " (" << describe(shape) << ")\n";
       return kExitOk;
     }
 
@@ -134,11 +159,13 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     convert::SampleType type = convert::natural_sample_type(reader);
     if (!s->out_type.empty() && !convert::parse_sample_type(s->out_type, type))
       throw Error(ErrorClass::InvalidArgument, "--out-type: '" + s->out_type + "' is not u8, u16, i16, f16 or f32");
-    convert::DenseVolume volume = convert::export_from_ivol(reader, Box{}, s->level, type);
-    apply_geometry(volume, s->voxel_size, s->origin, s->unit);
-    write_dense(volume, s->output, to, foreign);
+    const Box box = full_box(reader.layout().dims, s->level);
+    convert::DenseVolume shape = convert::export_shape(reader, box, s->level, type);
+    apply_geometry(shape, s->voxel_size, s->origin, s->unit);
+    const auto sink = create_sink(s->output, to, shape, foreign);
+    convert::export_from_ivol(reader, box, s->level, type, *sink, progress_bar("ivol convert", global.quiet));
     if (!global.quiet)
-      std::cout << s->input << " -> " << s->output << " (" << format_name(to) << " " << describe(volume)
+      std::cout << s->input << " -> " << s->output << " (" << format_name(to) << " " << describe(shape)
                 << (s->level ? ", level of detail " + std::to_string(s->level) : std::string()) << ")\n";
     return kExitOk;
   };

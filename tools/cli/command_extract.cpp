@@ -36,14 +36,24 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
     convert::SampleType type = convert::natural_sample_type(reader);
     if (!s->type.empty() && !convert::parse_sample_type(s->type, type))
       throw Error(ErrorClass::InvalidArgument, "--type: '" + s->type + "' is not u8, u16, i16, f16 or f32");
-    const convert::DenseVolume volume = convert::export_from_ivol(reader, parse_box(s->box, "--box"), s->level, type);
+    const Box box = parse_box(s->box, "--box");
     ForeignOptions options;
     options.big_endian = s->endian == "big";
-    write_dense(volume, s->output, to, options);
+    const convert::DenseVolume shape = convert::export_shape(reader, box, s->level, type);
+    // Refuse a bad box before creating the output.
+    const Dims limit = lod_dims(reader.layout().dims, s->level);
+    for (int a = 0; a < 3; ++a)
+      if (box.lo[a] >= box.hi[a] || box.hi[a] > limit[a])
+        throw Error(ErrorClass::InvalidArgument, "--box: " + box.to_string() + " is empty or outside the volume (" +
+                                                     std::to_string(limit[0]) + "x" + std::to_string(limit[1]) + "x" +
+                                                     std::to_string(limit[2]) + " at level " +
+                                                     std::to_string(s->level) + ")");
+    const auto sink = create_sink(s->output, to, shape, options);
+    convert::export_from_ivol(reader, box, s->level, type, *sink);
     if (!global.quiet)
-      std::cout << s->output << ": " << convert::sample_type_name(type) << " " << volume.dims[0] << "x"
-                << volume.dims[1] << "x" << volume.dims[2] << " from " << s->file << " (read "
-                << reader.io_stats().bytes_read << " of " << reader.info().file_size << " bytes)\n";
+      std::cout << s->output << ": " << convert::sample_type_name(type) << " " << shape.dims[0] << "x" << shape.dims[1]
+                << "x" << shape.dims[2] << " from " << s->file << " (read " << reader.io_stats().bytes_read << " of "
+                << reader.info().file_size << " bytes)\n";
     return kExitOk;
   };
 }

@@ -1,11 +1,40 @@
 #include "formats.hpp"
 
+#include <cstring>
 #include <filesystem>
 
+#include "hdf5_io.hpp"
 #include "ivol/error.hpp"
 #include "tiff_io.hpp"
+#include "vdb_io.hpp"
 
 namespace ivol::cli {
+namespace {
+
+// OpenVDB writes a whole grid: gather the slabs, write at the end.
+class VdbSink final : public convert::SlabWriter {
+ public:
+  VdbSink(const std::string& path, const convert::DenseVolume& shape, float background)
+      : path_(path), volume_(shape), background_(background) {
+    if (volume_.type != convert::SampleType::Float32)
+      throw Error(ErrorClass::InvalidArgument, path + ": OpenVDB grids hold float32 values (--type f32)");
+    volume_.data.assign(volume_.voxel_count() * 4, 0);
+  }
+  void write(const void* samples, std::uint32_t count) override {
+    const std::size_t bytes = std::size_t{count} * volume_.dims[0] * volume_.dims[1] * 4;
+    std::memcpy(volume_.data.data() + at_, samples, bytes);
+    at_ += bytes;
+  }
+  void finish() override { convert::write_vdb(volume_, path_, background_); }
+
+ private:
+  std::string path_;
+  convert::DenseVolume volume_;
+  float background_;
+  std::size_t at_ = 0;
+};
+
+}  // namespace
 
 const char* format_name(Format format) {
   switch (format) {
@@ -37,35 +66,36 @@ Format detect_format(const std::string& path, const std::string& name, const cha
           "' (extensions .ivol .raw .bin .vol .tif .tiff .h5 .hdf5 .vdb, or a folder of TIFF files; or name it)");
 }
 
-convert::DenseVolume read_dense(const std::string& path, Format format, const ForeignOptions& options) {
+std::unique_ptr<convert::SlabReader> open_source(const std::string& path, Format format,
+                                                 const ForeignOptions& options) {
   switch (format) {
     case Format::Raw:
       if (!options.raw_dims_given)
         throw Error(ErrorClass::InvalidArgument, "--dims: a raw input needs its dimensions (--dims X,Y,Z --type T)");
-      return convert::read_raw(path, options.raw);
+      return convert::open_raw_slabs(path, options.raw);
     case Format::Tiff:
-      return convert::read_tiff(path);
+      return convert::open_tiff_slabs(path);
     case Format::Hdf5:
+      return convert::open_hdf5_slabs(path, options.dataset);
     case Format::Vdb:
-      throw Error(ErrorClass::InvalidArgument,
-                  std::string(format_name(format)) + " is not supported by this build of ivol yet");
+      return convert::memory_slabs(convert::read_vdb(path, options.grid).volume);
     case Format::Ivol:
       break;
   }
   throw Error(ErrorClass::InvalidArgument, path + ": .ivol is not a dense format");
 }
 
-void write_dense(const convert::DenseVolume& volume, const std::string& path, Format format,
-                 const ForeignOptions& options) {
+std::unique_ptr<convert::SlabWriter> create_sink(const std::string& path, Format format,
+                                                 const convert::DenseVolume& shape, const ForeignOptions& options) {
   switch (format) {
     case Format::Raw:
-      return convert::write_raw(volume, path, options.big_endian);
+      return convert::create_raw_slabs(path, shape, options.big_endian);
     case Format::Tiff:
-      return convert::write_tiff(volume, path);
+      return convert::create_tiff_slabs(path, shape);
     case Format::Hdf5:
+      return convert::create_hdf5_slabs(path, shape, options.dataset);
     case Format::Vdb:
-      throw Error(ErrorClass::InvalidArgument,
-                  std::string(format_name(format)) + " is not supported by this build of ivol yet");
+      return std::make_unique<VdbSink>(path, shape, options.background);
     case Format::Ivol:
       break;
   }

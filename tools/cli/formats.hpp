@@ -1,10 +1,12 @@
-// Which format a path names, and reading and writing dense volumes in it.
+// Which format a path names, and opening it as a source or sink of slabs.
 #pragma once
 
+#include <memory>
 #include <string>
 
 #include "dense_volume.hpp"
 #include "raw_io.hpp"
+#include "slab_io.hpp"
 
 namespace ivol::cli {
 
@@ -24,8 +26,11 @@ struct ForeignOptions {
   float background = 0.0f;                 // OpenVDB output
 };
 
-convert::DenseVolume read_dense(const std::string& path, Format format, const ForeignOptions& options);
-void write_dense(const convert::DenseVolume& volume, const std::string& path, Format format,
-                 const ForeignOptions& options);
+// A dense input, read slab by slab (OpenVDB grids are read whole).
+std::unique_ptr<convert::SlabReader> open_source(const std::string& path, Format format, const ForeignOptions& options);
+// A dense output for a volume of `shape`, written slab by slab (OpenVDB
+// grids are assembled in memory and written at finish()).
+std::unique_ptr<convert::SlabWriter> create_sink(const std::string& path, Format format,
+                                                 const convert::DenseVolume& shape, const ForeignOptions& options);
 
 }  // namespace ivol::cli

@@ -1,5 +1,7 @@
 #include "report.hpp"
 
+#include <unistd.h>
+
 #include <cstdio>
 
 namespace ivol::cli {
@@ -12,6 +14,18 @@ std::string human_bytes(std::uint64_t bytes) {
   char text[32];
   std::snprintf(text, sizeof text, unit == 0 ? "%.0f %s" : "%.1f %s", value, units[unit]);
   return text;
+}
+
+convert::Progress progress_bar(const std::string& label, bool quiet) {
+  if (quiet || !isatty(STDERR_FILENO)) return {};
+  return [label](std::uint64_t done, std::uint64_t total) {
+    const int width = 30;
+    const int filled = total ? static_cast<int>(width * done / total) : width;
+    std::fprintf(stderr, "\r%s [%.*s%*s] %3d%%", label.c_str(), filled, "##############################",
+                 width - filled, "", total ? static_cast<int>(100 * done / total) : 100);
+    if (done >= total) std::fputs("\n", stderr);
+    std::fflush(stderr);
+  };
 }
 
 nlohmann::json describe_file(Reader& reader) {

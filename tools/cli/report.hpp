@@ -6,10 +6,15 @@
 #include <string>
 
 #include "ivol/reader.hpp"
+#include "ivol_io.hpp"
 
 namespace ivol::cli {
 
 std::string human_bytes(std::uint64_t bytes);  // "12.3 MiB"
+// A progress bar on stderr, a few updates a second, only when stderr is a
+// terminal and not --quiet; otherwise nothing.
+convert::Progress progress_bar(const std::string& label, bool quiet);
+
 // Everything `ivol info` reports, as JSON.
 nlohmann::json describe_file(Reader& reader);
 

@@ -267,49 +267,83 @@ void require_filters(hid_t dataset, const std::string& context) {
 
 }  // namespace
 
+namespace {
+
+// Reads a dataset slab by slab with hyperslab selections.
+class Hdf5SlabReader final : public SlabReader {
+ public:
+  Hdf5SlabReader(const std::string& path, const std::string& dataset_name, Hdf5SourceInfo* source)
+      : context_(where(path, dataset_name)) {
+    QuietHdf5Errors quiet;
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(path, ec)) throw Error(ErrorClass::Io, path + ": cannot open: no such file");
+    if (H5Fis_hdf5(path.c_str()) <= 0) throw Error(ErrorClass::Malformed, path + ": not an HDF5 file");
+    file_ = Handle(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
+    if (!file_.valid()) throw Error(ErrorClass::Io, path + ": cannot open the HDF5 file" + hdf5_reason());
+    dataset_ = Handle(H5Dopen2(file_.get(), dataset_name.c_str(), H5P_DEFAULT), H5Dclose);
+    if (!dataset_.valid())
+      throw Error(ErrorClass::InvalidArgument,
+                  context_ + " does not exist or is not a dataset; " + list_3d_datasets(file_.get()));
+    space_ = Handle(H5Dget_space(dataset_.get()), H5Sclose);
+    const int rank = H5Sget_simple_extent_ndims(space_.get());
+    if (rank != 3)
+      throw Error(ErrorClass::InvalidArgument,
+                  context_ + " is " + std::to_string(rank) + "-D; a volume needs a 3-D dataset (z, y, x)");
+    hsize_t shape[3];
+    H5Sget_simple_extent_dims(space_.get(), shape, nullptr);
+    for (hsize_t extent : shape) {
+      if (extent == 0) throw Error(ErrorClass::InvalidArgument, context_ + " is empty");
+      if (extent > std::numeric_limits<std::uint32_t>::max())
+        throw Error(ErrorClass::InvalidArgument, context_ + ": an extent exceeds 2^32 - 1 voxels");
+    }
+    Handle file_type(H5Dget_type(dataset_.get()), H5Tclose);
+    mapping_ = map_sample_type(file_type.get(), context_);
+    require_filters(dataset_.get(), context_);
+    shape_.dims = {static_cast<std::uint32_t>(shape[2]), static_cast<std::uint32_t>(shape[1]),
+                   static_cast<std::uint32_t>(shape[0])};
+    shape_.type = mapping_.sample;
+    read_geometry(dataset_.get(), context_, shape_);
+    if (source) {
+      source->stored_type = mapping_.stored_name;
+      source->narrowed_to_f32 = mapping_.narrowed;
+      describe_layout(dataset_.get(), *source);
+    }
+  }
+
+  void read(std::uint32_t z0, std::uint32_t count, void* out) override {
+    QuietHdf5Errors quiet;
+    const hsize_t start[3] = {z0, 0, 0};
+    const hsize_t extent[3] = {count, shape_.dims[1], shape_.dims[0]};
+    H5Sselect_hyperslab(space_.get(), H5S_SELECT_SET, start, nullptr, extent, nullptr);
+    Handle memory(H5Screate_simple(3, extent, nullptr), H5Sclose);
+    if (H5Dread(dataset_.get(), mapping_.memory_type.get(), memory.get(), space_.get(), H5P_DEFAULT, out) < 0)
+      throw Error(ErrorClass::Malformed, context_ + ": cannot read slices " + std::to_string(z0) + " .. " +
+                                             std::to_string(z0 + count) + hdf5_reason());
+  }
+
+ private:
+  std::string context_;
+  Handle file_;
+  Handle dataset_;
+  Handle space_;
+  SampleMapping mapping_;
+};
+
+}  // namespace
+
+std::unique_ptr<SlabReader> open_hdf5_slabs(const std::string& path, const std::string& dataset,
+                                            Hdf5SourceInfo* source) {
+  return std::make_unique<Hdf5SlabReader>(path, dataset, source);
+}
+
 DenseVolume read_hdf5(const std::string& path, const std::string& dataset_name, Hdf5SourceInfo* source) {
-  QuietHdf5Errors quiet;
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) throw Error(ErrorClass::Io, path + ": cannot open: no such file");
-  if (H5Fis_hdf5(path.c_str()) <= 0) throw Error(ErrorClass::Malformed, path + ": not an HDF5 file");
-  Handle file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
-  if (!file.valid()) throw Error(ErrorClass::Io, path + ": cannot open the HDF5 file" + hdf5_reason());
-
-  const std::string context = where(path, dataset_name);
-  Handle dataset(H5Dopen2(file.get(), dataset_name.c_str(), H5P_DEFAULT), H5Dclose);
-  if (!dataset.valid())
-    throw Error(ErrorClass::InvalidArgument,
-                context + " does not exist or is not a dataset; " + list_3d_datasets(file.get()));
-
-  Handle space(H5Dget_space(dataset.get()), H5Sclose);
-  const int rank = H5Sget_simple_extent_ndims(space.get());
-  if (rank != 3)
-    throw Error(ErrorClass::InvalidArgument,
-                context + " is " + std::to_string(rank) + "-D; a volume needs a 3-D dataset (z, y, x)");
-  hsize_t shape[3];
-  H5Sget_simple_extent_dims(space.get(), shape, nullptr);
-  for (hsize_t extent : shape) {
-    if (extent == 0) throw Error(ErrorClass::InvalidArgument, context + " is empty");
-    if (extent > std::numeric_limits<std::uint32_t>::max())
-      throw Error(ErrorClass::InvalidArgument, context + ": an extent exceeds 2^32 - 1 voxels");
-  }
-
-  Handle file_type(H5Dget_type(dataset.get()), H5Tclose);
-  SampleMapping mapping = map_sample_type(file_type.get(), context);
-  require_filters(dataset.get(), context);
-
-  DenseVolume volume = make_dense({static_cast<std::uint32_t>(shape[2]), static_cast<std::uint32_t>(shape[1]),
-                                   static_cast<std::uint32_t>(shape[0])},
-                                  mapping.sample);
-  if (H5Dread(dataset.get(), mapping.memory_type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, volume.data.data()) < 0)
-    throw Error(ErrorClass::Malformed, context + ": cannot read the samples" + hdf5_reason());
-  read_geometry(dataset.get(), context, volume);
-
-  if (source) {
-    source->stored_type = mapping.stored_name;
-    source->narrowed_to_f32 = mapping.narrowed;
-    describe_layout(dataset.get(), *source);
-  }
+  auto reader = open_hdf5_slabs(path, dataset_name, source);
+  DenseVolume volume = make_dense(reader->shape().dims, reader->shape().type);
+  volume.voxel_size = reader->shape().voxel_size;
+  volume.origin = reader->shape().origin;
+  volume.unit = reader->shape().unit;
+  volume.has_geometry = reader->shape().has_geometry;
+  reader->read(0, volume.dims[2], volume.data.data());
   return volume;
 }
 
@@ -373,62 +407,103 @@ void write_string(hid_t object, const char* name, const std::string& value, cons
     throw Error(ErrorClass::Io, context + ": cannot write attribute " + name + hdf5_reason());
 }
 
-}  // namespace
-
-void write_hdf5(const DenseVolume& volume, const std::string& path, const std::string& dataset_name,
-                int deflate_level) {
-  const std::string context = where(path, dataset_name);
-  if (dataset_name.empty() || dataset_name.back() == '/')
-    throw Error(ErrorClass::InvalidArgument, context + ": the dataset needs a name");
-  if (deflate_level < 0 || deflate_level > 9)
-    throw Error(ErrorClass::InvalidArgument, context + ": deflate level must be 0 to 9");
-  for (std::uint32_t extent : volume.dims)
-    if (extent == 0) throw Error(ErrorClass::InvalidArgument, context + ": the volume is empty");
-  if (volume.data.size() != volume.voxel_count() * sample_size(volume.type))
-    throw Error(ErrorClass::InvalidArgument, context + ": the volume's data size does not match its dimensions");
-
-  QuietHdf5Errors quiet;
-  StagedFile staged(path);
-  {
-    Handle file(H5Fcreate(staged.temp_path().c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose);
-    if (!file.valid()) throw Error(ErrorClass::Io, path + ": cannot create the HDF5 file" + hdf5_reason());
-
-    const hsize_t shape[3] = {volume.dims[2], volume.dims[1], volume.dims[0]};
-    Handle space(H5Screate_simple(3, shape, nullptr), H5Sclose);
+// Writes a dataset slab by slab (hyperslab writes) into a staged file.
+class Hdf5SlabWriter final : public SlabWriter {
+ public:
+  Hdf5SlabWriter(const std::string& path, const DenseVolume& shape, const std::string& dataset_name, int deflate_level)
+      : path_(path), context_(where(path, dataset_name)), shape_(shape), staged_(path) {
+    if (dataset_name.empty() || dataset_name.back() == '/')
+      throw Error(ErrorClass::InvalidArgument, context_ + ": the dataset needs a name");
+    if (deflate_level < 0 || deflate_level > 9)
+      throw Error(ErrorClass::InvalidArgument, context_ + ": deflate level must be 0 to 9");
+    for (std::uint32_t extent : shape.dims)
+      if (extent == 0) throw Error(ErrorClass::InvalidArgument, context_ + ": the volume is empty");
+    QuietHdf5Errors quiet;
+    file_ = Handle(H5Fcreate(staged_.temp_path().c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose);
+    if (!file_.valid()) throw Error(ErrorClass::Io, path + ": cannot create the HDF5 file" + hdf5_reason());
+    const hsize_t extent[3] = {shape.dims[2], shape.dims[1], shape.dims[0]};
+    space_ = Handle(H5Screate_simple(3, extent, nullptr), H5Sclose);
     Handle link_plist(H5Pcreate(H5P_LINK_CREATE), H5Pclose);
     H5Pset_create_intermediate_group(link_plist.get(), 1);
     Handle create_plist(H5Pcreate(H5P_DATASET_CREATE), H5Pclose);
-    const hsize_t chunk[3] = {std::min<hsize_t>(64, shape[0]), std::min<hsize_t>(64, shape[1]),
-                              std::min<hsize_t>(64, shape[2])};
+    const hsize_t chunk[3] = {std::min<hsize_t>(64, extent[0]), std::min<hsize_t>(64, extent[1]),
+                              std::min<hsize_t>(64, extent[2])};
     H5Pset_chunk(create_plist.get(), 3, chunk);
     if (deflate_level > 0) {
       if (H5Zfilter_avail(H5Z_FILTER_DEFLATE) <= 0)
-        throw Error(ErrorClass::InvalidArgument, context + ": this HDF5 library has no deflate filter");
+        throw Error(ErrorClass::InvalidArgument, context_ + ": this HDF5 library has no deflate filter");
       // Shuffle groups the bytes of equal significance, which deflate then
       // compresses far better for 16- and 32-bit samples.
       H5Pset_shuffle(create_plist.get());
       H5Pset_deflate(create_plist.get(), static_cast<unsigned>(deflate_level));
     }
-    Handle file_type = file_type_for(volume.type);
-    Handle dataset(H5Dcreate2(file.get(), dataset_name.c_str(), file_type.get(), space.get(), link_plist.get(),
-                              create_plist.get(), H5P_DEFAULT),
-                   H5Dclose);
-    if (!dataset.valid()) throw Error(ErrorClass::Io, context + ": cannot create the dataset" + hdf5_reason());
-    Handle memory_type = memory_type_for(volume.type);
-    if (H5Dwrite(dataset.get(), memory_type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, volume.data.data()) < 0)
-      throw Error(ErrorClass::Io, context + ": cannot write the samples" + hdf5_reason());
-    if (volume.has_geometry) {
-      const auto& s = volume.voxel_size;
-      const auto& o = volume.origin;
-      write_numbers(dataset.get(), "voxel_size", {s[2], s[1], s[0]}, context);  // dataset axis order (z, y, x)
-      write_numbers(dataset.get(), "origin", {o[2], o[1], o[0]}, context);
-      write_string(dataset.get(), "unit", volume.unit, context);
-    }
-    dataset.reset();
-    if (H5Fclose(file.release()) < 0)
-      throw Error(ErrorClass::Io, path + ": cannot finish the HDF5 file" + hdf5_reason());
+    Handle file_type = file_type_for(shape.type);
+    dataset_ = Handle(H5Dcreate2(file_.get(), dataset_name.c_str(), file_type.get(), space_.get(), link_plist.get(),
+                                 create_plist.get(), H5P_DEFAULT),
+                      H5Dclose);
+    if (!dataset_.valid()) throw Error(ErrorClass::Io, context_ + ": cannot create the dataset" + hdf5_reason());
+    memory_type_ = memory_type_for(shape.type);
   }
-  staged.commit();
+
+  void write(const void* samples, std::uint32_t count) override {
+    QuietHdf5Errors quiet;
+    const hsize_t start[3] = {z_, 0, 0};
+    const hsize_t extent[3] = {count, shape_.dims[1], shape_.dims[0]};
+    H5Sselect_hyperslab(space_.get(), H5S_SELECT_SET, start, nullptr, extent, nullptr);
+    Handle memory(H5Screate_simple(3, extent, nullptr), H5Sclose);
+    if (H5Dwrite(dataset_.get(), memory_type_.get(), memory.get(), space_.get(), H5P_DEFAULT, samples) < 0)
+      throw Error(ErrorClass::Io, context_ + ": cannot write the samples" + hdf5_reason());
+    z_ += count;
+  }
+
+  void finish() override {
+    if (z_ != shape_.dims[2])
+      throw Error(ErrorClass::InvalidArgument,
+                  context_ + ": " + std::to_string(z_) + " of " + std::to_string(shape_.dims[2]) + " slices written");
+    QuietHdf5Errors quiet;
+    if (shape_.has_geometry) {
+      const auto& s = shape_.voxel_size;
+      const auto& o = shape_.origin;
+      write_numbers(dataset_.get(), "voxel_size", {s[2], s[1], s[0]}, context_);  // dataset axis order (z, y, x)
+      write_numbers(dataset_.get(), "origin", {o[2], o[1], o[0]}, context_);
+      write_string(dataset_.get(), "unit", shape_.unit, context_);
+    }
+    dataset_.reset();
+    space_.reset();
+    if (H5Fclose(file_.release()) < 0)
+      throw Error(ErrorClass::Io, path_ + ": cannot finish the HDF5 file" + hdf5_reason());
+    staged_.commit();
+  }
+
+ private:
+  std::string path_;
+  std::string context_;
+  DenseVolume shape_;
+  StagedFile staged_;  // before the HDF5 handles: the file closes before it is removed
+  Handle file_;
+  Handle space_;
+  Handle dataset_;
+  Handle memory_type_;
+  std::uint32_t z_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<SlabWriter> create_hdf5_slabs(const std::string& path, const DenseVolume& shape,
+                                              const std::string& dataset, int deflate_level) {
+  DenseVolume geometry = shape;
+  geometry.data.clear();
+  return std::make_unique<Hdf5SlabWriter>(path, geometry, dataset, deflate_level);
+}
+
+void write_hdf5(const DenseVolume& volume, const std::string& path, const std::string& dataset_name,
+                int deflate_level) {
+  if (volume.data.size() != volume.voxel_count() * sample_size(volume.type))
+    throw Error(ErrorClass::InvalidArgument,
+                where(path, dataset_name) + ": the volume's data size does not match its dimensions");
+  auto writer = create_hdf5_slabs(path, volume, dataset_name, deflate_level);
+  writer->write(volume.data.data(), volume.dims[2]);
+  writer->finish();
 }
 
 }  // namespace ivol::convert

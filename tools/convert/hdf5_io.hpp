@@ -22,6 +22,7 @@
 #include <string>
 
 #include "dense_volume.hpp"
+#include "slab_io.hpp"
 
 namespace ivol::convert {
 
@@ -42,11 +43,19 @@ struct Hdf5SourceInfo {
 DenseVolume read_hdf5(const std::string& path, const std::string& dataset = "/exchange/data",
                       Hdf5SourceInfo* source = nullptr);
 
+// The same, slab by slab (hyperslab reads): memory holds one slab.
+std::unique_ptr<SlabReader> open_hdf5_slabs(const std::string& path, const std::string& dataset = "/exchange/data",
+                                            Hdf5SourceInfo* source = nullptr);
+
 // Writes a chunked (64^3, clipped to the volume) dataset with the shuffle and
 // deflate filters (deflate_level 0: chunked, no filters), creating the groups
 // on the way, samples little-endian. Writes a temporary file in the same
 // directory and renames it into place: never a partial file at `path`.
 void write_hdf5(const DenseVolume& volume, const std::string& path, const std::string& dataset = "/exchange/data",
                 int deflate_level = 4);
+
+// The same, slab by slab.
+std::unique_ptr<SlabWriter> create_hdf5_slabs(const std::string& path, const DenseVolume& shape,
+                                              const std::string& dataset = "/exchange/data", int deflate_level = 4);
 
 }  // namespace ivol::convert

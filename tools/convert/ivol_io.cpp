@@ -9,6 +9,7 @@
 #include "ivol/build.hpp"
 #include "ivol/error.hpp"
 #include "ivol/keep_mask.hpp"
+#include "ivol/streaming_writer.hpp"
 #include "ivol/writer.hpp"
 
 namespace ivol::convert {
@@ -55,64 +56,183 @@ ValueEncoding lossless_encoding(SampleType type) {
   return ValueEncoding::Float32;
 }
 
-ImportReport import_to_ivol(const DenseVolume& volume, const std::string& path, const ImportOptions& options) {
+namespace {
+
+// Samples of one slab of any type as float32 and, for the uint16 encoding,
+// as codes (sample - offset).
+void to_float(const DenseVolume& shape, const std::uint8_t* samples, std::uint64_t count, float* out) {
+  const std::size_t size = sample_size(shape.type);
+  for (std::uint64_t i = 0; i < count; ++i) {
+    const std::uint8_t* p = samples + i * size;
+    switch (shape.type) {
+      case SampleType::UInt8:
+        out[i] = *p;
+        break;
+      case SampleType::UInt16: {
+        std::uint16_t v;
+        std::memcpy(&v, p, 2);
+        out[i] = v;
+        break;
+      }
+      case SampleType::Int16: {
+        std::int16_t v;
+        std::memcpy(&v, p, 2);
+        out[i] = v;
+        break;
+      }
+      case SampleType::Float16: {
+        std::uint16_t v;
+        std::memcpy(&v, p, 2);
+        out[i] = binary16_to_float(v);
+        break;
+      }
+      case SampleType::Float32:
+        std::memcpy(&out[i], p, 4);
+        break;
+    }
+  }
+}
+
+// Otsu's threshold of a volume read slab by slab: one pass for the range, one
+// for the histogram.
+float streamed_otsu(SlabReader& source, std::uint32_t slab) {
+  const DenseVolume& shape = source.shape();
+  const std::uint64_t slice = std::uint64_t{shape.dims[0]} * shape.dims[1];
+  std::vector<std::uint8_t> samples(slab * slice * sample_size(shape.type));
+  std::vector<float> values(slab * slice);
+  double lo = INFINITY, hi = -INFINITY;
+  std::vector<double> histogram(256, 0.0);
+  for (int pass = 0; pass < 2; ++pass) {
+    const double scale = pass ? histogram.size() / (hi - lo) : 0.0;
+    if (pass && !(hi > lo)) return static_cast<float>(lo);
+    for (std::uint32_t z = 0; z < shape.dims[2]; z += slab) {
+      const std::uint32_t n = std::min(slab, shape.dims[2] - z);
+      source.read(z, n, samples.data());
+      to_float(shape, samples.data(), n * slice, values.data());
+      for (std::uint64_t i = 0; i < n * slice; ++i) {
+        const float v = values[i];
+        if (std::isnan(v)) continue;
+        if (!pass)
+          lo = std::min<double>(lo, v), hi = std::max<double>(hi, v);
+        else
+          histogram[std::min<std::size_t>(histogram.size() - 1, static_cast<std::size_t>((v - lo) * scale))] += 1;
+      }
+    }
+  }
+  return otsu_threshold_from_histogram(histogram, lo, hi);
+}
+
+class ProgressTicker {
+ public:
+  ProgressTicker(const Progress& progress, std::uint64_t total) : progress_(progress), total_(total) {}
+  void update(std::uint64_t done) {
+    if (!progress_) return;
+    const auto now = std::chrono::steady_clock::now();
+    if (done < total_ && now - last_ < std::chrono::milliseconds(250)) return;
+    last_ = now;
+    progress_(done, total_);
+  }
+
+ private:
+  const Progress& progress_;
+  std::uint64_t total_;
+  std::chrono::steady_clock::time_point last_{};
+};
+
+}  // namespace
+
+ImportReport import_to_ivol(SlabReader& source, const std::string& path, const ImportOptions& options) {
   const auto start = std::chrono::steady_clock::now();
+  const DenseVolume& shape = source.shape();
   ImportReport report;
-  report.encoding = options.encoding.value_or(lossless_encoding(volume.type));
-  BuildOptions build;
+  report.encoding = options.encoding.value_or(lossless_encoding(shape.type));
+  StreamingOptions streaming;
+  BuildOptions& build = streaming.build;
   build.encoding = report.encoding;
   const bool integer_source =
-      volume.type == SampleType::UInt8 || volume.type == SampleType::UInt16 || volume.type == SampleType::Int16;
-  if (build.encoding == ValueEncoding::UInt16 && volume.type == SampleType::Int16) build.value_offset = -32768.0;
+      shape.type == SampleType::UInt8 || shape.type == SampleType::UInt16 || shape.type == SampleType::Int16;
   if (build.encoding == ValueEncoding::UInt16 && !integer_source)
     throw Error(ErrorClass::InvalidArgument,
                 std::string("--encoding uint16 needs integer samples; this volume holds ") +
-                    sample_type_name(volume.type) + " (use binary16 or float32)");
+                    sample_type_name(shape.type) + " (use binary16 or float32)");
+  if (build.encoding == ValueEncoding::UInt16 && shape.type == SampleType::Int16) build.value_offset = -32768.0;
   report.value_scale = build.value_scale;
   report.value_offset = build.value_offset;
+  if (options.block_bytes) streaming.write.block_bytes = options.block_bytes;
+  if (options.slab_budget_bytes) streaming.slab_budget_bytes = options.slab_budget_bytes;
 
-  std::vector<float> as_float;
-  std::vector<std::uint16_t> as_codes;
+  StreamingOctreeWriter writer(path, shape.dims, streaming);
+  const std::uint32_t slab = writer.slab_slices();
+  report.slab_slices = slab;
+  if (options.keep) report.threshold = options.keep->otsu ? streamed_otsu(source, slab) : options.keep->threshold;
+  const unsigned margin = options.keep ? options.keep->margin : 0;
   const bool codes = build.encoding == ValueEncoding::UInt16;
-  if (codes) {
-    as_codes.resize(volume.voxel_count());
-    for (std::uint64_t i = 0; i < as_codes.size(); ++i)
-      as_codes[i] = static_cast<std::uint16_t>(volume.value(i) - build.value_offset);
-  }
-  if (!codes || options.keep) as_float = volume.to_float();
 
-  std::vector<std::uint8_t> keep;
-  if (options.keep) {
-    report.threshold = options.keep->otsu ? otsu_threshold(as_float.data(), as_float.size()) : options.keep->threshold;
-    keep = threshold_keep_mask(as_float.data(), volume.dims, report.threshold, options.keep->margin);
-    build.keep_mask = keep.data();
+  // One slab and the `margin` slices on either side, which the keep mask's
+  // growth needs.
+  const std::uint64_t slice = std::uint64_t{shape.dims[0]} * shape.dims[1];
+  const std::uint64_t most = std::uint64_t{std::min(slab + 2 * margin, shape.dims[2])} * slice;
+  std::vector<std::uint8_t> samples(most * sample_size(shape.type));
+  std::vector<float> values(codes && !options.keep ? 0 : most);
+  std::vector<std::uint16_t> code_values(codes ? slab * slice : 0);
+  ProgressTicker ticker(options.progress, shape.dims[2]);
+  while (writer.next_slab_count() > 0) {
+    const std::uint32_t z0 = writer.next_slab_first();
+    const std::uint32_t n = writer.next_slab_count();
+    const std::uint32_t lo = z0 >= margin ? z0 - margin : 0;
+    const std::uint32_t hi = std::min(shape.dims[2], z0 + n + margin);
+    source.read(lo, hi - lo, samples.data());
+    const std::uint64_t centre = (z0 - lo) * slice;
+    if (!values.empty()) to_float(shape, samples.data(), (hi - lo) * slice, values.data());
+    std::vector<std::uint8_t> keep;
+    if (options.keep) {
+      keep = threshold_keep_mask(values.data(), Dims{shape.dims[0], shape.dims[1], hi - lo}, report.threshold, margin);
+      keep.erase(keep.begin(), keep.begin() + static_cast<std::ptrdiff_t>(centre));
+      keep.resize(n * slice);
+    }
+    if (codes) {
+      DenseVolume view;
+      view.type = shape.type;
+      view.data.assign(samples.begin() + static_cast<std::ptrdiff_t>(centre * sample_size(shape.type)),
+                       samples.begin() + static_cast<std::ptrdiff_t>((centre + n * slice) * sample_size(shape.type)));
+      for (std::uint64_t i = 0; i < n * slice; ++i)
+        code_values[i] = static_cast<std::uint16_t>(view.value(i) - build.value_offset);
+      writer.add_slab(code_values.data(), options.keep ? keep.data() : nullptr);
+    } else {
+      writer.add_slab(values.data() + centre, options.keep ? keep.data() : nullptr);
+    }
+    ticker.update(z0 + n);
   }
-  const BuildResult built =
-      codes ? build_octree(as_codes.data(), volume.dims, build) : build_octree(as_float.data(), volume.dims, build);
-  report.lossless = built.lossless;
-  report.max_abs_error = built.max_abs_error;
-  report.kept_voxels = built.kept_voxels;
 
   Metadata metadata = options.metadata;
-  if (volume.has_geometry) {
-    metadata.voxel_size = volume.voxel_size;
-    metadata.origin = volume.origin;
-    metadata.unit = volume.unit;
+  if (shape.has_geometry) {
+    metadata.voxel_size = shape.voxel_size;
+    metadata.origin = shape.origin;
+    metadata.unit = shape.unit;
   }
+  // The outcome of the build is known only at the end; finish() writes the
+  // metadata after the blocks, so say it here from what the slabs reported.
   metadata.structure["kind"] = "octree";
-  metadata.structure["lossless"] = built.lossless;
-  metadata.structure["source_encoding"] = sample_type_name(volume.type);
-  metadata.structure["max_abs_error"] = built.max_abs_error;
+  metadata.structure["source_encoding"] = sample_type_name(shape.type);
   if (options.keep) {
-    metadata.structure["keep"] = {
-        {"rule", "threshold"}, {"threshold", report.threshold}, {"margin", options.keep->margin}};
+    metadata.structure["keep"] = {{"rule", "threshold"}, {"threshold", report.threshold}, {"margin", margin}};
     if (options.keep->otsu) metadata.structure["keep"]["threshold_method"] = "otsu";
   }
-  WriteOptions write;
-  if (options.block_bytes) write.block_bytes = options.block_bytes;
-  report.file_bytes = write_octree(built.octree, metadata, path, write).file_bytes;
+  const StreamingResult result = writer.finish(metadata, [&](Metadata& m, const StreamingResult& r) {
+    m.structure["lossless"] = r.lossless;
+    m.structure["max_abs_error"] = r.max_abs_error;
+  });
+  report.lossless = result.lossless;
+  report.max_abs_error = result.max_abs_error;
+  report.kept_voxels = result.kept_voxels;
+  report.file_bytes = result.write.file_bytes;
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return report;
+}
+
+ImportReport import_to_ivol(const DenseVolume& volume, const std::string& path, const ImportOptions& options) {
+  const auto source = view_slabs(volume);
+  return import_to_ivol(*source, path, options);
 }
 
 SampleType natural_sample_type(const Reader& reader) {
@@ -121,10 +241,10 @@ SampleType natural_sample_type(const Reader& reader) {
   return SampleType::Float32;
 }
 
-DenseVolume export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type) {
-  if (box.empty()) box = full_box(reader.layout().dims, lod);
-  const std::vector<float> values = reader.read_box(box, lod);
-  DenseVolume out = make_dense(Dims{box.hi[0] - box.lo[0], box.hi[1] - box.lo[1], box.hi[2] - box.lo[2]}, type);
+DenseVolume export_shape(const Reader& reader, const Box& box, unsigned lod, SampleType type) {
+  DenseVolume out;
+  out.dims = Dims{box.hi[0] - box.lo[0], box.hi[1] - box.lo[1], box.hi[2] - box.lo[2]};
+  out.type = type;
   const Metadata& m = reader.metadata();
   const double scale = std::ldexp(1.0, static_cast<int>(lod));
   out.has_geometry = true;
@@ -134,11 +254,17 @@ DenseVolume export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType t
     // Centre of the box's first cell: the centre of the 2^lod voxels it covers.
     out.origin[a] = m.origin[a] + (box.lo[a] * scale + (scale - 1) / 2) * m.voxel_size[a];
   }
+  return out;
+}
+
+namespace {
+
+void convert_samples(const std::vector<float>& values, SampleType type, std::uint8_t* out) {
   auto clamp_round = [](double v, double lo, double hi) {
     return std::isnan(v) ? 0.0 : std::min(hi, std::max(lo, std::nearbyint(v)));
   };
   for (std::uint64_t i = 0; i < values.size(); ++i) {
-    std::uint8_t* p = out.data.data() + i * sample_size(type);
+    std::uint8_t* p = out + i * sample_size(type);
     switch (type) {
       case SampleType::UInt8:
         *p = static_cast<std::uint8_t>(clamp_round(values[i], 0, 255));
@@ -163,6 +289,52 @@ DenseVolume export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType t
         break;
     }
   }
+}
+
+class MemorySink final : public SlabWriter {
+ public:
+  explicit MemorySink(DenseVolume& volume) : volume_(volume) {}
+  void write(const void* samples, std::uint32_t count) override {
+    const std::size_t bytes = std::size_t{count} * volume_.dims[0] * volume_.dims[1] * sample_size(volume_.type);
+    std::memcpy(volume_.data.data() + at_, samples, bytes);
+    at_ += bytes;
+  }
+  void finish() override {}
+
+ private:
+  DenseVolume& volume_;
+  std::size_t at_ = 0;
+};
+
+}  // namespace
+
+void export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type, SlabWriter& sink,
+                      const Progress& progress) {
+  if (box.empty()) box = full_box(reader.layout().dims, lod);
+  const std::uint64_t slice = std::uint64_t{box.hi[0] - box.lo[0]} * (box.hi[1] - box.lo[1]);
+  // Slabs of about 64 MiB of float32, whole slices.
+  const auto slab = static_cast<std::uint32_t>(std::max<std::uint64_t>(1, (64ull << 20) / (4 * slice)));
+  ProgressTicker ticker(progress, box.hi[2] - box.lo[2]);
+  std::vector<std::uint8_t> samples;
+  for (std::uint32_t z = box.lo[2]; z < box.hi[2]; z += slab) {
+    Box part = box;
+    part.lo[2] = z;
+    part.hi[2] = std::min(box.hi[2], z + slab);
+    const std::vector<float> values = reader.read_box(part, lod);
+    samples.resize(values.size() * sample_size(type));
+    convert_samples(values, type, samples.data());
+    sink.write(samples.data(), part.hi[2] - part.lo[2]);
+    ticker.update(part.hi[2] - box.lo[2]);
+  }
+  sink.finish();
+}
+
+DenseVolume export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type) {
+  if (box.empty()) box = full_box(reader.layout().dims, lod);
+  DenseVolume out = export_shape(reader, box, lod, type);
+  out.data.resize(out.voxel_count() * sample_size(type));
+  MemorySink sink(out);
+  export_from_ivol(reader, box, lod, type, sink);
   return out;
 }
 

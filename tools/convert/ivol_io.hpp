@@ -1,6 +1,8 @@
-// Dense volumes into and out of .ivol, through libformat's public API.
+// Dense volumes into and out of .ivol, slab by slab, through libformat's
+// public API: memory holds one slab, never the whole volume.
 #pragma once
 
+#include <functional>
 #include <optional>
 #include <string>
 
@@ -8,6 +10,7 @@
 #include "ivol/encoding.hpp"
 #include "ivol/metadata.hpp"
 #include "ivol/reader.hpp"
+#include "slab_io.hpp"
 
 namespace ivol::convert {
 
@@ -21,11 +24,16 @@ struct KeepRule {
 // Parses "threshold=T,margin=M" (T a number or "otsu"); throws InvalidArgument.
 KeepRule parse_keep_rule(const std::string& text);
 
+// Called with the slices done and the slices in all, a few times a second at most.
+using Progress = std::function<void(std::uint64_t done, std::uint64_t total)>;
+
 struct ImportOptions {
   std::optional<ValueEncoding> encoding;  // default: lossless for the sample type
   std::optional<KeepRule> keep;           // default: lossless (equal leaves merge)
   std::uint32_t block_bytes = 0;          // 0: the library's default
+  std::uint64_t slab_budget_bytes = 0;    // 0: the library's default
   Metadata metadata;                      // provenance etc.; geometry from the volume
+  Progress progress;
 };
 
 struct ImportReport {
@@ -37,6 +45,7 @@ struct ImportReport {
   float threshold = 0.0f;  // when a keep rule was applied
   std::uint64_t kept_voxels = 0;
   std::uint64_t file_bytes = 0;
+  std::uint64_t slab_slices = 0;
   double seconds = 0.0;
 };
 
@@ -44,11 +53,17 @@ struct ImportReport {
 // i16 with an offset of -32768), binary16 for f16, float32 for f32.
 ValueEncoding lossless_encoding(SampleType type);
 
+ImportReport import_to_ivol(SlabReader& source, const std::string& path, const ImportOptions& options);
 ImportReport import_to_ivol(const DenseVolume& volume, const std::string& path, const ImportOptions& options);
 
-// A box of an .ivol file (full box when `box` is empty) at level of detail
-// `lod`, as `type` samples (physical values, rounded and clamped for
-// integers) with the file's geometry (voxel size scaled by 2^lod).
+// The shape (dims, type, geometry; no samples) of a box of an .ivol file at a
+// level of detail: voxel size scaled by 2^lod, origin at the box's first cell.
+DenseVolume export_shape(const Reader& reader, const Box& box, unsigned lod, SampleType type);
+// Streams the box (full box when empty) to `sink`, created for
+// export_shape(...): physical values, rounded and clamped for integers.
+void export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type, SlabWriter& sink,
+                      const Progress& progress = {});
+// The same into memory.
 DenseVolume export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type);
 // The sample type that holds a file's values without loss when there is one
 // (uint16 codes with scale 1 and offset 0), else f32.

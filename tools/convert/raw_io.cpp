@@ -107,9 +107,14 @@ class RawSlabWriter final : public SlabWriter {
 
 class MemorySlabReader final : public SlabReader {
  public:
-  explicit MemorySlabReader(DenseVolume volume) : volume_(std::move(volume)) {
-    shape_ = volume_;
-    shape_.data.clear();
+  MemorySlabReader(DenseVolume owned, const DenseVolume* viewed)
+      : owned_(std::move(owned)), volume_(viewed ? *viewed : owned_) {
+    shape_.dims = volume_.dims;
+    shape_.type = volume_.type;
+    shape_.voxel_size = volume_.voxel_size;
+    shape_.origin = volume_.origin;
+    shape_.unit = volume_.unit;
+    shape_.has_geometry = volume_.has_geometry;
   }
   void read(std::uint32_t z0, std::uint32_t count, void* out) override {
     const std::size_t slice = std::size_t{volume_.dims[0]} * volume_.dims[1] * sample_size(volume_.type);
@@ -117,7 +122,8 @@ class MemorySlabReader final : public SlabReader {
   }
 
  private:
-  DenseVolume volume_;
+  DenseVolume owned_;
+  const DenseVolume& volume_;
 };
 
 }  // namespace
@@ -127,7 +133,11 @@ std::unique_ptr<SlabReader> open_raw_slabs(const std::string& path, const RawLay
 }
 
 std::unique_ptr<SlabReader> memory_slabs(DenseVolume volume) {
-  return std::make_unique<MemorySlabReader>(std::move(volume));
+  return std::make_unique<MemorySlabReader>(std::move(volume), nullptr);
+}
+
+std::unique_ptr<SlabReader> view_slabs(const DenseVolume& volume) {
+  return std::make_unique<MemorySlabReader>(DenseVolume{}, &volume);
 }
 
 std::unique_ptr<SlabWriter> create_raw_slabs(const std::string& path, const DenseVolume& shape, bool big_endian) {

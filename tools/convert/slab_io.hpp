@@ -34,8 +34,10 @@ class SlabWriter {
 
 std::unique_ptr<SlabReader> open_raw_slabs(const std::string& path, const RawLayout& layout);
 std::unique_ptr<SlabReader> open_tiff_slabs(const std::string& path_or_folder);
-// A volume already in memory (formats read whole, e.g. OpenVDB).
+// A volume already in memory (formats read whole, e.g. OpenVDB): owned, or
+// only viewed (the volume must outlive the reader).
 std::unique_ptr<SlabReader> memory_slabs(DenseVolume volume);
+std::unique_ptr<SlabReader> view_slabs(const DenseVolume& volume);
 
 std::unique_ptr<SlabWriter> create_raw_slabs(const std::string& path, const DenseVolume& shape, bool big_endian);
 std::unique_ptr<SlabWriter> create_tiff_slabs(const std::string& path, const DenseVolume& shape, bool compress = true);

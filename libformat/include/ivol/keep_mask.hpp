@@ -15,5 +15,8 @@ std::vector<std::uint8_t> threshold_keep_mask(const float* data, const Dims& dim
 
 // Otsu's threshold over a histogram of the values (ignores NaN).
 float otsu_threshold(const float* data, std::uint64_t count, unsigned bins = 256);
+// The same from a histogram of `histogram.size()` equal bins over [lo, hi],
+// for volumes read in parts.
+float otsu_threshold_from_histogram(const std::vector<double>& histogram, double lo, double hi);
 
 }  // namespace ivol

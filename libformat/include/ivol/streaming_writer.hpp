@@ -14,6 +14,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -61,8 +62,12 @@ class StreamingOctreeWriter {
   void add_slab(const float* samples, const std::uint8_t* keep = nullptr);
   void add_slab(const std::uint16_t* samples, const std::uint8_t* keep = nullptr);
 
+  // Called once the whole octree is known, before the metadata is written:
+  // lets the caller record the outcome (lossless, largest error) in it.
+  using AmendMetadata = std::function<void(Metadata& metadata, const StreamingResult& outcome)>;
+
   // After the last slab: writes the file and renames it into place.
-  StreamingResult finish(const Metadata& metadata);
+  StreamingResult finish(const Metadata& metadata, const AmendMetadata& amend = {});
 
   struct Impl;
 
