@@ -1,0 +1,120 @@
+// The paper's four ways to hold a volume with inhomogeneous resolution
+// (Betz et al., sections 3-4), behind one interface: the regular grid, the
+// rectilinear grid (per-axis borders), the nested grid (a coarse grid whose
+// cells hold their own regular sub-grids) and the octree.
+//
+// Every structure is a list of bricks: regular sub-grids of voxels of one
+// size. A reconstruction kernel walks a brick as it walks a dense volume
+// (origin, voxel size, counts), and the values of all bricks lie in one
+// array, brick after brick, x fastest within a brick. Coordinates are in
+// full-resolution voxels: voxel (x, y, z) of the full grid covers
+// [x, x + 1) x [y, y + 1) x [z, z + 1).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "ivol/geometry.hpp"
+#include "ivol/octree.hpp"
+#include "ivol/streaming_writer.hpp"
+
+namespace ivol {
+
+enum class StructureKind { Regular, Rectilinear, Nested, Octree };
+const char* structure_name(StructureKind kind);  // "regular", "rectilinear", "nested", "octree"
+bool parse_structure(const std::string& name, StructureKind& out);
+
+struct Brick {
+  std::array<std::uint32_t, 3> origin{};  // full-resolution voxel of the brick's first corner
+  std::array<std::uint32_t, 3> voxel{};   // edge of one voxel along x, y, z, in full-resolution voxels
+  std::array<std::uint32_t, 3> count{};   // voxels along x, y, z
+  std::uint64_t first_value = 0;          // index of the brick's first value
+  std::uint64_t voxel_count() const { return std::uint64_t{count[0]} * count[1] * count[2]; }
+};
+
+// Bytes the structure needs as the paper stores it: 16-bit values and the
+// structure's own bookkeeping (borders, cell pointers, node words).
+struct StructureMemory {
+  std::uint64_t value_bytes = 0;
+  std::uint64_t structure_bytes = 0;
+  std::uint64_t total() const { return value_bytes + structure_bytes; }
+};
+
+class VoxelStructure {
+ public:
+  virtual ~VoxelStructure() = default;
+  virtual StructureKind kind() const = 0;
+  // Exact bytes as the paper stores the structure (16-bit values).
+  virtual StructureMemory memory() const = 0;
+
+  const Dims& dims() const { return dims_; }
+  const std::vector<Brick>& bricks() const { return bricks_; }
+  std::uint64_t voxel_count() const { return values_.size(); }  // values to compute
+  // The values, brick after brick (working precision; the format stores 16 bits).
+  std::vector<float>& values() { return values_; }
+  const std::vector<float>& values() const { return values_; }
+
+  // Each full-resolution voxel takes the value of the structure's voxel that
+  // covers it. `out` is [z][y][x].
+  void to_dense(float* out) const;
+  // Each structure voxel takes the mean of the full-resolution voxels it covers.
+  void sample_dense(const float* dense);
+  // The brick voxel index covering full-resolution voxel (x, y, z).
+  std::uint64_t value_index(std::uint32_t x, std::uint32_t y, std::uint32_t z) const;
+
+ protected:
+  void finish_bricks();  // assigns first_value and sizes values(); builds the lookup
+  Dims dims_{};
+  std::vector<Brick> bricks_;
+  std::vector<float> values_;
+  // For value_index: the bricks meeting each 16^3 tile (CSR: tile_start_, owner_).
+  std::vector<std::uint32_t> tile_start_;
+  std::vector<std::uint32_t> owner_;
+};
+
+// Where full resolution is needed, as the structures are generated from it: a
+// mask over a low-resolution grid whose cells are `factor` full-resolution
+// voxels wide (factor a power of two; 1 = full resolution).
+struct NeedMask {
+  Dims dims{};                   // full-resolution dimensions of the volume
+  std::uint32_t factor = 1;      // full-resolution voxels per mask cell, per axis
+  Dims cells{};                  // ceil(dims / factor)
+  std::vector<std::uint8_t> need;  // 1 where the cell needs full resolution, [z][y][x]
+  bool at(std::uint32_t i, std::uint32_t j, std::uint32_t k) const {
+    return need[(std::uint64_t{k} * cells[1] + j) * cells[0] + i] != 0;
+  }
+};
+
+// The paper's rule on a low-resolution reconstruction: cells above
+// `threshold` (the object), grown by `margin_voxels` full-resolution voxels
+// (rounded up to whole cells). Uses all cores.
+NeedMask need_mask_from_low_resolution(const float* low, const Dims& low_dims, std::uint32_t factor,
+                                       const Dims& full_dims, float threshold, unsigned margin_voxels);
+
+struct GenerationOptions {
+  // Rectilinear: the largest interval outside the needed ranges, in voxels.
+  std::uint32_t rectilinear_max_interval = 64;
+  // Nested: the coarse cell's edge in full-resolution voxels (a power of two).
+  std::uint32_t nested_cell = 16;
+  unsigned threads = 0;  // 0: all hardware threads
+};
+
+// Builds a structure from a need mask: full resolution wherever a cell needs
+// it, coarse elsewhere as the structure allows. Values start at zero.
+std::unique_ptr<VoxelStructure> generate_structure(StructureKind kind, const NeedMask& mask,
+                                                   const GenerationOptions& options = {});
+
+// Writes a structure as an .ivol file (the format holds octrees; the
+// rectilinear and nested kinds have no format of their own yet), slab by slab
+// through StreamingOctreeWriter, never the dense volume. The octree kind keeps
+// full resolution exactly where it has fine voxels and holds each coarse
+// voxel as one leaf; other kinds are written losslessly (their coarse voxels
+// become the largest octree leaves that fit in them). `options.build` gives
+// the value encoding.
+StreamingResult write_structure(const VoxelStructure& structure, const std::string& path, const Metadata& metadata,
+                                StreamingOptions options = {});
+
+}  // namespace ivol
