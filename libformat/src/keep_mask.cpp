@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <thread>
 
 namespace ivol {
 namespace {
@@ -13,25 +14,31 @@ void dilate_axis(std::vector<std::uint8_t>& mask, const Dims& dims, int axis, un
   const std::uint64_t stride = axis == 0 ? 1 : axis == 1 ? dims[0] : std::uint64_t{dims[0]} * dims[1];
   const std::uint64_t n = dims[axis];
   const std::uint64_t lines = voxel_count(dims) / n;
-  std::vector<std::uint8_t> line(n);
-  for (std::uint64_t li = 0; li < lines; ++li) {
-    // Index of the first voxel of line li.
-    std::uint64_t base;
-    if (axis == 0)
-      base = li * n;
-    else if (axis == 1)
-      base = (li / dims[0]) * dims[0] * dims[1] + li % dims[0];
-    else
-      base = li;
-    for (std::uint64_t t = 0; t < n; ++t) line[t] = mask[base + t * stride];
-    std::uint64_t count = 0;  // ones in the window [t - radius, t + radius]
-    for (std::uint64_t t = 0; t < std::min<std::uint64_t>(n, radius); ++t) count += line[t];
-    for (std::uint64_t t = 0; t < n; ++t) {
-      if (t + radius < n) count += line[t + radius];
-      if (t > radius) count -= line[t - radius - 1];
-      mask[base + t * stride] = count ? 1 : 0;
+  // Lines are independent: split them over the cores.
+  const unsigned threads = std::max(1u, std::min<unsigned>(std::thread::hardware_concurrency(),
+                                                            static_cast<unsigned>(lines / 64 + 1)));
+  auto work = [&](std::uint64_t first, std::uint64_t last) {
+    std::vector<std::uint8_t> line(n);
+    for (std::uint64_t li = first; li < last; ++li) {
+      // Index of the first voxel of line li.
+      std::uint64_t base;
+      if (axis == 0) base = li * n;
+      else if (axis == 1) base = (li / dims[0]) * dims[0] * dims[1] + li % dims[0];
+      else base = li;
+      for (std::uint64_t t = 0; t < n; ++t) line[t] = mask[base + t * stride];
+      std::uint64_t count = 0;  // ones in the window [t - radius, t + radius]
+      for (std::uint64_t t = 0; t < std::min<std::uint64_t>(n, radius); ++t) count += line[t];
+      for (std::uint64_t t = 0; t < n; ++t) {
+        if (t + radius < n) count += line[t + radius];
+        if (t > radius) count -= line[t - radius - 1];
+        mask[base + t * stride] = count ? 1 : 0;
+      }
     }
-  }
+  };
+  std::vector<std::thread> pool;
+  for (unsigned t = 1; t < threads; ++t) pool.emplace_back(work, lines * t / threads, lines * (t + 1) / threads);
+  work(0, lines / threads);
+  for (auto& th : pool) th.join();
 }
 
 }  // namespace

@@ -38,8 +38,21 @@ void VoxelStructure::finish_bricks() {
     b.first_value = next;
     next += b.voxel_count();
   }
-  values_.assign(next, 0.0f);
-  // For value_index: the bricks meeting each tile, as a CSR list.
+  voxel_total_ = next;
+}
+
+std::vector<float>& VoxelStructure::values() {
+  if (values_.size() != voxel_total_) values_.assign(voxel_total_, 0.0f);
+  return values_;
+}
+
+const std::vector<float>& VoxelStructure::values() const {
+  if (values_.size() != voxel_total_)
+    throw Error(ErrorClass::InvalidArgument, "structure: no values yet (call values() or sample_dense first)");
+  return values_;
+}
+
+void VoxelStructure::build_lookup() const {
   const Dims tiles{(dims_[0] + kTile - 1) / kTile, (dims_[1] + kTile - 1) / kTile, (dims_[2] + kTile - 1) / kTile};
   std::vector<std::uint32_t> counts(ivol::voxel_count(tiles) + 1, 0);
   auto for_tiles = [&](const Brick& b, auto&& visit) {
@@ -57,12 +70,14 @@ void VoxelStructure::finish_bricks() {
   tile_start_ = counts;
   owner_.assign(counts.back(), 0);
   std::vector<std::uint32_t> fill(counts.begin(), counts.end() - 1);
-  for (std::uint32_t n = 0; n < bricks_.size(); ++n) for_tiles(bricks_[n], [&](std::uint64_t t) { owner_[fill[t]++] = n; });
+  for (std::uint32_t n = 0; n < bricks_.size(); ++n)
+    for_tiles(bricks_[n], [&](std::uint64_t t) { owner_[fill[t]++] = n; });
 }
 
 std::uint64_t VoxelStructure::value_index(std::uint32_t x, std::uint32_t y, std::uint32_t z) const {
   if (x >= dims_[0] || y >= dims_[1] || z >= dims_[2])
     throw Error(ErrorClass::InvalidArgument, "value_index: voxel outside the volume");
+  if (tile_start_.empty()) build_lookup();
   const Dims tiles{(dims_[0] + kTile - 1) / kTile, (dims_[1] + kTile - 1) / kTile, (dims_[2] + kTile - 1) / kTile};
   const std::uint64_t t = (std::uint64_t{z / kTile} * tiles[1] + y / kTile) * tiles[0] + x / kTile;
   const std::uint32_t p[3] = {x, y, z};
@@ -108,16 +123,18 @@ void for_each_covered_row(const Brick& b, const Dims& dims, F&& visit) {
 }  // namespace
 
 void VoxelStructure::to_dense(float* out) const {
+  const std::vector<float>& vals = values();
   for (const Brick& b : bricks_)
     for_each_covered_row(b, dims_, [&](std::uint64_t v, std::uint64_t x0, std::uint64_t x1, std::uint64_t y,
                                        std::uint64_t z) {
-      std::fill(out + (z * dims_[1] + y) * dims_[0] + x0, out + (z * dims_[1] + y) * dims_[0] + x1, values_[v]);
+      std::fill(out + (z * dims_[1] + y) * dims_[0] + x0, out + (z * dims_[1] + y) * dims_[0] + x1, vals[v]);
     });
 }
 
 void VoxelStructure::sample_dense(const float* dense) {
-  std::vector<double> sum(values_.size(), 0.0);
-  std::vector<std::uint64_t> count(values_.size(), 0);
+  std::vector<float>& vals = values();
+  std::vector<double> sum(vals.size(), 0.0);
+  std::vector<std::uint64_t> count(vals.size(), 0);
   for (const Brick& b : bricks_)
     for_each_covered_row(b, dims_, [&](std::uint64_t v, std::uint64_t x0, std::uint64_t x1, std::uint64_t y,
                                        std::uint64_t z) {
@@ -125,8 +142,8 @@ void VoxelStructure::sample_dense(const float* dense) {
       for (std::uint64_t x = x0; x < x1; ++x) sum[v] += row[x];
       count[v] += x1 - x0;
     });
-  for (std::size_t v = 0; v < values_.size(); ++v)
-    values_[v] = count[v] ? static_cast<float>(sum[v] / static_cast<double>(count[v])) : 0.0f;
+  for (std::size_t v = 0; v < vals.size(); ++v)
+    vals[v] = count[v] ? static_cast<float>(sum[v] / static_cast<double>(count[v])) : 0.0f;
 }
 
 }  // namespace ivol

@@ -52,10 +52,12 @@ class VoxelStructure {
 
   const Dims& dims() const { return dims_; }
   const std::vector<Brick>& bricks() const { return bricks_; }
-  std::uint64_t voxel_count() const { return values_.size(); }  // values to compute
-  // The values, brick after brick (working precision; the format stores 16 bits).
-  std::vector<float>& values() { return values_; }
-  const std::vector<float>& values() const { return values_; }
+  std::uint64_t voxel_count() const { return voxel_total_; }  // values to compute
+  // The values, brick after brick (working precision; the format stores 16
+  // bits), zero at first. The array is allocated by the first non-const call,
+  // not by generation: it is the reconstruction's storage, not the structure's.
+  std::vector<float>& values();
+  const std::vector<float>& values() const;
 
   // Each full-resolution voxel takes the value of the structure's voxel that
   // covers it. `out` is [z][y][x].
@@ -66,13 +68,18 @@ class VoxelStructure {
   std::uint64_t value_index(std::uint32_t x, std::uint32_t y, std::uint32_t z) const;
 
  protected:
-  void finish_bricks();  // assigns first_value and sizes values(); builds the lookup
+  void finish_bricks();  // assigns first_value and counts the voxels
   Dims dims_{};
   std::vector<Brick> bricks_;
-  std::vector<float> values_;
-  // For value_index: the bricks meeting each 16^3 tile (CSR: tile_start_, owner_).
-  std::vector<std::uint32_t> tile_start_;
-  std::vector<std::uint32_t> owner_;
+  std::uint64_t voxel_total_ = 0;
+
+ private:
+  void build_lookup() const;
+  mutable std::vector<float> values_;
+  // For value_index, built on first use: the bricks meeting each 16^3 tile
+  // (CSR: tile_start_, owner_).
+  mutable std::vector<std::uint32_t> tile_start_;
+  mutable std::vector<std::uint32_t> owner_;
 };
 
 // Where full resolution is needed, as the structures are generated from it: a
