@@ -81,8 +81,10 @@ TEST_P(Structures, TileTheVolumeAndKeepFullResolutionWhereNeeded) {
     // Scattered needs can refine every plane of the rectilinear grid and
     // every cell of the nested grid (the paper's point about their limits);
     // the octree always coarsens what is not needed.
-    if (kind == StructureKind::Octree) EXPECT_LT(s->voxel_count(), voxel_count(c.dims));
-    else EXPECT_LE(s->voxel_count(), voxel_count(c.dims));
+    if (kind == StructureKind::Octree)
+      EXPECT_LT(s->voxel_count(), voxel_count(c.dims));
+    else
+      EXPECT_LE(s->voxel_count(), voxel_count(c.dims));
   }
 }
 

@@ -15,16 +15,19 @@ void dilate_axis(std::vector<std::uint8_t>& mask, const Dims& dims, int axis, un
   const std::uint64_t n = dims[axis];
   const std::uint64_t lines = voxel_count(dims) / n;
   // Lines are independent: split them over the cores.
-  const unsigned threads = std::max(1u, std::min<unsigned>(std::thread::hardware_concurrency(),
-                                                            static_cast<unsigned>(lines / 64 + 1)));
+  const unsigned threads =
+      std::max(1u, std::min<unsigned>(std::thread::hardware_concurrency(), static_cast<unsigned>(lines / 64 + 1)));
   auto work = [&](std::uint64_t first, std::uint64_t last) {
     std::vector<std::uint8_t> line(n);
     for (std::uint64_t li = first; li < last; ++li) {
       // Index of the first voxel of line li.
       std::uint64_t base;
-      if (axis == 0) base = li * n;
-      else if (axis == 1) base = (li / dims[0]) * dims[0] * dims[1] + li % dims[0];
-      else base = li;
+      if (axis == 0)
+        base = li * n;
+      else if (axis == 1)
+        base = (li / dims[0]) * dims[0] * dims[1] + li % dims[0];
+      else
+        base = li;
       for (std::uint64_t t = 0; t < n; ++t) line[t] = mask[base + t * stride];
       std::uint64_t count = 0;  // ones in the window [t - radius, t + radius]
       for (std::uint64_t t = 0; t < std::min<std::uint64_t>(n, radius); ++t) count += line[t];

@@ -42,13 +42,8 @@ class ParallelBuild {
     std::atomic<std::uint32_t> next{0};
     auto work = [&] {
       for (std::uint32_t t; (t = next.fetch_add(1)) < task_count;) {
-        std::uint32_t i = 0, j = 0, k = 0;
-        for (unsigned b = 0; b < split_; ++b) {
-          const std::uint32_t c = (t >> (3 * (split_ - 1 - b))) & 7u;
-          i = (i << 1) | (c & 1u);
-          j = (j << 1) | ((c >> 1) & 1u);
-          k = (k << 1) | ((c >> 2) & 1u);
-        }
+        std::uint32_t i, j, k;
+        detail::morton_decode(split_, t, i, j, k);
         results_[t] = b_.build(split_, i, j, k, arrays_[t], stats_[t]);
       }
     };

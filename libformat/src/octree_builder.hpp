@@ -285,6 +285,17 @@ class Builder {
   bool identity_ = true;
 };
 
+// The node coordinates of Morton index t among the nodes of level `bits`.
+inline void morton_decode(unsigned bits, std::uint64_t t, std::uint32_t& i, std::uint32_t& j, std::uint32_t& k) {
+  i = j = k = 0;
+  for (unsigned b = 0; b < bits; ++b) {
+    const auto c = static_cast<std::uint32_t>((t >> (3 * (bits - 1 - b))) & 7u);
+    i = (i << 1) | (c & 1u);
+    j = (j << 1) | ((c >> 1) & 1u);
+    k = (k << 1) | ((c >> 2) & 1u);
+  }
+}
+
 inline std::uint32_t morton_index(unsigned bits, std::uint32_t i, std::uint32_t j, std::uint32_t k) {
   std::uint32_t t = 0;
   for (int b = static_cast<int>(bits) - 1; b >= 0; --b)

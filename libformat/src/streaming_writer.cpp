@@ -271,13 +271,8 @@ class Engine final : public StreamingOctreeWriter::Impl {
   void for_each_subtree(F&& visit) const {
     const std::uint64_t total = std::uint64_t{1} << (3 * subtree_level_);
     for (std::uint64_t t = 0; t < total; ++t) {
-      std::uint32_t i = 0, j = 0, k = 0;
-      for (unsigned b = 0; b < subtree_level_; ++b) {
-        const auto c = static_cast<std::uint32_t>((t >> (3 * (subtree_level_ - 1 - b))) & 7u);
-        i = (i << 1) | (c & 1u);
-        j = (j << 1) | ((c >> 1) & 1u);
-        k = (k << 1) | ((c >> 2) & 1u);
-      }
+      std::uint32_t i, j, k;
+      detail::morton_decode(subtree_level_, t, i, j, k);
       if (i < grid_[0] && j < grid_[1] && k < grid_[2]) visit((std::uint64_t{k} * grid_[1] + j) * grid_[0] + i);
     }
   }

@@ -1,6 +1,7 @@
 // What every structure shares: bricks, values, dense conversions, lookup.
 #include <algorithm>
 
+#include "brick_rows.hpp"
 #include "ivol/error.hpp"
 #include "ivol/structures.hpp"
 
@@ -8,17 +9,21 @@ namespace ivol {
 
 const char* structure_name(StructureKind kind) {
   switch (kind) {
-    case StructureKind::Regular: return "regular";
-    case StructureKind::Rectilinear: return "rectilinear";
-    case StructureKind::Nested: return "nested";
-    case StructureKind::Octree: return "octree";
+    case StructureKind::Regular:
+      return "regular";
+    case StructureKind::Rectilinear:
+      return "rectilinear";
+    case StructureKind::Nested:
+      return "nested";
+    case StructureKind::Octree:
+      return "octree";
   }
   return "unknown";
 }
 
 bool parse_structure(const std::string& name, StructureKind& out) {
-  for (StructureKind k : {StructureKind::Regular, StructureKind::Rectilinear, StructureKind::Nested,
-                          StructureKind::Octree})
+  for (StructureKind k :
+       {StructureKind::Regular, StructureKind::Rectilinear, StructureKind::Nested, StructureKind::Octree})
     if (name == structure_name(k)) {
       out = k;
       return true;
@@ -86,7 +91,8 @@ std::uint64_t VoxelStructure::value_index(std::uint32_t x, std::uint32_t y, std:
     std::uint64_t local[3];
     bool inside = true;
     for (int a = 0; a < 3 && inside; ++a) {
-      if (p[a] < b.origin[a]) inside = false;
+      if (p[a] < b.origin[a])
+        inside = false;
       else {
         local[a] = (p[a] - b.origin[a]) / b.voxel[a];
         inside = local[a] < b.count[a];
@@ -97,38 +103,14 @@ std::uint64_t VoxelStructure::value_index(std::uint32_t x, std::uint32_t y, std:
   throw Error(ErrorClass::Malformed, "value_index: no brick covers the voxel");
 }
 
-namespace {
-
-// Calls visit(value index, x0, x1, y, z) for every row of full-resolution
-// voxels covered by one structure voxel within one full-resolution row.
-template <class F>
-void for_each_covered_row(const Brick& b, const Dims& dims, F&& visit) {
-  for (std::uint32_t k = 0; k < b.count[2]; ++k) {
-    const std::uint64_t z0 = b.origin[2] + std::uint64_t{k} * b.voxel[2];
-    const std::uint64_t z1 = std::min<std::uint64_t>(dims[2], z0 + b.voxel[2]);
-    for (std::uint32_t j = 0; j < b.count[1]; ++j) {
-      const std::uint64_t y0 = b.origin[1] + std::uint64_t{j} * b.voxel[1];
-      const std::uint64_t y1 = std::min<std::uint64_t>(dims[1], y0 + b.voxel[1]);
-      for (std::uint32_t i = 0; i < b.count[0]; ++i) {
-        const std::uint64_t x0 = b.origin[0] + std::uint64_t{i} * b.voxel[0];
-        const std::uint64_t x1 = std::min<std::uint64_t>(dims[0], x0 + b.voxel[0]);
-        const std::uint64_t v = b.first_value + (std::uint64_t{k} * b.count[1] + j) * b.count[0] + i;
-        for (std::uint64_t z = z0; z < z1; ++z)
-          for (std::uint64_t y = y0; y < y1; ++y) visit(v, x0, x1, y, z);
-      }
-    }
-  }
-}
-
-}  // namespace
-
 void VoxelStructure::to_dense(float* out) const {
   const std::vector<float>& vals = values();
   for (const Brick& b : bricks_)
-    for_each_covered_row(b, dims_, [&](std::uint64_t v, std::uint64_t x0, std::uint64_t x1, std::uint64_t y,
-                                       std::uint64_t z) {
-      std::fill(out + (z * dims_[1] + y) * dims_[0] + x0, out + (z * dims_[1] + y) * dims_[0] + x1, vals[v]);
-    });
+    detail::for_each_brick_row(
+        b, dims_, 0, dims_[2],
+        [&](std::uint64_t v, std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint64_t z) {
+          std::fill(out + (z * dims_[1] + y) * dims_[0] + x0, out + (z * dims_[1] + y) * dims_[0] + x1, vals[v]);
+        });
 }
 
 void VoxelStructure::sample_dense(const float* dense) {
@@ -136,12 +118,13 @@ void VoxelStructure::sample_dense(const float* dense) {
   std::vector<double> sum(vals.size(), 0.0);
   std::vector<std::uint64_t> count(vals.size(), 0);
   for (const Brick& b : bricks_)
-    for_each_covered_row(b, dims_, [&](std::uint64_t v, std::uint64_t x0, std::uint64_t x1, std::uint64_t y,
-                                       std::uint64_t z) {
-      const float* row = dense + (z * dims_[1] + y) * dims_[0];
-      for (std::uint64_t x = x0; x < x1; ++x) sum[v] += row[x];
-      count[v] += x1 - x0;
-    });
+    detail::for_each_brick_row(
+        b, dims_, 0, dims_[2],
+        [&](std::uint64_t v, std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint64_t z) {
+          const float* row = dense + (z * dims_[1] + y) * dims_[0];
+          for (std::uint64_t x = x0; x < x1; ++x) sum[v] += row[x];
+          count[v] += x1 - x0;
+        });
   for (std::size_t v = 0; v < vals.size(); ++v)
     vals[v] = count[v] ? static_cast<float>(sum[v] / static_cast<double>(count[v])) : 0.0f;
 }

@@ -9,6 +9,7 @@
 #include "ivol/error.hpp"
 #include "ivol/keep_mask.hpp"
 #include "ivol/structures.hpp"
+#include "octree_builder.hpp"
 
 namespace ivol {
 namespace {
@@ -44,8 +45,10 @@ class RectilinearStructure final : public VoxelStructure {
     for (int a = 0; a < 3; ++a) {
       borders_ += axes[a].size() + 1;
       for (const Interval& iv : axes[a]) {
-        if (!runs[a].empty() && runs[a].back().size == iv.size) ++run_counts[a].back();
-        else runs[a].push_back(iv), run_counts[a].push_back(1);
+        if (!runs[a].empty() && runs[a].back().size == iv.size)
+          ++run_counts[a].back();
+        else
+          runs[a].push_back(iv), run_counts[a].push_back(1);
       }
     }
     for (std::size_t k = 0; k < runs[2].size(); ++k)
@@ -103,8 +106,10 @@ class NestedStructure final : public VoxelStructure {
           const std::array<std::uint32_t, 3> lo{i * cell, j * cell, k * cell};
           std::array<std::uint32_t, 3> extent{};
           for (int a = 0; a < 3; ++a) extent[a] = std::min(cell, dims_[a] - lo[a]);
-          if (needs(mask, lo, extent)) bricks_.push_back(Brick{lo, {1, 1, 1}, extent, 0});
-          else bricks_.push_back(Brick{lo, extent, {1, 1, 1}, 0});
+          if (needs(mask, lo, extent))
+            bricks_.push_back(Brick{lo, {1, 1, 1}, extent, 0});
+          else
+            bricks_.push_back(Brick{lo, extent, {1, 1, 1}, 0});
         }
     finish_bricks();
   }
@@ -198,11 +203,8 @@ class OctreeStructure final : public VoxelStructure {
     std::atomic<std::uint32_t> next{0};
     auto work = [&] {
       for (std::uint32_t t; (t = next.fetch_add(1)) < tasks;) {
-        std::uint32_t i = 0, j = 0, k = 0;
-        for (unsigned b = 0; b < split; ++b) {
-          const std::uint32_t c = (t >> (3 * (split - 1 - b))) & 7u;
-          i = (i << 1) | (c & 1u), j = (j << 1) | ((c >> 1) & 1u), k = (k << 1) | ((c >> 2) & 1u);
-        }
+        std::uint32_t i, j, k;
+        detail::morton_decode(split, t, i, j, k);
         visit(pyramid, split, i, j, k, parts[t], inner[t]);
       }
     };
@@ -305,7 +307,8 @@ std::unique_ptr<VoxelStructure> generate_structure(StructureKind kind, const Nee
                                                    const GenerationOptions& options) {
   const unsigned threads = options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
   switch (kind) {
-    case StructureKind::Regular: return std::make_unique<RegularStructure>(mask.dims);
+    case StructureKind::Regular:
+      return std::make_unique<RegularStructure>(mask.dims);
     case StructureKind::Rectilinear:
       return std::make_unique<RectilinearStructure>(mask, std::max(1u, options.rectilinear_max_interval));
     case StructureKind::Nested: {
@@ -314,7 +317,8 @@ std::unique_ptr<VoxelStructure> generate_structure(StructureKind kind, const Nee
         throw Error(ErrorClass::InvalidArgument, "nested grid: the cell size must be a power of two");
       return std::make_unique<NestedStructure>(mask, cell);
     }
-    case StructureKind::Octree: return std::make_unique<OctreeStructure>(mask, threads);
+    case StructureKind::Octree:
+      return std::make_unique<OctreeStructure>(mask, threads);
   }
   throw Error(ErrorClass::InvalidArgument, "unknown structure kind");
 }

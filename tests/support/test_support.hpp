@@ -37,6 +37,13 @@ std::vector<std::uint32_t> reference_lod(const std::vector<std::uint32_t>& bits,
 // encoding (0 = identical).
 std::uint64_t ulp_distance(ValueEncoding encoding, std::uint32_t a, std::uint32_t b);
 
+struct CommandResult {
+  int exit_code = -1;
+  std::string output;  // stdout and stderr
+};
+// Runs a shell command and collects what it prints.
+CommandResult run_command(const std::string& command);
+
 // Rewrites the CRCs of header, index and footer after a test patched the file
 // (so that the intended error, not a checksum error, is found first).
 void refresh_container_checksums(std::vector<std::uint8_t>& file);
