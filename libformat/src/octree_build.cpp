@@ -148,7 +148,7 @@ BuildResult build(const Source* data, const Dims& dims, const BuildOptions& opti
       level_values(l, [&](std::vector<Stored>& v) {
         const std::size_t at = values.size();
         values.resize(at + v.size() * width);
-        std::memcpy(values.data() + at, v.data(), v.size() * width);
+        if (!v.empty()) std::memcpy(values.data() + at, v.data(), v.size() * width);
         std::vector<Stored>().swap(v);
       });
     }

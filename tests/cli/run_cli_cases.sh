@@ -95,6 +95,9 @@ case_ vdb-not-vdb        2 "VDB"                     -- "$IVOL" convert "$work/v
 
 # Streaming: a 64 MiB input converts holding far less than 64 MiB.
 /usr/bin/python3 -c "import numpy as np; z,y,x=np.mgrid[0:1024,0:128,0:128]; ((x+y+z)%97 * 0.01).astype(np.float32).tofile('$work/big.raw')"
+if [ "${IVOL_SANITIZED:-0}" = 1 ]; then
+  echo "note bounded-memory: not measured in a sanitizer build (AddressSanitizer's shadow memory inflates RSS); the Release build checks it"
+else
 case_ bounded-memory     0 "peak"                    -- /usr/bin/python3 -c "
 import resource, subprocess, sys
 subprocess.run(['$IVOL', '--version'], capture_output=True)
@@ -103,6 +106,8 @@ r = subprocess.run(['$IVOL', '-q', 'convert', '$work/big.raw', '$work/big.ivol',
 peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
 print('peak %.1f MiB above a baseline of %.1f MiB' % (peak - baseline, baseline))
 sys.exit(r.returncode or (0 if peak - baseline < 24 else 1))"
+fi
+[ -e "$work/big.ivol" ] || "$IVOL" -q convert "$work/big.raw" "$work/big.ivol" --dims 128,128,1024
 case_ big-verifies       0 "OK"                      -- "$IVOL" verify "$work/big.ivol"
 
 echo "$passed passed, $failed failed"
