@@ -122,4 +122,47 @@ TEST_F(Corruption, ReaderRefusesDamagedBlockButReadsOtherRegions) {
   }
 }
 
+TEST_F(Corruption, SalvageFillsDamagedRegionsFromCoarserLevels) {
+  Reader intact(path_);
+  const unsigned depth = intact.layout().depth;
+  const std::vector<float> original = intact.read_lod(0);
+  for (std::uint8_t stream : {std::uint8_t{3}, std::uint8_t{2}}) {
+    // Damage the last block of the stream: the finest values, or the nodes
+    // of the deepest inner level.
+    std::size_t victim = 0;
+    for (std::size_t b = 0; b < info_.blocks.size(); ++b)
+      if (info_.blocks[b].stream == stream) victim = b;
+    std::vector<std::uint8_t> bytes = original_;
+    bytes[info_.blocks[victim].file_offset] ^= 0x40;
+    const std::string damaged_path = test::temp_path("salvage.ivol");
+    test::write_bytes(damaged_path, bytes);
+    Reader reader(damaged_path);
+    const Dims d = reader.layout().dims;
+    std::vector<DamagedRegion> damaged;
+    const std::vector<float> salvaged = reader.read_box(full_box(d), 0, &damaged);
+    ASSERT_FALSE(damaged.empty()) << "stream " << int(stream);
+    EXPECT_NE(damaged[0].message.find("block " + std::to_string(victim) + " ("), std::string::npos)
+        << damaged[0].message;
+    std::vector<std::uint8_t> hit(salvaged.size(), 0);
+    for (const DamagedRegion& r : damaged) {
+      // A damaged region holds the average of the level above the damage.
+      const unsigned lod = depth - (r.level > 0 ? r.level - 1 : 0);
+      const std::vector<float> coarse = intact.read_lod(lod);
+      const Dims cd = lod_dims(d, lod);
+      for (std::uint32_t z = r.region.lo[2]; z < r.region.hi[2]; ++z)
+        for (std::uint32_t y = r.region.lo[1]; y < r.region.hi[1]; ++y)
+          for (std::uint32_t x = r.region.lo[0]; x < r.region.hi[0]; ++x) {
+            const std::uint64_t at = (std::uint64_t{z} * d[1] + y) * d[0] + x;
+            hit[at] = 1;
+            const std::uint64_t c = (std::uint64_t{z >> lod} * cd[1] + (y >> lod)) * cd[0] + (x >> lod);
+            if (stream == 3) ASSERT_EQ(salvaged[at], coarse[c]) << x << "," << y << "," << z;
+          }
+    }
+    // Everything outside the damaged regions is exactly as written.
+    for (std::size_t i = 0; i < salvaged.size(); ++i)
+      if (!hit[i]) ASSERT_EQ(salvaged[i], original[i]) << i;
+    EXPECT_THROW(reader.read_lod(0), Error);  // without salvage the damage is an error
+  }
+}
+
 }  // namespace

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <optional>
 
 #include "ivol/error.hpp"
 #include "layout.hpp"
@@ -41,11 +42,13 @@ double Reader::voxel_value(std::uint32_t x, std::uint32_t y, std::uint32_t z, un
   return v.physical(decode_value(v.encoding, voxel_bits(x, y, z, lod)));
 }
 
-std::vector<float> Reader::read_box(const Box& box, unsigned lod) {
+std::vector<float> Reader::read_box(const Box& box, unsigned lod, std::vector<DamagedRegion>* damaged) {
   impl_->check_box(box, lod);
   const VolumeLayout& v = impl_->info.layout;
   std::vector<float> out(box.voxel_count());
   detail::ImplAccess access{impl_.get()};
+  std::optional<detail::SalvageLog> log;
+  if (damaged) log.emplace(detail::SalvageLog{*damaged});
   if (encoding_width(v.encoding) == 2) {
     // Physical values of all 65536 codes, once per call: cheaper than
     // decoding each voxel when the box is large.
@@ -55,31 +58,43 @@ std::vector<float> Reader::read_box(const Box& box, unsigned lod) {
       for (std::uint32_t code = 0; code < 65536; ++code)
         table[code] = static_cast<float>(v.physical(decode_value(v.encoding, code)));
     }
-    detail::walk_box(access, v, impl_->ranges, box, lod, [&](const Box& region, std::uint32_t bits) {
-      const float value =
-          table.empty() ? static_cast<float>(v.physical(decode_value(v.encoding, bits))) : table[bits & 0xFFFFu];
-      detail::fill_region(out.data(), box, region, value);
-    });
+    detail::walk_box(
+        access, v, impl_->ranges, box, lod,
+        [&](const Box& region, std::uint32_t bits) {
+          const float value =
+              table.empty() ? static_cast<float>(v.physical(decode_value(v.encoding, bits))) : table[bits & 0xFFFFu];
+          detail::fill_region(out.data(), box, region, value);
+        },
+        log ? &*log : nullptr);
     return out;
   }
-  detail::walk_box(access, v, impl_->ranges, box, lod, [&](const Box& region, std::uint32_t bits) {
-    detail::fill_region(out.data(), box, region, static_cast<float>(v.physical(decode_value(v.encoding, bits))));
-  });
+  detail::walk_box(
+      access, v, impl_->ranges, box, lod,
+      [&](const Box& region, std::uint32_t bits) {
+        detail::fill_region(out.data(), box, region, static_cast<float>(v.physical(decode_value(v.encoding, bits))));
+      },
+      log ? &*log : nullptr);
   return out;
 }
 
-std::vector<std::uint8_t> Reader::read_box_bits(const Box& box, unsigned lod) {
+std::vector<std::uint8_t> Reader::read_box_bits(const Box& box, unsigned lod, std::vector<DamagedRegion>* damaged) {
   impl_->check_box(box, lod);
   const VolumeLayout& v = impl_->info.layout;
   const std::size_t width = encoding_width(v.encoding);
   std::vector<std::uint8_t> out(box.voxel_count() * width);
   detail::ImplAccess access{impl_.get()};
-  detail::walk_box(access, v, impl_->ranges, box, lod, [&](const Box& region, std::uint32_t bits) {
-    if (width == 2)
-      detail::fill_region(reinterpret_cast<std::uint16_t*>(out.data()), box, region, static_cast<std::uint16_t>(bits));
-    else
-      detail::fill_region(reinterpret_cast<std::uint32_t*>(out.data()), box, region, bits);
-  });
+  std::optional<detail::SalvageLog> log;
+  if (damaged) log.emplace(detail::SalvageLog{*damaged});
+  detail::walk_box(
+      access, v, impl_->ranges, box, lod,
+      [&](const Box& region, std::uint32_t bits) {
+        if (width == 2)
+          detail::fill_region(reinterpret_cast<std::uint16_t*>(out.data()), box, region,
+                              static_cast<std::uint16_t>(bits));
+        else
+          detail::fill_region(reinterpret_cast<std::uint32_t*>(out.data()), box, region, bits);
+      },
+      log ? &*log : nullptr);
   return out;
 }
 

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <unordered_map>
 
 #include "block_reader.hpp"
 #include "file_index.hpp"
@@ -20,7 +21,8 @@ struct Reader::Impl {
   detail::LevelRanges ranges;
   detail::BlockCache cache;
   IoStats stats;
-  std::uint64_t bytes_baseline = 0;  // file.bytes_read at the last reset
+  std::uint64_t bytes_baseline = 0;                 // file.bytes_read at the last reset
+  std::unordered_map<std::size_t, Error> failures;  // blocks that failed their checks
   // Blocks of the nodes and values streams, sorted by first element.
   std::vector<std::size_t> stream_blocks[4];
   // The block last used for each stream and level, held here as well as in
@@ -57,9 +59,18 @@ struct Reader::Impl {
       ++stats.cache_hits;
       return hit;
     }
+    // A block that failed once fails the same way again: do not re-read it
+    // (a salvaging walk meets it many times).
+    if (const auto failed = failures.find(index); failed != failures.end()) throw failed->second;
     const BlockInfo& b = info.blocks[index];
-    auto data = std::make_shared<const std::vector<std::uint8_t>>(
-        detail::read_and_decode_block(file, b, index, detail::stream_width(b.stream, info.layout.encoding)));
+    detail::BlockData data;
+    try {
+      data = std::make_shared<const std::vector<std::uint8_t>>(
+          detail::read_and_decode_block(file, b, index, detail::stream_width(b.stream, info.layout.encoding)));
+    } catch (const Error& e) {
+      failures.emplace(index, e);
+      throw;
+    }
     ++stats.blocks_decoded;
     cache.insert(index, data);
     return data;

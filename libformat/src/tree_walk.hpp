@@ -10,6 +10,7 @@
 #include "ivol/error.hpp"
 #include "ivol/geometry.hpp"
 #include "ivol/octree.hpp"
+#include "ivol/reader.hpp"
 
 namespace ivol::detail {
 
@@ -67,18 +68,44 @@ std::uint32_t lookup_bits(Access& access, const VolumeLayout& layout, const Leve
 // Calls sink(region, bits) for every leaf (or node of the target level) that
 // meets `box`, with `region` the part of the box it covers, in the
 // coordinates of level of detail `lod`.
+// Where a salvaging walk met damage: the region it filled from a coarser
+// level instead.
+struct SalvageLog {
+  std::vector<DamagedRegion>& regions;
+};
+
+// Calls sink(region, bits) for every leaf (or node of the target level) that
+// meets `box`, with `region` the part of the box it covers, in the
+// coordinates of level of detail `lod`. With `salvage`, a node or value that
+// cannot be read (damaged block, broken rule) does not stop the walk: the
+// region takes the value of the nearest readable ancestor (its average), and
+// the damage is logged.
 template <class Access, class Sink>
 void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ranges, const Box& box, unsigned lod,
-              Sink&& sink) {
+              Sink&& sink, SalvageLog* salvage = nullptr) {
   const unsigned target = layout.depth - lod;
   struct Frame {
     unsigned level;
     std::uint32_t i, j, k;
     std::uint64_t value_index;
     std::uint64_t inner;
+    std::uint32_t fallback;  // bits of the nearest readable ancestor (salvage)
+  };
+  auto log = [&](const Box& region, unsigned level, const Error& e) {
+    salvage->regions.push_back({region, level, e.what()});
+  };
+  // A value, or in salvage mode the fallback when it cannot be read.
+  auto value_or = [&](std::uint64_t index, std::uint32_t fallback, const Box& region, unsigned level) {
+    if (!salvage) return access.value_bits(index);
+    try {
+      return access.value_bits(index);
+    } catch (const Error& e) {
+      log(region, level, e);
+      return fallback;
+    }
   };
   std::vector<Frame> stack;
-  stack.push_back({0, 0, 0, 0, 0, layout.inner_count[0] ? 0 : kNoInner});
+  stack.push_back({0, 0, 0, 0, 0, layout.inner_count[0] ? 0 : kNoInner, 0});
   while (!stack.empty()) {
     const Frame f = stack.back();
     stack.pop_back();
@@ -98,11 +125,22 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
     }
     if (!meets) continue;
     if (f.inner == kNoInner || f.level == target) {
-      sink(region, access.value_bits(f.value_index));
+      sink(region, value_or(f.value_index, f.fallback, region, f.level));
       continue;
     }
-    const std::uint64_t word = access.node_word(f.inner);
-    check_node_word(layout, ranges, f.level, f.inner, word);
+    // In salvage mode, read this node's own average first: it stands in for
+    // whatever below it cannot be read.
+    const std::uint32_t own = salvage ? value_or(f.value_index, f.fallback, region, f.level) : 0;
+    std::uint64_t word;
+    try {
+      word = access.node_word(f.inner);
+      check_node_word(layout, ranges, f.level, f.inner, word);
+    } catch (const Error& e) {
+      if (!salvage) throw;
+      log(region, f.level, e);
+      sink(region, own);
+      continue;
+    }
     const unsigned mask = child_mask(word);
     const std::uint64_t first = first_inner_child(word);
     if (f.level + 1 == target) {
@@ -118,7 +156,7 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
           child.hi[a] = static_cast<std::uint32_t>(std::min<std::uint64_t>(lo + half, region.hi[a]));
           inside = inside && child.lo[a] < child.hi[a];
         }
-        if (inside) sink(child, access.value_bits(1 + 8 * f.inner + c));
+        if (inside) sink(child, value_or(1 + 8 * f.inner + c, own, child, f.level + 1));
       }
       continue;
     }
@@ -128,7 +166,7 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
       const auto cu = static_cast<unsigned>(c);
       const std::uint64_t child_inner = (mask >> cu) & 1u ? first + popcount8(mask & ((1u << cu) - 1u)) : kNoInner;
       stack.push_back({f.level + 1, 2 * f.i + (cu & 1u), 2 * f.j + ((cu >> 1) & 1u), 2 * f.k + ((cu >> 2) & 1u),
-                       1 + 8 * f.inner + cu, child_inner});
+                       1 + 8 * f.inner + cu, child_inner, own});
     }
   }
 }

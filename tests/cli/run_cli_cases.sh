@@ -52,6 +52,10 @@ size=$(stat -c %s "$work/damaged.ivol")
 printf '\x5a' | dd of="$work/damaged.ivol" bs=1 seek=$((size / 2)) conv=notrunc status=none
 case_ verify-damaged     2 "DAMAGED"                 -- "$IVOL" verify "$work/damaged.ivol"
 case_ verify-names-block 2 "checksum: "              -- "$IVOL" verify "$work/damaged.ivol"
+case_ extract-damaged    2 "checksum"                -- "$IVOL" extract "$work/damaged.ivol" --box 0,0,0,32,32,32 -o "$work/d1.raw"
+test ! -e "$work/d1.raw" && case_ damaged-no-output 0 "" -- true
+case_ extract-salvage    3 "salvaged"                -- "$IVOL" extract "$work/damaged.ivol" --box 0,0,0,32,32,32 --salvage -o "$work/d2.raw"
+case_ salvage-output     0 "131072"                  -- stat -c %s "$work/d2.raw"
 head -c $((size - 7)) "$work/demo/demo-octree.ivol" > "$work/truncated.ivol"
 case_ verify-truncated   2 "truncated"               -- "$IVOL" verify "$work/truncated.ivol"
 echo "hello" > "$work/text.ivol"

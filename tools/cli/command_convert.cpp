@@ -118,8 +118,8 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       if (global.verbose)
         std::cerr << "ivol convert: " << encoding_name(r.encoding) << " (physical = " << r.value_offset << " + "
                   << r.value_scale << " x stored), slabs of " << r.slab_slices << " slices, "
-                  << (options.keep ? "threshold " + std::to_string(r.threshold) + ", " : std::string())
-                  << r.kept_voxels << " voxels at full resolution\n";
+                  << (options.keep ? "threshold " + std::to_string(r.threshold) + ", " : std::string()) << r.kept_voxels
+                  << " voxels at full resolution\n";
       if (!global.quiet) {
         const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         const std::uint64_t bytes = shape.voxel_count() * convert::sample_size(shape.type);

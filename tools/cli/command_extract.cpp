@@ -17,6 +17,7 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
     std::string file, box, output, to, type, endian = "little";
     unsigned level = 0;
     bool force = false;
+    bool salvage = false;
   };
   auto s = std::make_shared<Settings>();
   cmd->add_option("FILE", s->file, "The .ivol file")->required();
@@ -27,6 +28,8 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
   cmd->add_option("--type", s->type, "u8, u16, i16, f16, f32 (default: u16 for uint16 files, else f32)");
   cmd->add_option("--endian", s->endian, "Raw output byte order")->check(CLI::IsMember({"little", "big"}));
   cmd->add_flag("-f,--force", s->force, "Replace the output if it exists");
+  cmd->add_flag("--salvage", s->salvage,
+                "Read past damaged blocks: their regions take the average of a coarser level (exit 3)");
   return [s, &global]() {
     const Format to = detect_format(s->output, s->to, "--to");
     if (to == Format::Ivol) throw Error(ErrorClass::InvalidArgument, "-o: extract writes dense formats, not .ivol");
@@ -49,12 +52,21 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
                                                      std::to_string(limit[2]) + " at level " +
                                                      std::to_string(s->level) + ")");
     const auto sink = create_sink(s->output, to, shape, options);
-    convert::export_from_ivol(reader, box, s->level, type, *sink);
+    std::vector<DamagedRegion> damaged;
+    convert::export_from_ivol(reader, box, s->level, type, *sink, {}, s->salvage ? &damaged : nullptr);
+    if (!damaged.empty()) {
+      std::cerr << "ivol extract: salvaged " << damaged.size()
+                << " region(s) from coarser levels because blocks are damaged:\n";
+      for (std::size_t n = 0; n < damaged.size() && n < 10; ++n)
+        std::cerr << "  " << damaged[n].region.to_string() << " (level " << damaged[n].level
+                  << "): " << damaged[n].message << "\n";
+      if (damaged.size() > 10) std::cerr << "  ... and " << damaged.size() - 10 << " more\n";
+    }
     if (!global.quiet)
       std::cout << s->output << ": " << convert::sample_type_name(type) << " " << shape.dims[0] << "x" << shape.dims[1]
                 << "x" << shape.dims[2] << " from " << s->file << " (read " << reader.io_stats().bytes_read << " of "
                 << reader.info().file_size << " bytes)\n";
-    return kExitOk;
+    return damaged.empty() ? kExitOk : kExitSalvaged;
   };
 }
 

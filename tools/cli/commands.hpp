@@ -11,6 +11,7 @@ namespace ivol::cli {
 constexpr int kExitOk = 0;
 constexpr int kExitUsage = 1;    // bad command line
 constexpr int kExitFailure = 2;  // bad input file, damaged file, I/O error
+constexpr int kExitSalvaged = 3;  // output written, but parts of it came from coarser levels (--salvage)
 
 struct GlobalOptions {
   bool quiet = false;

@@ -309,7 +309,7 @@ class MemorySink final : public SlabWriter {
 }  // namespace
 
 void export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type, SlabWriter& sink,
-                      const Progress& progress) {
+                      const Progress& progress, std::vector<DamagedRegion>* damaged) {
   if (box.empty()) box = full_box(reader.layout().dims, lod);
   const std::uint64_t slice = std::uint64_t{box.hi[0] - box.lo[0]} * (box.hi[1] - box.lo[1]);
   // Slabs of about 64 MiB of float32, whole slices.
@@ -320,7 +320,7 @@ void export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type, Sl
     Box part = box;
     part.lo[2] = z;
     part.hi[2] = std::min(box.hi[2], z + slab);
-    const std::vector<float> values = reader.read_box(part, lod);
+    const std::vector<float> values = reader.read_box(part, lod, damaged);
     samples.resize(values.size() * sample_size(type));
     convert_samples(values, type, samples.data());
     sink.write(samples.data(), part.hi[2] - part.lo[2]);

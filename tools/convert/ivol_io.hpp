@@ -61,8 +61,10 @@ ImportReport import_to_ivol(const DenseVolume& volume, const std::string& path, 
 DenseVolume export_shape(const Reader& reader, const Box& box, unsigned lod, SampleType type);
 // Streams the box (full box when empty) to `sink`, created for
 // export_shape(...): physical values, rounded and clamped for integers.
+// With `damaged`, reads past damaged blocks (Reader::read_box's salvage) and
+// lists the regions filled from coarser levels.
 void export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type, SlabWriter& sink,
-                      const Progress& progress = {});
+                      const Progress& progress = {}, std::vector<DamagedRegion>* damaged = nullptr);
 // The same into memory.
 DenseVolume export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type);
 // The sample type that holds a file's values without loss when there is one

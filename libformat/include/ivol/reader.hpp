@@ -50,6 +50,15 @@ struct FileInfo {
   std::vector<BlockInfo> blocks;
 };
 
+// A region a salvaging read filled from a coarser level because a block it
+// needed is damaged: `region` in the coordinates of the read's level of
+// detail, `level` the octree level where the damage was met.
+struct DamagedRegion {
+  Box region;
+  unsigned level = 0;
+  std::string message;
+};
+
 struct IoStats {
   std::uint64_t bytes_read = 0;      // bytes read from the file, all parts
   std::uint64_t blocks_decoded = 0;  // blocks read, checked and decompressed
@@ -76,9 +85,13 @@ class Reader {
 
   // Physical values of `box` (in the coordinates of level of detail `lod`),
   // [z][y][x] with x fastest.
-  std::vector<float> read_box(const Box& box, unsigned lod = 0);
+  // With `damaged`, blocks that fail their checks do not stop the read: their
+  // regions take the average of the nearest readable ancestor (a coarser
+  // level) and are listed in *damaged (salvage).
+  std::vector<float> read_box(const Box& box, unsigned lod = 0, std::vector<DamagedRegion>* damaged = nullptr);
   // Stored bits of `box`, encoding_width() bytes per voxel, little-endian.
-  std::vector<std::uint8_t> read_box_bits(const Box& box, unsigned lod = 0);
+  std::vector<std::uint8_t> read_box_bits(const Box& box, unsigned lod = 0,
+                                          std::vector<DamagedRegion>* damaged = nullptr);
   std::vector<float> read_slice(Axis axis, std::uint32_t index);
   // The whole volume at 1/2^lod resolution (spec §12.3).
   std::vector<float> read_lod(unsigned lod);
