@@ -107,9 +107,9 @@ TEST_F(Refusal, HeaderChecksum) {
 }
 
 TEST_F(Refusal, UnknownStructureKindAndEncoding) {
-  bytes_[index_at(8)] = 2;
+  bytes_[index_at(8)] = 5;
   test::refresh_container_checksums(bytes_);
-  expect_refused(ErrorClass::UnsupportedFeature, "structure_kind 2");
+  expect_refused(ErrorClass::UnsupportedFeature, "structure_kind 5");
   bytes_[index_at(8)] = 1;
   bytes_[index_at(9)] = 4;
   test::refresh_container_checksums(bytes_);

@@ -3,8 +3,10 @@
 // memory the paper's arithmetic predicts.
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <random>
 
+#include "ivol/check.hpp"
 #include "ivol/reader.hpp"
 #include "ivol/structures.hpp"
 #include "test_support.hpp"
@@ -151,11 +153,37 @@ TEST(StructureWriter, OctreeFileHasTheGeneratedStructureAndValues) {
     const std::string path = test::temp_path(std::string(structure_name(kind)) + ".ivol");
     write_structure(*s, path, Metadata{}, options);
     Reader reader(path);
+    EXPECT_EQ(reader.layout().kind, kind) << "written in its own form";
+    EXPECT_EQ(reader.info().version_minor, kind == StructureKind::Octree ? 0 : 1);
     std::vector<float> expected(dense.size());
     s->to_dense(expected.data());
     EXPECT_EQ(reader.read_lod(0), expected);
+    const CheckReport report = check_file(path);
+    EXPECT_TRUE(report.ok()) << report.problems.at(0).message;
     if (kind == StructureKind::Octree)
       EXPECT_EQ(reader.layout().total_inner() * 8, s->memory().structure_bytes) << "the file is the generated octree";
+    // Levels of detail: the box filter of the dense volume (spec §12.3).
+    std::vector<std::uint32_t> bits(expected.size());
+    for (std::size_t i = 0; i < bits.size(); ++i) bits[i] = test::reference_encode(ValueEncoding::Float32, expected[i]);
+    for (unsigned lod = 1; lod <= 2; ++lod) {
+      const auto reference = test::reference_lod(bits, dims, ValueEncoding::Float32, lod);
+      const auto got = reader.read_box_bits(full_box(dims, lod), lod);
+      ASSERT_EQ(got.size(), reference.size() * 4);
+      for (std::size_t i = 0; i < reference.size(); ++i) {
+        std::uint32_t g;
+        std::memcpy(&g, got.data() + 4 * i, 4);
+        ASSERT_LE(test::ulp_distance(ValueEncoding::Float32, g, reference[i]), 1u) << "lod " << lod << " at " << i;
+      }
+    }
+    // Voxel, box and slice reads agree with the whole.
+    const Box box{{3, 5, 7}, {41, 22, 30}};
+    const auto part = reader.read_box(box);
+    std::size_t n = 0;
+    for (std::uint32_t z = box.lo[2]; z < box.hi[2]; ++z)
+      for (std::uint32_t y = box.lo[1]; y < box.hi[1]; ++y)
+        for (std::uint32_t x = box.lo[0]; x < box.hi[0]; ++x)
+          ASSERT_EQ(part[n++], expected[(std::uint64_t{z} * dims[1] + y) * dims[0] + x]);
+    EXPECT_EQ(reader.voxel_value(49, 39, 29), expected.back());
   }
 }
 

@@ -31,7 +31,7 @@ std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const Bl
   }
   // A block of a stream this reader does not know (ignorable, or the index
   // would have been refused): its CRC is all that can be checked.
-  if (block.stream < 1 || block.stream > 3) return stored;
+  if (block.stream < 1 || block.stream > 5) return stored;
   const std::size_t decoded_size = std::size_t{block.element_count} * width;
   if (block.codec == 0) return stored;
   if (block.codec != 1)

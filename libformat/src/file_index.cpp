@@ -18,6 +18,10 @@ const char* stream_name(std::uint8_t stream) {
       return "nodes";
     case 3:
       return "values";
+    case 4:
+      return "borders";
+    case 5:
+      return "cells";
     default:
       return "unknown stream";
   }
@@ -27,6 +31,20 @@ namespace detail {
 namespace {
 
 using layout::load;
+
+const char* kind_name(StructureKind kind) {
+  switch (kind) {
+    case StructureKind::Octree:
+      return "octree";
+    case StructureKind::Regular:
+      return "regular grid";
+    case StructureKind::Rectilinear:
+      return "rectilinear grid";
+    case StructureKind::Nested:
+      return "nested grid";
+  }
+  return "?";
+}
 
 std::string hex32(std::uint32_t v) {
   char text[16];
@@ -129,16 +147,22 @@ class StructureReader {
       fail(ErrorClass::Malformed, "index",
            "fixed_size " + std::to_string(fixed_size) + " is outside 48 .. 4096 or the index");
     const std::uint8_t structure = p[layout::kIndexStructureKind];
-    if (structure != layout::kStructureOctree)
+    if (structure < 1 || structure > 4)
       fail(ErrorClass::UnsupportedFeature, "index",
-           "structure_kind " + std::to_string(structure) + " is not known (1 = octree)");
+           "structure_kind " + std::to_string(structure) +
+               " is not known (1 = octree, 2 = regular, 3 = rectilinear, 4 = nested)");
     const std::uint8_t encoding = p[layout::kIndexValueEncoding];
     if (!is_known_encoding(encoding))
       fail(ErrorClass::UnsupportedFeature, "index", "value_encoding " + std::to_string(encoding) + " is not known");
     VolumeLayout& v = info_.layout;
+    v.kind = static_cast<StructureKind>(structure);
     v.encoding = static_cast<ValueEncoding>(encoding);
     v.depth = p[layout::kIndexDepth];
-    if (p[layout::kIndexReserved] != 0) fail(ErrorClass::Malformed, "index", "reserved byte 11 is not zero");
+    v.cell_log2 = p[layout::kIndexCellLog2];
+    if (v.kind == StructureKind::Nested && (v.cell_log2 < 1 || v.cell_log2 > 31))
+      fail(ErrorClass::Malformed, "index", "cell_log2 " + std::to_string(v.cell_log2) + " is outside 1 .. 31");
+    if (v.kind != StructureKind::Nested && v.cell_log2 != 0)
+      fail(ErrorClass::Malformed, "index", "reserved byte 11 is not zero");
     for (int a = 0; a < 3; ++a) {
       v.dims[a] = load<std::uint32_t>(p + layout::kIndexSizeX + 4 * a);
       if (v.dims[a] == 0) fail(ErrorClass::Malformed, "index", std::string("size_") + "xyz"[a] + " is 0");
@@ -172,6 +196,11 @@ class StructureReader {
     v.inner_count.resize(v.depth + 1);
     for (unsigned l = 0; l <= v.depth; ++l) v.inner_count[l] = load<std::uint64_t>(p + 8 * l);
     auto bad = [&](const std::string& what) { fail(ErrorClass::Malformed, "level table", what); };
+    if (v.kind != StructureKind::Octree) {
+      for (unsigned l = 0; l <= v.depth; ++l)
+        if (v.inner_count[l] != 0) bad("inner_count[" + std::to_string(l) + "] is not 0 for a " + kind_name(v.kind));
+      return;
+    }
     if (v.inner_count[0] > 1) bad("inner_count[0] is " + std::to_string(v.inner_count[0]) + ", more than one root");
     if (v.inner_count[v.depth] != 0) bad("inner_count[D] is not 0: voxels cannot be subdivided");
     // Counts are bounded before any arithmetic on them, so nothing overflows:
@@ -234,6 +263,12 @@ class StructureReader {
       if (blk.level > v.depth) bad(ErrorClass::Malformed, "level " + std::to_string(blk.level) + " is deeper than D");
       std::uint64_t lo = 0;
       std::uint64_t hi = 0;
+      const bool octree = v.kind == StructureKind::Octree;
+      if ((blk.stream == 2 && !octree) || (blk.stream == 4 && v.kind != StructureKind::Rectilinear) ||
+          (blk.stream == 5 && v.kind != StructureKind::Nested))
+        bad(ErrorClass::Malformed,
+            std::string(stream_name(blk.stream)) + " blocks do not belong in a " + kind_name(v.kind) + " file");
+      if (!octree && blk.level != 0) bad(ErrorClass::Malformed, "level must be 0 outside octrees");
       if (blk.stream == 1) {
         ++metadata_blocks;
         if (blk.level != 0 || blk.first_element != 0)
@@ -241,6 +276,7 @@ class StructureReader {
         if (decoded > layout::kMaxMetadataBytes) bad(ErrorClass::Malformed, "metadata exceeds 16 MiB");
         continue;
       }
+      if (!octree) continue;  // ranges are checked by coverage below
       if (blk.stream == 2) {
         lo = v.first_inner(blk.level);
         hi = lo + v.inner_count[blk.level];
@@ -261,12 +297,38 @@ class StructureReader {
     if (metadata_blocks != 1)
       fail(ErrorClass::Malformed, "block table",
            std::to_string(metadata_blocks) + " metadata blocks (exactly 1 required)");
-    check_coverage(2, v.total_inner());
-    check_coverage(3, v.total_values());
+    switch (v.kind) {
+      case StructureKind::Octree:
+        check_coverage(2, v.total_inner());
+        check_coverage(3, v.total_values());
+        break;
+      case StructureKind::Regular:
+        check_coverage(3, voxel_count(v.dims));
+        break;
+      case StructureKind::Rectilinear: {
+        const std::uint64_t borders = check_coverage(4, kAnyTotal);
+        if (borders == 0) fail(ErrorClass::Malformed, "block table", "a rectilinear grid needs a borders stream");
+        if (borders > std::uint64_t{v.dims[0]} + v.dims[1] + v.dims[2] + 3)
+          fail(ErrorClass::Malformed, "block table",
+               "the borders stream holds more than size_x + size_y + size_z + 3 elements");
+        check_coverage(3, kAnyTotal);
+        break;
+      }
+      case StructureKind::Nested: {
+        const std::uint64_t edge = std::uint64_t{1} << v.cell_log2;
+        std::uint64_t cells = 1;
+        for (int a = 0; a < 3; ++a) cells *= (v.dims[a] + edge - 1) / edge;
+        check_coverage(5, cells);
+        check_coverage(3, kAnyTotal);
+        break;
+      }
+    }
   }
 
-  // Blocks of a stream, in order of first_element, cover 0 .. total exactly.
-  void check_coverage(std::uint8_t stream, std::uint64_t total) {
+  // Blocks of a stream, in order of first_element, cover 0 .. total exactly
+  // (any total with kAnyTotal: the caller checks it later). Returns the total.
+  static constexpr std::uint64_t kAnyTotal = ~std::uint64_t{0};
+  std::uint64_t check_coverage(std::uint8_t stream, std::uint64_t total) {
     std::vector<const BlockInfo*> list;
     for (const auto& b : info_.blocks)
       if (b.stream == stream) list.push_back(&b);
@@ -280,10 +342,11 @@ class StructureReader {
                  (b->first_element > next ? " is in no block" : " is in two blocks"));
       next += b->element_count;
     }
-    if (next != total)
+    if (total != kAnyTotal && next != total)
       fail(ErrorClass::Malformed, "block table",
            std::string(stream_name(stream)) + ": blocks hold " + std::to_string(next) +
-               " elements, the level table needs " + std::to_string(total));
+               " elements, the structure needs " + std::to_string(total));
+    return next;
   }
 
   RandomAccessFile& file_;
@@ -294,7 +357,7 @@ class StructureReader {
 
 }  // namespace
 
-bool is_known_stream(std::uint8_t stream) { return stream >= 1 && stream <= 3; }
+bool is_known_stream(std::uint8_t stream) { return stream >= 1 && stream <= 5; }
 
 std::size_t stream_width(std::uint8_t stream, ValueEncoding encoding) {
   switch (stream) {
@@ -304,6 +367,10 @@ std::size_t stream_width(std::uint8_t stream, ValueEncoding encoding) {
       return 8;
     case 3:
       return encoding_width(encoding);
+    case 4:
+      return 4;
+    case 5:
+      return 8;
     default:
       return 1;
   }

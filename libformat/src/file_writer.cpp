@@ -76,7 +76,9 @@ FileWriter::FileWriter(const std::string& path, const VolumeLayout& layout) : pa
   unsigned char header[layout::kHeaderSize] = {};
   std::memcpy(header, layout::kSignature.data(), 8);
   layout::store<std::uint16_t>(header + layout::kHeaderVersionMajor, layout::kVersionMajor);
-  layout::store<std::uint16_t>(header + layout::kHeaderVersionMinor, layout::kVersionMinor);
+  // Octree files stay version 1.0, so that 1.0 readers read them.
+  layout::store<std::uint16_t>(header + layout::kHeaderVersionMinor,
+                               layout_.kind == StructureKind::Octree ? 0 : layout::kVersionMinor);
   layout::store<std::uint32_t>(header + layout::kHeaderSizeField, layout::kHeaderSize);
   layout::store<std::uint32_t>(header + layout::kHeaderSize - 4, crc32c(header, layout::kHeaderSize - 4));
   write_all(header, sizeof header, "header");
@@ -124,7 +126,8 @@ void FileWriter::finish(const Metadata& metadata, const std::vector<std::uint64_
   unsigned char* p = index.data();
   std::memcpy(p, layout::kIndexSignature.data(), 4);
   layout::store<std::uint32_t>(p + layout::kIndexFixedSizeField, layout::kIndexFixedSize);
-  p[layout::kIndexStructureKind] = layout::kStructureOctree;
+  p[layout::kIndexStructureKind] = static_cast<std::uint8_t>(layout_.kind);
+  p[layout::kIndexCellLog2] = layout_.kind == StructureKind::Nested ? layout_.cell_log2 : 0;
   p[layout::kIndexValueEncoding] = static_cast<std::uint8_t>(layout_.encoding);
   p[layout::kIndexDepth] = static_cast<std::uint8_t>(layout_.depth);
   for (int a = 0; a < 3; ++a) layout::store<std::uint32_t>(p + layout::kIndexSizeX + 4 * a, layout_.dims[a]);

@@ -18,7 +18,7 @@ constexpr std::array<unsigned char, 8> kEndSignature = {'I', 'V', 'O', 'L', '_',
 constexpr std::array<unsigned char, 4> kIndexSignature = {'I', 'V', 'I', 'X'};
 
 constexpr std::uint16_t kVersionMajor = 1;
-constexpr std::uint16_t kVersionMinor = 0;
+constexpr std::uint16_t kVersionMinor = 1;  // written only for the kinds of spec §8A
 
 // Header (§4)
 constexpr std::uint32_t kHeaderSize = 40;
@@ -45,7 +45,7 @@ constexpr std::size_t kIndexFixedSizeField = 4;
 constexpr std::size_t kIndexStructureKind = 8;
 constexpr std::size_t kIndexValueEncoding = 9;
 constexpr std::size_t kIndexDepth = 10;
-constexpr std::size_t kIndexReserved = 11;
+constexpr std::size_t kIndexCellLog2 = 11;  // nested grid; reserved otherwise
 constexpr std::size_t kIndexSizeX = 12;
 constexpr std::size_t kIndexScale = 24;
 constexpr std::size_t kIndexOffset = 32;

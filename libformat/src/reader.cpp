@@ -12,6 +12,55 @@
 
 namespace ivol {
 
+namespace {
+
+// Stored bits of every voxel of `box` at level of detail `lod` for the grid
+// structures of spec §8A: the cells' values at full resolution, and the mean
+// of §12.3 (binary64, z then y then x) at coarser levels.
+std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigned lod) {
+  const VolumeLayout& v = impl.info.layout;
+  const detail::GridStructure& grid = *impl.grid;
+  if (lod == 0) {
+    std::vector<std::uint32_t> bits(box.voxel_count());
+    grid.for_each_cell(box, [&](const Box& region, std::uint64_t index) {
+      detail::fill_region(bits.data(), box, region, impl.value_bits(index));
+    });
+    return bits;
+  }
+  Box full;
+  for (int a = 0; a < 3; ++a) {
+    full.lo[a] = box.lo[a] << lod;
+    full.hi[a] = static_cast<std::uint32_t>(std::min<std::uint64_t>(std::uint64_t{box.hi[a]} << lod, v.dims[a]));
+  }
+  const std::vector<std::uint32_t> fine = grid_bits(impl, full, 0);
+  const std::uint64_t fx = full.hi[0] - full.lo[0], fy = full.hi[1] - full.lo[1];
+  std::vector<std::uint32_t> bits(box.voxel_count());
+  std::size_t n = 0;
+  for (std::uint32_t k = box.lo[2]; k < box.hi[2]; ++k)
+    for (std::uint32_t j = box.lo[1]; j < box.hi[1]; ++j)
+      for (std::uint32_t i = box.lo[0]; i < box.hi[0]; ++i) {
+        double sum = 0.0;
+        std::uint64_t count = 0;
+        const std::uint32_t c[3] = {i, j, k};
+        std::uint64_t lo[3], hi[3];
+        for (int a = 0; a < 3; ++a) {
+          lo[a] = std::uint64_t{c[a]} << lod;
+          hi[a] = std::min<std::uint64_t>((std::uint64_t{c[a]} + 1) << lod, v.dims[a]);
+        }
+        for (std::uint64_t z = lo[2]; z < hi[2]; ++z)
+          for (std::uint64_t y = lo[1]; y < hi[1]; ++y)
+            for (std::uint64_t x = lo[0]; x < hi[0]; ++x) {
+              sum = sum +
+                    decode_value(v.encoding, fine[((z - full.lo[2]) * fy + (y - full.lo[1])) * fx + (x - full.lo[0])]);
+              ++count;
+            }
+        bits[n++] = encode_value(v.encoding, sum / static_cast<double>(count));
+      }
+  return bits;
+}
+
+}  // namespace
+
 Reader::Reader(const std::string& path, const ReaderOptions& options) : impl_(std::make_unique<Impl>(path, options)) {}
 Reader::~Reader() = default;
 Reader::Reader(Reader&&) noexcept = default;
@@ -33,6 +82,7 @@ void Reader::reset_io_stats() {
 
 std::uint32_t Reader::voxel_bits(std::uint32_t x, std::uint32_t y, std::uint32_t z, unsigned lod) {
   impl_->check_box(Box{{x, y, z}, {x + 1, y + 1, z + 1}}, lod);
+  if (impl_->grid) return grid_bits(*impl_, Box{{x, y, z}, {x + 1, y + 1, z + 1}}, lod)[0];
   detail::ImplAccess access{impl_.get()};
   return detail::lookup_bits(access, impl_->info.layout, impl_->ranges, x, y, z, lod);
 }
@@ -46,6 +96,12 @@ std::vector<float> Reader::read_box(const Box& box, unsigned lod, std::vector<Da
   impl_->check_box(box, lod);
   const VolumeLayout& v = impl_->info.layout;
   std::vector<float> out(box.voxel_count());
+  if (impl_->grid) {
+    const std::vector<std::uint32_t> bits = grid_bits(*impl_, box, lod);
+    for (std::size_t i = 0; i < bits.size(); ++i)
+      out[i] = static_cast<float>(v.physical(decode_value(v.encoding, bits[i])));
+    return out;
+  }
   detail::ImplAccess access{impl_.get()};
   std::optional<detail::SalvageLog> log;
   if (damaged) log.emplace(detail::SalvageLog{*damaged});
@@ -82,6 +138,11 @@ std::vector<std::uint8_t> Reader::read_box_bits(const Box& box, unsigned lod, st
   const VolumeLayout& v = impl_->info.layout;
   const std::size_t width = encoding_width(v.encoding);
   std::vector<std::uint8_t> out(box.voxel_count() * width);
+  if (impl_->grid) {
+    const std::vector<std::uint32_t> bits = grid_bits(*impl_, box, lod);
+    for (std::size_t i = 0; i < bits.size(); ++i) std::memcpy(out.data() + i * width, &bits[i], width);
+    return out;
+  }
   detail::ImplAccess access{impl_.get()};
   std::optional<detail::SalvageLog> log;
   if (damaged) log.emplace(detail::SalvageLog{*damaged});
@@ -101,6 +162,21 @@ std::vector<std::uint8_t> Reader::read_box_bits(const Box& box, unsigned lod, st
 void Reader::visit_leaves(const Box& box, unsigned lod, const std::function<void(const Box&, double)>& visit) {
   impl_->check_box(box, lod);
   const VolumeLayout& v = impl_->info.layout;
+  if (impl_->grid && lod == 0) {
+    impl_->grid->for_each_cell(box, [&](const Box& region, std::uint64_t index) {
+      visit(region, v.physical(decode_value(v.encoding, impl_->value_bits(index))));
+    });
+    return;
+  }
+  if (impl_->grid) {  // a level of detail of a grid: each element on its own
+    const std::vector<std::uint32_t> bits = grid_bits(*impl_, box, lod);
+    std::size_t n = 0;
+    for (std::uint32_t z = box.lo[2]; z < box.hi[2]; ++z)
+      for (std::uint32_t y = box.lo[1]; y < box.hi[1]; ++y)
+        for (std::uint32_t x = box.lo[0]; x < box.hi[0]; ++x)
+          visit(Box{{x, y, z}, {x + 1, y + 1, z + 1}}, v.physical(decode_value(v.encoding, bits[n++])));
+    return;
+  }
   detail::ImplAccess access{impl_.get()};
   detail::walk_box(access, v, impl_->ranges, box, lod, [&](const Box& region, std::uint32_t bits) {
     visit(region, v.physical(decode_value(v.encoding, bits)));

@@ -3,10 +3,12 @@
 
 #include <algorithm>
 #include <cstring>
+#include <optional>
 #include <unordered_map>
 
 #include "block_reader.hpp"
 #include "file_index.hpp"
+#include "grid_structure.hpp"
 #include "ivol/error.hpp"
 #include "ivol/reader.hpp"
 #include "layout.hpp"
@@ -23,8 +25,9 @@ struct Reader::Impl {
   IoStats stats;
   std::uint64_t bytes_baseline = 0;                 // file.bytes_read at the last reset
   std::unordered_map<std::size_t, Error> failures;  // blocks that failed their checks
+  std::optional<detail::GridStructure> grid;        // structures of spec §8A
   // Blocks of the nodes and values streams, sorted by first element.
-  std::vector<std::size_t> stream_blocks[4];
+  std::vector<std::size_t> stream_blocks[6];
   // The block last used for each stream and level, held here as well as in
   // the cache: walks stay within one block per level for long stretches, and
   // then find their element without a cache lookup.
@@ -34,8 +37,8 @@ struct Reader::Impl {
     std::uint64_t count = 0;
     detail::BlockData data;
   };
-  std::vector<Hint> hint[4];
-  std::size_t last_level[4] = {0, 0, 0, 0};  // the hint that served the last lookup
+  std::vector<Hint> hint[6];
+  std::size_t last_level[6] = {0, 0, 0, 0, 0, 0};  // the hint that served the last lookup
 
   Impl(const std::string& path, const ReaderOptions& options)
       : file(path), info(detail::read_file_structure(file)), ranges(info.layout), cache(options.cache_bytes) {
@@ -52,6 +55,28 @@ struct Reader::Impl {
     } catch (const Error& e) {
       throw Error(e.error_class(), file.path() + ": " + e.what());
     }
+    if (info.layout.kind != StructureKind::Octree) load_grid();
+  }
+
+  // The borders or cell words of a grid structure (spec §8A), checked.
+  void load_grid() {
+    std::vector<std::uint32_t> borders;
+    std::vector<std::uint64_t> cells;
+    for (std::size_t b : stream_blocks[4]) {
+      const auto data = block(b);
+      const std::size_t at = borders.size();
+      borders.resize(at + data->size() / 4);
+      std::memcpy(borders.data() + at, data->data(), data->size());
+    }
+    for (std::size_t b : stream_blocks[5]) {
+      const auto data = block(b);
+      const std::size_t at = cells.size();
+      cells.resize(at + data->size() / 8);
+      std::memcpy(cells.data() + at, data->data(), data->size());
+    }
+    std::uint64_t values = 0;
+    for (std::size_t b : stream_blocks[3]) values += info.blocks[b].element_count;
+    grid.emplace(info.layout, std::move(borders), std::move(cells), values, file.path());
   }
 
   detail::BlockData block(std::size_t index) {

@@ -38,12 +38,15 @@ class RectilinearStructure final : public VoxelStructure {
   RectilinearStructure(const NeedMask& mask, std::uint32_t max_interval) {
     dims_ = mask.dims;
     std::array<std::vector<Interval>, 3> axes;
-    for (int a = 0; a < 3; ++a) axes[a] = intervals(mask, a, max_interval);
+    for (int a = 0; a < 3; ++a) {
+      axes[a] = intervals(mask, a, max_interval);
+      for (const Interval& iv : axes[a]) borders_[a].push_back(iv.start);
+      borders_[a].push_back(dims_[a]);
+    }
     // Bricks: runs of equal-sized intervals along each axis, crossed.
     std::array<std::vector<Interval>, 3> runs;  // start, interval size; count in run_counts
     std::array<std::vector<std::uint32_t>, 3> run_counts;
     for (int a = 0; a < 3; ++a) {
-      borders_ += axes[a].size() + 1;
       for (const Interval& iv : axes[a]) {
         if (!runs[a].empty() && runs[a].back().size == iv.size)
           ++run_counts[a].back();
@@ -62,7 +65,9 @@ class RectilinearStructure final : public VoxelStructure {
   }
   StructureKind kind() const override { return StructureKind::Rectilinear; }
   // 16-bit values; borders as 32-bit positions (three lists of n + 1).
-  StructureMemory memory() const override { return {2 * voxel_count(), 4 * borders_}; }
+  StructureMemory memory() const override {
+    return {2 * voxel_count(), 4 * (borders_[0].size() + borders_[1].size() + borders_[2].size())};
+  }
 
  private:
   static std::vector<Interval> intervals(const NeedMask& mask, int axis, std::uint32_t max_interval) {
@@ -91,13 +96,13 @@ class RectilinearStructure final : public VoxelStructure {
     }
     return out;
   }
-  std::uint64_t borders_ = 0;
 };
 
 class NestedStructure final : public VoxelStructure {
  public:
   NestedStructure(const NeedMask& mask, std::uint32_t cell) {
     dims_ = mask.dims;
+    nested_cell_ = cell;
     const Dims cells{(dims_[0] + cell - 1) / cell, (dims_[1] + cell - 1) / cell, (dims_[2] + cell - 1) / cell};
     cells_ = ivol::voxel_count(cells);
     for (std::uint32_t k = 0; k < cells[2]; ++k)

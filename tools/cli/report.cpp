@@ -1,5 +1,7 @@
 #include "report.hpp"
 
+#include "ivol/structures.hpp"
+
 #include <unistd.h>
 
 #include <cstdio>
@@ -57,7 +59,8 @@ nlohmann::json describe_file(Reader& reader) {
   return {
       {"file", reader.path()},
       {"format_version", std::to_string(info.version_major) + "." + std::to_string(info.version_minor)},
-      {"structure", "octree"},
+      {"structure", structure_name(v.kind)},
+      {"nested_cell", v.kind == StructureKind::Nested ? (std::uint64_t{1} << v.cell_log2) : 0},
       {"dimensions", {v.dims[0], v.dims[1], v.dims[2]}},
       {"depth", v.depth},
       {"value_encoding", encoding_name(v.encoding)},

@@ -14,6 +14,9 @@ using Dims = std::array<std::uint32_t, 3>;  // voxels along x, y, z
 
 enum class Axis { X = 0, Y = 1, Z = 2 };
 
+// The structures a file can hold (spec §6.1: structure_kind), with their codes.
+enum class StructureKind : std::uint8_t { Octree = 1, Regular = 2, Rectilinear = 3, Nested = 4 };
+
 // A half-open box of voxels [lo, hi) in the coordinates of one level of detail.
 struct Box {
   std::array<std::uint32_t, 3> lo{0, 0, 0};
@@ -36,6 +39,8 @@ Box slice_box(const Dims& dims, Axis axis, std::uint32_t index);
 // Everything needed to decode the arrays: what the index's fixed part and level
 // table say (§6.1, §6.2), with the derived ranges.
 struct VolumeLayout {
+  StructureKind kind = StructureKind::Octree;
+  std::uint8_t cell_log2 = 0;  // nested grid: log2 of the cell edge (spec §8A.3)
   Dims dims{1, 1, 1};
   unsigned depth = 0;
   ValueEncoding encoding = ValueEncoding::Binary16;

@@ -23,7 +23,6 @@
 
 namespace ivol {
 
-enum class StructureKind { Regular, Rectilinear, Nested, Octree };
 const char* structure_name(StructureKind kind);  // "regular", "rectilinear", "nested", "octree"
 bool parse_structure(const std::string& name, StructureKind& out);
 
@@ -73,6 +72,17 @@ class VoxelStructure {
   std::vector<Brick> bricks_;
   std::uint64_t voxel_total_ = 0;
 
+ public:
+  // The rectilinear grid's border positions along x, y, z (spec §8A.2); empty
+  // for the other kinds.
+  const std::array<std::vector<std::uint32_t>, 3>& borders() const { return borders_; }
+  // The nested grid's cell edge (a power of two); 0 for the other kinds.
+  std::uint32_t nested_cell() const { return nested_cell_; }
+
+ protected:
+  std::array<std::vector<std::uint32_t>, 3> borders_;
+  std::uint32_t nested_cell_ = 0;
+
  private:
   void build_lookup() const;
   mutable std::vector<float> values_;
@@ -114,13 +124,11 @@ struct GenerationOptions {
 std::unique_ptr<VoxelStructure> generate_structure(StructureKind kind, const NeedMask& mask,
                                                    const GenerationOptions& options = {});
 
-// Writes a structure as an .ivol file (the format holds octrees; the
-// rectilinear and nested kinds have no format of their own yet), slab by slab
-// through StreamingOctreeWriter, never the dense volume. The octree kind keeps
-// full resolution exactly where it has fine voxels and holds each coarse
-// voxel as one leaf; other kinds are written losslessly (their coarse voxels
-// become the largest octree leaves that fit in them). `options.build` gives
-// the value encoding.
+// Writes a structure as an .ivol file of its own kind: the octree through
+// StreamingOctreeWriter, slab by slab (full resolution exactly where it has
+// fine voxels, each coarse voxel one leaf); the regular, rectilinear and
+// nested grids in their form of spec §8A. `options.build` gives the value
+// encoding (and scale and offset); the values must exist.
 StreamingResult write_structure(const VoxelStructure& structure, const std::string& path, const Metadata& metadata,
                                 StreamingOptions options = {});
 

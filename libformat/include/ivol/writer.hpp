@@ -14,7 +14,7 @@
 
 namespace ivol {
 
-enum class Stream : std::uint8_t { Metadata = 1, Nodes = 2, Values = 3 };
+enum class Stream : std::uint8_t { Metadata = 1, Nodes = 2, Values = 3, Borders = 4, Cells = 5 };
 enum class Codec : std::uint8_t { Stored = 0, Zstd = 1 };
 
 struct WriteOptions {

@@ -1,0 +1,82 @@
+#include "grid_structure.hpp"
+
+#include "ivol/error.hpp"
+
+namespace ivol::detail {
+
+GridStructure::GridStructure(const VolumeLayout& layout, std::vector<std::uint32_t> borders,
+                             std::vector<std::uint64_t> cells, std::uint64_t values_in_file, const std::string& where)
+    : layout_(layout), cells_(std::move(cells)) {
+  auto fail = [&](const std::string& part, const std::string& what) {
+    throw Error(ErrorClass::Malformed, where + ": " + part + ": " + what);
+  };
+  const Dims& d = layout.dims;
+  std::uint64_t total = 0;
+  switch (layout.kind) {
+    case StructureKind::Regular:
+      total = voxel_count(d);
+      break;
+    case StructureKind::Rectilinear: {
+      // Three lists, each from 0 strictly up to the size along its axis.
+      std::size_t at = 0;
+      total = 1;
+      for (int a = 0; a < 3; ++a) {
+        const std::string axis = std::string("borders along ") + "xyz"[a];
+        if (at >= borders.size() || borders[at] != 0) fail(axis, "the list does not start with 0");
+        std::vector<std::uint32_t>& list = borders_[a];
+        list.push_back(0);
+        ++at;
+        while (true) {
+          if (at >= borders.size()) fail(axis, "the list does not end with " + std::to_string(d[a]));
+          const std::uint32_t b = borders[at++];
+          if (b <= list.back())
+            fail(axis,
+                 "positions do not increase (" + std::to_string(b) + " after " + std::to_string(list.back()) + ")");
+          if (b > d[a]) fail(axis, "position " + std::to_string(b) + " exceeds the size " + std::to_string(d[a]));
+          list.push_back(b);
+          if (b == d[a]) break;
+        }
+        interval_of_[a].resize(d[a]);
+        for (std::size_t i = 0; i + 1 < list.size(); ++i)
+          for (std::uint32_t x = list[i]; x < list[i + 1]; ++x) interval_of_[a][x] = static_cast<std::uint32_t>(i);
+        total *= list.size() - 1;
+      }
+      if (at != borders.size()) fail("borders", std::to_string(borders.size() - at) + " elements after the z list");
+      break;
+    }
+    case StructureKind::Nested: {
+      cell_edge_ = std::uint64_t{1} << layout.cell_log2;
+      for (int a = 0; a < 3; ++a) cell_grid_[a] = static_cast<std::uint32_t>((d[a] + cell_edge_ - 1) / cell_edge_);
+      std::uint64_t n = 0;
+      for (std::uint32_t k = 0; k < cell_grid_[2]; ++k)
+        for (std::uint32_t j = 0; j < cell_grid_[1]; ++j)
+          for (std::uint32_t i = 0; i < cell_grid_[0]; ++i, ++n) {
+            const std::uint64_t word = cells_[n];
+            const unsigned e = static_cast<unsigned>(word >> 56);
+            const std::uint64_t first = word & ((std::uint64_t{1} << 56) - 1);
+            const std::string cell = "cell " + std::to_string(n);
+            if (e > layout.cell_log2)
+              fail(cell, "exponent " + std::to_string(e) + " exceeds cell_log2 " + std::to_string(layout.cell_log2));
+            if (first != total)
+              fail(cell,
+                   "first_value is " + std::to_string(first) + ", the cells before it hold " + std::to_string(total));
+            const std::uint64_t h = cell_edge_ >> e;
+            const std::uint32_t c[3] = {i, j, k};
+            std::uint64_t count = 1;
+            for (int a = 0; a < 3; ++a) {
+              const std::uint64_t ext = std::min<std::uint64_t>(cell_edge_, d[a] - std::uint64_t{c[a]} * cell_edge_);
+              count *= (ext + h - 1) / h;
+            }
+            total += count;
+          }
+      break;
+    }
+    case StructureKind::Octree:
+      break;
+  }
+  if (total != values_in_file)
+    fail("values", "the file holds " + std::to_string(values_in_file) + " values, the structure has " +
+                       std::to_string(total) + " cells");
+}
+
+}  // namespace ivol::detail
