@@ -16,7 +16,7 @@ constexpr unsigned char kZstdMagic[4] = {0x28, 0xB5, 0x2F, 0xFD};
 }  // namespace
 
 std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const BlockInfo& block, std::size_t index,
-                                                std::size_t width) {
+                                                std::size_t width, bool known) {
   const std::string part = file.path() + ": block " + std::to_string(index) + " (" + stream_name(block.stream) +
                            ", level " + std::to_string(block.level) + ", elements " +
                            std::to_string(block.first_element) + " .. " +
@@ -31,7 +31,7 @@ std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const Bl
   }
   // A block of a stream this reader does not know (ignorable, or the index
   // would have been refused): its CRC is all that can be checked.
-  if (block.stream < 1 || block.stream > 5) return stored;
+  if (!known) return stored;
   const std::size_t decoded_size = std::size_t{block.element_count} * width;
   if (block.codec == 0) return stored;
   if (block.codec != 1)

@@ -15,8 +15,10 @@ namespace ivol::detail {
 
 // Reads, checks and decodes block `index` of the block table; `width` is the
 // element width of its stream.
+// A block of a stream unknown to the file's kind is only checked against its
+// CRC (`known` false).
 std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const BlockInfo& block, std::size_t index,
-                                                std::size_t width);
+                                                std::size_t width, bool known = true);
 
 using BlockData = std::shared_ptr<const std::vector<std::uint8_t>>;
 

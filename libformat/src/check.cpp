@@ -29,7 +29,8 @@ CheckReport check_file(const std::string& path) {
     ++report.blocks_checked;
     try {
       const auto decoded =
-          detail::read_and_decode_block(*file, block, b, detail::stream_width(block.stream, info.layout.encoding));
+          detail::read_and_decode_block(*file, block, b, detail::stream_width(block.stream, info.layout.encoding),
+                                        detail::is_known_stream(block.stream, info.layout.kind));
       if (block.stream == 1) metadata_text.assign(decoded.begin(), decoded.end());
     } catch (const Error& e) {
       ++report.blocks_damaged;

@@ -245,7 +245,7 @@ class StructureReader {
       if (expected_offset > info_.index_offset)
         bad(ErrorClass::Malformed, "the block runs past the index at offset " + std::to_string(info_.index_offset));
       if (blk.flags & ~layout::kFlagIgnorable) bad(ErrorClass::Malformed, "reserved flag bits are set");
-      if (!is_known_stream(blk.stream)) {
+      if (!is_known_stream(blk.stream, v.kind)) {
         if (!(blk.flags & layout::kFlagIgnorable))
           bad(ErrorClass::UnsupportedFeature,
               "stream " + std::to_string(blk.stream) + " is not known and the block is not marked ignorable");
@@ -264,10 +264,8 @@ class StructureReader {
       std::uint64_t lo = 0;
       std::uint64_t hi = 0;
       const bool octree = v.kind == StructureKind::Octree;
-      if ((blk.stream == 2 && !octree) || (blk.stream == 4 && v.kind != StructureKind::Rectilinear) ||
-          (blk.stream == 5 && v.kind != StructureKind::Nested))
-        bad(ErrorClass::Malformed,
-            std::string(stream_name(blk.stream)) + " blocks do not belong in a " + kind_name(v.kind) + " file");
+      if (blk.stream == 2 && !octree)
+        bad(ErrorClass::Malformed, std::string("nodes blocks do not belong in a ") + kind_name(v.kind) + " file");
       if (!octree && blk.level != 0) bad(ErrorClass::Malformed, "level must be 0 outside octrees");
       if (blk.stream == 1) {
         ++metadata_blocks;
@@ -358,6 +356,12 @@ class StructureReader {
 }  // namespace
 
 bool is_known_stream(std::uint8_t stream) { return stream >= 1 && stream <= 5; }
+
+bool is_known_stream(std::uint8_t stream, StructureKind kind) {
+  if (stream == 4) return kind == StructureKind::Rectilinear;
+  if (stream == 5) return kind == StructureKind::Nested;
+  return stream >= 1 && stream <= 3;
+}
 
 std::size_t stream_width(std::uint8_t stream, ValueEncoding encoding) {
   switch (stream) {

@@ -62,11 +62,16 @@ GridStructure::GridStructure(const VolumeLayout& layout, std::vector<std::uint32
                    "first_value is " + std::to_string(first) + ", the cells before it hold " + std::to_string(total));
             const std::uint64_t h = cell_edge_ >> e;
             const std::uint32_t c[3] = {i, j, k};
+            // Counts up to 2^31 per axis: bound the product at 2^56 as it grows.
+            constexpr std::uint64_t kMaxValues = std::uint64_t{1} << 56;
             std::uint64_t count = 1;
             for (int a = 0; a < 3; ++a) {
               const std::uint64_t ext = std::min<std::uint64_t>(cell_edge_, d[a] - std::uint64_t{c[a]} * cell_edge_);
-              count *= (ext + h - 1) / h;
+              const std::uint64_t m = (ext + h - 1) / h;
+              if (count > kMaxValues / m) fail(cell, "holds more than 2^56 values");
+              count *= m;
             }
+            if (total + count > kMaxValues) fail(cell, "the values of the cells exceed 2^56");
             total += count;
           }
       break;

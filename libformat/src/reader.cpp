@@ -226,7 +226,8 @@ std::vector<std::uint8_t> Reader::read_block(std::size_t block_index) {
     throw Error(ErrorClass::InvalidArgument, path() + ": no block " + std::to_string(block_index));
   const BlockInfo& b = impl_->info.blocks[block_index];
   return detail::read_and_decode_block(impl_->file, b, block_index,
-                                       detail::stream_width(b.stream, impl_->info.layout.encoding));
+                                       detail::stream_width(b.stream, impl_->info.layout.encoding),
+                                       detail::is_known_stream(b.stream, impl_->info.layout.kind));
 }
 
 }  // namespace ivol

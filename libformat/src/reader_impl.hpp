@@ -43,7 +43,8 @@ struct Reader::Impl {
   Impl(const std::string& path, const ReaderOptions& options)
       : file(path), info(detail::read_file_structure(file)), ranges(info.layout), cache(options.cache_bytes) {
     for (std::size_t b = 0; b < info.blocks.size(); ++b)
-      if (detail::is_known_stream(info.blocks[b].stream)) stream_blocks[info.blocks[b].stream].push_back(b);
+      if (detail::is_known_stream(info.blocks[b].stream, info.layout.kind))
+        stream_blocks[info.blocks[b].stream].push_back(b);
     for (auto& list : stream_blocks)
       std::sort(list.begin(), list.end(), [&](std::size_t a, std::size_t b) {
         return info.blocks[a].first_element < info.blocks[b].first_element;
