@@ -10,6 +10,7 @@
 
 #include "ivol/build.hpp"
 #include "ivol/reader.hpp"
+#include "ivol/structures.hpp"
 #include "ivol/writer.hpp"
 #include "test_support.hpp"
 
@@ -70,6 +71,46 @@ TEST(ReferenceReader, AgreesWithLibformatOnRandomFiles) {
     if (reader.layout().depth >= 1) {
       ASSERT_EQ(run_reference("lod " + path + " 1 -o " + out, &log), 0) << log;
       EXPECT_EQ(test::read_bytes(out), reader.read_box_bits(full_box(dims, 1), 1)) << "level of detail 1 differs";
+    }
+  }
+}
+
+TEST(ReferenceReader, AgreesWithLibformatOnEveryStructureKind) {
+  std::mt19937_64 rng(11);
+  for (int n = 0; n < 9; ++n) {
+    const Dims dims{7 + static_cast<std::uint32_t>(rng() % 30), 3 + static_cast<std::uint32_t>(rng() % 20),
+                    1 + static_cast<std::uint32_t>(rng() % 25)};
+    const std::uint32_t factor = 1u << (rng() % 3);
+    NeedMask mask;
+    mask.dims = dims;
+    mask.factor = factor;
+    mask.cells = {(dims[0] + factor - 1) / factor, (dims[1] + factor - 1) / factor, (dims[2] + factor - 1) / factor};
+    mask.need.resize(voxel_count(mask.cells));
+    for (auto& c : mask.need) c = rng() % 5 == 0;
+    const std::vector<float> volume = test::random_volume(dims, rng, 0.1, 3);
+    for (StructureKind kind : {StructureKind::Regular, StructureKind::Rectilinear, StructureKind::Nested}) {
+      GenerationOptions generation;
+      generation.nested_cell = 2u << (n % 3);
+      generation.rectilinear_max_interval = 3 + n;
+      const auto structure = generate_structure(kind, mask, generation);
+      structure->sample_dense(volume.data());
+      StreamingOptions options;
+      options.build.encoding = static_cast<ValueEncoding>(1 + n % 3);
+      if (options.build.encoding == ValueEncoding::UInt16) options.build.value_scale = 1.0 / 512;
+      options.write.block_bytes = 64u << (n % 4);
+      options.write.compress = n % 2 == 0;
+      const std::string path = test::temp_path("grid-" + std::to_string(n) + ".ivol");
+      write_structure(*structure, path, Metadata{}, options);
+      SCOPED_TRACE(std::string(structure_name(kind)) + " " + std::to_string(n));
+      Reader reader(path);
+      const std::string out = test::temp_path("ref-grid.raw");
+      std::string log;
+      ASSERT_EQ(run_reference("dense " + path + " -o " + out, &log), 0) << log;
+      EXPECT_EQ(test::read_bytes(out), reader.read_box_bits(full_box(dims))) << "dense export differs";
+      if (reader.layout().depth >= 1) {
+        ASSERT_EQ(run_reference("lod " + path + " 1 -o " + out, &log), 0) << log;
+        EXPECT_EQ(test::read_bytes(out), reader.read_box_bits(full_box(dims, 1), 1)) << "level of detail 1 differs";
+      }
     }
   }
 }

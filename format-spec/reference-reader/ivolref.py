@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""ivolref.py -- independent reference reader for the .ivol format, version 1.0.
+"""ivolref.py -- independent reference reader for the .ivol format, version 1.1.
 
 Written from format-spec/ivol.md alone (no code of the ivol project was read).
 Section numbers (§n) below refer to that document.  Where the specification
@@ -278,7 +278,22 @@ def read_footer(r, header):
 INDEX_SIGNATURE = b"IVIX"
 ENCODINGS = {1: ("binary16", 2), 2: ("uint16", 2), 3: ("float32", 4)}   # §9
 STREAM_METADATA, STREAM_NODES, STREAM_VALUES = 1, 2, 3                  # §6.4
-STREAM_NAMES = {1: "metadata", 2: "nodes", 3: "values"}
+STREAM_BORDERS, STREAM_CELLS = 4, 5                                    # §6.4, since 1.1
+STREAM_NAMES = {1: "metadata", 2: "nodes", 3: "values", 4: "borders", 5: "cells"}
+KNOWN_STREAMS = frozenset(STREAM_NAMES)
+
+
+def known_stream(stream, kind):
+    """§6.4 (1.1): streams 1-3 are known in every file; stream 4 only in a
+    rectilinear grid (kind 3) and stream 5 only in a nested grid (kind 4). In
+    files of other kinds they are unknown streams, as in version 1.0."""
+    if stream == STREAM_BORDERS:
+        return kind == KIND_RECTILINEAR
+    if stream == STREAM_CELLS:
+        return kind == KIND_NESTED
+    return stream in KNOWN_STREAMS
+KIND_OCTREE, KIND_REGULAR, KIND_RECTILINEAR, KIND_NESTED = 1, 2, 3, 4   # §6.1, §8, §8A
+KIND_NAMES = {1: "octree", 2: "regular grid", 3: "rectilinear grid", 4: "nested grid"}
 MAX_BLOCK_DECODED = 64 * 1024 * 1024                                   # §7
 MAX_METADATA = 16 * 1024 * 1024                                        # §11
 
@@ -308,7 +323,7 @@ def read_index(header, footer, idx):
     if len(idx) < 48:
         fail("malformed", "index: index_size %d is smaller than the fixed part (48)"
              % len(idx))
-    (sig, fixed_size, structure_kind, value_encoding, depth, reserved,
+    (sig, fixed_size, structure_kind, value_encoding, depth, cell_log2,
      size_x, size_y, size_z, value_scale, value_offset,
      block_count, block_entry_size) = struct.unpack_from("<4sI4B3I2d2I", idx, 0)
     if sig != INDEX_SIGNATURE:   # SPEC-NOTES 6: class not stated; malformed
@@ -316,17 +331,22 @@ def read_index(header, footer, idx):
              % (base, sig.hex(" ")))
     if not 48 <= fixed_size <= 4096:
         fail("malformed", "index: fixed_size %d, expected 48..4096" % fixed_size)
-    if structure_kind != 1:
+    if structure_kind not in KIND_NAMES:
         fail("unsupported-feature", "index: structure_kind %d, this reader knows 1 "
-             "(octree)" % structure_kind)
+             "(octree), 2 (regular grid), 3 (rectilinear grid), 4 (nested grid)"
+             % structure_kind)
     if value_encoding not in ENCODINGS:
         fail("unsupported-feature", "index: value_encoding %d, this reader knows 1, 2, 3"
              % value_encoding)
     if depth > 31:
         fail("malformed", "index: depth %d, expected 0..31" % depth)
-    if reserved != 0:
-        fail("malformed", "index: reserved byte at index offset 11 is %d, expected 0"
-             % reserved)
+    if structure_kind == KIND_NESTED:   # §6.1 byte 11: cell_log2 (SPEC-NOTES 47, 48)
+        if not 1 <= cell_log2 <= 31:
+            fail("malformed", "index: cell_log2 (index offset 11) is %d, expected 1..31 "
+                 "for structure_kind 4 (nested grid)" % cell_log2)
+    elif cell_log2 != 0:
+        fail("malformed", "index: reserved byte at index offset 11 is %d, expected 0 "
+             "for structure_kind %d" % (cell_log2, structure_kind))
     for name, v in (("size_x", size_x), ("size_y", size_y), ("size_z", size_z)):
         if v < 1:
             fail("malformed", "index: %s is 0, expected >= 1" % name)
@@ -351,6 +371,9 @@ def read_index(header, footer, idx):
              "block_count %d x block_entry_size %d = %d"
              % (len(idx), fixed_size, D + 1, block_count, block_entry_size,
                 expected_size))
+    ix.structure_kind = structure_kind
+    ix.structure_name = KIND_NAMES[structure_kind]
+    ix.cell_log2 = cell_log2
     ix.value_encoding = value_encoding
     ix.encoding_name, ix.width = ENCODINGS[value_encoding]
     ix.depth = D
@@ -360,6 +383,12 @@ def read_index(header, footer, idx):
 
     # ---- §6.2 level table
     counts = list(struct.unpack_from("<%dQ" % (D + 1), idx, fixed_size))
+    if structure_kind != KIND_OCTREE:   # §6.2: all zero for the kinds of §8A
+        for l in range(D + 1):
+            if counts[l] != 0:
+                fail("malformed", "level table: inner_count[%d] is %d, expected 0 for "
+                     "structure_kind %d (%s)" % (l, counts[l], structure_kind,
+                                                 ix.structure_name))
     if counts[0] > 1:
         fail("malformed", "level table: inner_count[0] is %d, expected 0 or 1" % counts[0])
     if counts[D] != 0:
@@ -379,6 +408,17 @@ def read_index(header, footer, idx):
     ix.first_inner = [sum(counts[:l]) for l in range(D + 1)]
     ix.level_values = [1] + [8 * counts[l - 1] for l in range(1, D + 1)]
     ix.first_value = [0] + [1 + 8 * ix.first_inner[l - 1] for l in range(1, D + 1)]
+    if structure_kind != KIND_OCTREE:
+        # §6.2: the numbering does not apply; §8A gives the number of values.
+        ix.total_inner = None
+        ix.first_inner = ix.first_value = ix.level_values = None
+        ix.total_values = None          # kinds 3 and 4: known once stream 4/5 is read
+        if structure_kind == KIND_REGULAR:
+            ix.total_values = size_x * size_y * size_z          # §8A.1
+        if structure_kind == KIND_NESTED:
+            C = 1 << cell_log2                                  # §8A.3
+            ix.cells = tuple(-(-n // C) for n in ix.size)       # n_a = ceil(size_a / C)
+            ix.cell_count = ix.cells[0] * ix.cells[1] * ix.cells[2]
 
     # ---- §6.3 block table (per entry, in table order; SPEC-NOTES 7)
     at = fixed_size + 8 * (D + 1)
@@ -399,7 +439,7 @@ def read_index(header, footer, idx):
         if e.flags & 0xFE:
             fail("malformed", "block table: %s has reserved flag bits set (flags 0x%02X)"
                  % (ix.where(e), e.flags))
-        if e.stream == 0 or e.stream >= 4:   # §6.4: streams reserved for later versions
+        if not known_stream(e.stream, structure_kind):   # §6.4: reserved or unknown here
             if not e.flags & 1:
                 fail("unsupported-feature", "block table: %s belongs to unknown stream %d "
                      "and is not ignorable" % (ix.where(e), e.stream))
@@ -408,6 +448,7 @@ def read_index(header, footer, idx):
         if e.flags != 0:
             fail("malformed", "block table: %s has flags 0x%02X, expected 0 for stream %d"
                  % (ix.where(e), e.flags, e.stream))
+        check_stream_kind(ix, e)
         check_block_level(ix, e)
         entries.append(e)
     if expected_offset != footer.index_offset:
@@ -421,9 +462,47 @@ def read_index(header, footer, idx):
         fail("malformed", "block table: %d blocks of stream 1 (metadata), expected 1"
              % len(meta))
     ix.metadata_block = meta[0]
-    check_stream_coverage(ix, STREAM_NODES, ix.total_inner)
-    check_stream_coverage(ix, STREAM_VALUES, ix.total_values)
+    if structure_kind == KIND_OCTREE:
+        check_stream_coverage(ix, STREAM_NODES, ix.total_inner)
+        check_stream_coverage(ix, STREAM_VALUES, ix.total_values)
+        return ix
+    # §6.4 for the kinds of §8A (SPEC-NOTES 44, 45): stream 4 always with
+    # kind 3, stream 5 always with kind 4; coverage of streams 3, 4, 5.
+    for stream, kind in ((STREAM_BORDERS, KIND_RECTILINEAR), (STREAM_CELLS, KIND_NESTED)):
+        if structure_kind == kind and not any(e.stream == stream for e in entries):
+            fail("malformed", "block table: no block of stream %d (%s), which structure_"
+                 "kind %d (%s) always has" % (stream, STREAM_NAMES[stream], kind,
+                                              KIND_NAMES[kind]))
+    # Stream 3: without gap or overlap from element 0; its total is checked here
+    # for the regular grid, and against §8A once stream 4 or 5 is read otherwise.
+    ix.value_elements = check_stream_coverage(ix, STREAM_VALUES, ix.total_values)
+    if structure_kind == KIND_RECTILINEAR:
+        ix.border_elements = check_stream_coverage(ix, STREAM_BORDERS, None)
+        limit = size_x + size_y + size_z + 3      # §8A.2, before allocating
+        if ix.border_elements > limit:
+            fail("malformed", "block table: stream 4 (borders) holds %d elements, at most "
+                 "size_x + size_y + size_z + 3 = %d are possible"
+                 % (ix.border_elements, limit))
+    if structure_kind == KIND_NESTED:
+        check_stream_coverage(ix, STREAM_CELLS, ix.cell_count)
     return ix
+
+
+def check_stream_kind(ix, e):
+    """§6.4 (1.1): which streams appear with which structure kind, and the level of
+    the blocks of streams 3, 4 and 5 of the kinds of §8A."""
+    kind = ix.structure_kind
+    # Streams 4 and 5 in files of other kinds never get here: they are
+    # unknown streams there (known_stream).
+    allowed = {STREAM_NODES: (KIND_OCTREE,)}.get(e.stream)
+    if allowed is not None and kind not in allowed:
+        fail("malformed", "block table: %s: stream %d (%s) appears only with "
+             "structure_kind %d, this file has structure_kind %d (%s)"
+             % (ix.where(e), e.stream, STREAM_NAMES[e.stream], allowed[0], kind,
+                ix.structure_name))
+    if kind != KIND_OCTREE and e.stream != STREAM_METADATA and e.level != 0:
+        fail("malformed", "block table: %s: level %d, expected 0 for structure_kind %d "
+             "(%s)" % (ix.where(e), e.level, kind, ix.structure_name))
 
 
 def check_block_level(ix, e):
@@ -436,6 +515,8 @@ def check_block_level(ix, e):
             fail("malformed", "block table: %s: the metadata block has first_element %d, "
                  "expected 0" % (ix.where(e), e.first_element))
         return
+    if ix.structure_kind != KIND_OCTREE:
+        return                          # level 0, checked by check_stream_kind
     if e.level > ix.depth:
         fail("malformed", "block table: %s: level %d is deeper than depth %d"
              % (ix.where(e), e.level, ix.depth))
@@ -450,7 +531,8 @@ def check_block_level(ix, e):
 
 
 def check_stream_coverage(ix, stream, total):
-    """§6.4: the blocks of a stream cover 0 .. total exactly once."""
+    """§6.4: the blocks of a stream cover 0 .. total exactly once.  With total
+    None, only that they cover 0 .. n without gap or overlap; returns n."""
     blocks = sorted((e for e in ix.blocks if e.stream == stream),
                     key=lambda e: e.first_element)
     position = 0
@@ -461,15 +543,17 @@ def check_stream_coverage(ix, stream, total):
                                        e.first_element, position,
                                        "gap" if e.first_element > position else "overlap"))
         position += e.element_count
-    if position != total:
+    if total is not None and position != total:
         fail("malformed", "block table: stream %d (%s) covers elements 0..%d, expected 0..%d"
              % (stream, STREAM_NAMES[stream], position, total))
+    return position
 
 
 # ============================================================ §7 Blocks
 
 def stream_width(ix, stream):
-    return {STREAM_METADATA: 1, STREAM_NODES: 8, STREAM_VALUES: ix.width}[stream]
+    return {STREAM_METADATA: 1, STREAM_NODES: 8, STREAM_VALUES: ix.width,
+            STREAM_BORDERS: 4, STREAM_CELLS: 8}[stream]
 
 
 def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
@@ -708,7 +792,7 @@ def read_streams(r, ix, top_level, check_ignorable):
     nodes = np.zeros(n_nodes, "<u8")
     values = np.zeros(n_values, "<u%d" % ix.width)
     for e in ix.blocks:
-        if e.stream >= 4:   # ignorable block of an unknown stream (§6.4)
+        if not known_stream(e.stream, ix.structure_kind):   # ignorable, unknown (§6.4)
             if check_ignorable:
                 stored = r.read(e.file_offset, e.stored_size)
                 if crc32c(stored) != e.crc:
@@ -960,6 +1044,231 @@ def check_output_limit(ix, top_level):
                           % (need, LIMIT_OUTPUT_BYTES))
 
 
+# ============================================================ §8A Other structures
+
+class Grid:
+    """A structure of §8A as read and checked: the value array and what the
+    cells of the structure need (borders of a rectilinear grid, cell words of a
+    nested grid)."""
+
+
+def read_grid_streams(r, ix, check_ignorable):
+    """§13 step 6 for the kinds of §8A: read every block of streams 3, 4 and 5
+    in table (file) order, then check the borders (§8A.2) or the cell words and
+    their first_value chain (§8A.3), and that stream 3 holds total_values
+    elements.  Every size was checked against the index or a limit before it is
+    allocated."""
+    kind = ix.structure_kind
+    n_values = ix.value_elements
+    n_borders = ix.border_elements if kind == KIND_RECTILINEAR else 0
+    n_cells = ix.cell_count if kind == KIND_NESTED else 0
+    need = n_values * ix.width + n_borders * 4 + n_cells * 8
+    if need > LIMIT_DECODED_BYTES:
+        raise ReaderLimit("the value, border and cell arrays need %d bytes, this "
+                          "reader's limit is %d" % (need, LIMIT_DECODED_BYTES))
+    arrays = {STREAM_VALUES: np.zeros(n_values, "<u%d" % ix.width),
+              STREAM_BORDERS: np.zeros(n_borders, "<u4"),
+              STREAM_CELLS: np.zeros(n_cells, "<u8")}
+    for e in ix.blocks:
+        if not known_stream(e.stream, ix.structure_kind):   # ignorable, unknown (§6.4)
+            if check_ignorable:
+                stored = r.read(e.file_offset, e.stored_size)
+                if crc32c(stored) != e.crc:
+                    fail("checksum", "%s: CRC-32C of the ignorable block does not match"
+                         % ix.where(e))
+            continue
+        if e.stream == STREAM_METADATA:
+            continue                        # already read
+        target = arrays[e.stream]           # streams 3, 4, 5 (check_stream_kind)
+        data = read_block(r, ix, e)
+        target[e.first_element:e.first_element + e.element_count] = \
+            np.frombuffer(data, target.dtype)
+    g = Grid()
+    g.values = arrays[STREAM_VALUES]
+    if kind == KIND_REGULAR:
+        g.total_values = ix.total_values
+    elif kind == KIND_RECTILINEAR:
+        g.borders = check_borders(ix, arrays[STREAM_BORDERS])
+        g.intervals = tuple(len(b) - 1 for b in g.borders)
+        g.total_values = g.intervals[0] * g.intervals[1] * g.intervals[2]
+    else:
+        check_cells(ix, arrays[STREAM_CELLS], g)
+    if g.total_values != n_values:
+        fail("malformed", "block table: stream 3 (values) covers elements 0..%d, §8A "
+             "gives total_values %d for this %s" % (n_values, g.total_values,
+                                                   ix.structure_name))
+    return g
+
+
+def check_borders(ix, stream):
+    """§8A.2: stream 4 holds B_x, B_y, B_z one after the other; each starts with
+    0, increases strictly and ends with the size along its axis.  B_x and B_y
+    end at their first element (after the first) equal to size_x, size_y; B_z
+    ends at the last element of the stream.  Returns the three lists.  Order of
+    the checks: SPEC-NOTES 51."""
+    b = stream.astype(np.int64)
+    n = len(b)
+    lists = []
+    at = 0
+    for axis, name in enumerate("xyz"):
+        size = ix.size[axis]
+        where = "borders (stream 4): B_%s" % name
+        if at >= n:
+            fail("malformed", "%s would start at element %d, but the stream has only %d "
+                 "elements" % (where, at, n))
+        if b[at] != 0:
+            fail("malformed", "%s starts at element %d with %d, expected 0"
+                 % (where, at, b[at]))
+        if axis < 2:
+            hits = np.flatnonzero(b[at + 1:] == size)
+            end = at + 1 + int(hits[0]) if hits.size else n - 1
+        else:
+            end = n - 1
+        part = b[at:end + 1]
+        steps = np.flatnonzero(np.diff(part) <= 0)
+        if steps.size:
+            k = at + 1 + int(steps[0])
+            fail("malformed", "%s does not increase strictly: element %d is %d after %d"
+                 % (where, k, b[k], b[k - 1]))
+        if part[-1] != size or len(part) < 2:
+            fail("malformed", "%s ends %s with %d, expected size_%s = %d"
+                 % (where, "at the end of the stream" if axis == 2 or not hits.size
+                    else "at element %d" % end, part[-1], name, size))
+        lists.append(part)
+        at = end + 1
+    return lists
+
+
+def check_cells(ix, words, g):
+    """§8A.3: the exponent of every cell word is 0 .. cell_log2, and first_value
+    follows the chain 0, then previous first_value + m_x·m_y·m_z, in cell order.
+    Sets g.exponent, g.first_value, g.m (m_x, m_y, m_z per cell, shape
+    (n_z, n_y, n_x)) and g.total_values."""
+    L = ix.cell_log2
+    C = 1 << L
+    nx, ny, nz = ix.cells
+    first_value = (words & FIC_BITS).astype(np.int64)
+    exponent = (words >> np.uint64(56)).astype(np.int64)
+    bad_e = np.flatnonzero(exponent > L)
+    e = np.minimum(exponent, L)
+    shift = L - e                                       # h = C >> e = 2^shift
+
+    def extents(size, n):                               # ext_a = min(C, size_a − c_a·C)
+        return np.minimum(C, size - np.arange(n, dtype=np.int64) * C)
+
+    ext = [extents(ix.size[0], nx)[None, None, :], extents(ix.size[1], ny)[None, :, None],
+           extents(ix.size[2], nz)[:, None, None]]
+    sh = shift.reshape(nz, ny, nx)
+    m = [((ea + (np.int64(1) << sh) - 1) >> sh).ravel() for ea in ext]  # ceil(ext / h)
+    # m_x·m_y·m_z per cell; clipped at 2^56, where no later first_value can match
+    # (SPEC-NOTES 50), so that the int64 running sum cannot wrap before the first
+    # mismatch.
+    xy = m[0] * m[1]                                    # <= 2^62
+    cap = np.int64(1) << 56
+    big = xy > cap // m[2]
+    count = np.where(big, cap, xy * np.where(big, 1, m[2]))
+    expected = np.concatenate(([0], np.cumsum(count)[:-1]))
+    bad_c = np.flatnonzero(first_value != expected)
+    first_bad = min([int(a[0]) for a in (bad_e, bad_c) if a.size], default=None)
+    if first_bad is not None:
+        k = first_bad
+        i, j, kk = k % nx, (k // nx) % ny, k // (nx * ny)
+        where = "cells (stream 5): cell %d (cell coordinates %d,%d,%d, cell word 0x%016X)" \
+            % (k, i, j, kk, int(words[k]))
+        if bad_e.size and bad_e[0] == k:
+            fail("malformed", "%s: exponent %d, expected 0..cell_log2 = %d"
+                 % (where, exponent[k], L))
+        fail("malformed", "%s: first_value %d, expected %d (the previous cell's "
+             "first_value + its voxel count)" % (where, first_value[k], expected[k]))
+    last = len(words) - 1
+    g.exponent, g.first_value = e, first_value
+    g.m = [a.reshape(nz, ny, nx) for a in m]
+    g.total_values = (int(first_value[last]) + int(m[0][last]) * int(m[1][last])
+                      * int(m[2][last]))
+
+
+def grid_dense(ix, g):
+    """§12.2 for §8A: the stored bits of the cell covering each voxel, [z][y][x]."""
+    sx, sy, sz = ix.size
+    kind = ix.structure_kind
+    if kind == KIND_REGULAR:                      # §8A.1: (z·size_y + y)·size_x + x
+        return g.values.reshape(sz, sy, sx)
+    if kind == KIND_RECTILINEAR:                  # §8A.2: (k·n_y + j)·n_x + i
+        nx, ny, nz = g.intervals
+        cell = [np.repeat(np.arange(len(b) - 1), np.diff(b)) for b in g.borders]
+        return g.values.reshape(nz, ny, nx)[np.ix_(cell[2], cell[1], cell[0])]
+    # §8A.3, one z plane at a time
+    L = ix.cell_log2
+    mask = (1 << L) - 1
+    nx, ny, nz = ix.cells
+    x, y = np.arange(sx, dtype=np.int64), np.arange(sy, dtype=np.int64)
+    cx, lx = (x >> L)[None, :], (x & mask)[None, :]
+    cy, ly = (y >> L)[:, None], (y & mask)[:, None]
+    e = g.exponent.reshape(nz, ny, nx)
+    fv = g.first_value.reshape(nz, ny, nx)
+    mx, my = g.m[0], g.m[1]
+    out = np.empty((sz, sy, sx), g.values.dtype)
+    for z in range(sz):
+        cz, lz = z >> L, z & mask
+        sh = (L - e[cz])[cy, cx]                  # voxel edge h = 2^sh in each cell
+        p, q, r = lx >> sh, ly >> sh, lz >> sh
+        index = fv[cz][cy, cx] + (r * my[cz][cy, cx] + q) * mx[cz][cy, cx] + p
+        out[z] = g.values[index]
+    return out
+
+
+def lod_from_dense(ix, dense, k):
+    """§12.3 for §8A: each element of level of detail k >= 1 is the mean of the
+    decoded values of its cell, summed in binary64 from +0.0 in the order z, then
+    y, then x (x fastest), divided by their number, and encoded (§9).  The sum is
+    sequential: np.cumsum (np.add.accumulate) adds one element after the other,
+    unlike np.sum, which adds pairwise.  Level of detail 0 is the dense export
+    itself (SPEC-NOTES 42)."""
+    if k == 0:
+        return dense
+    B = 1 << k
+    sz, sy, sx = dense.shape
+    oz, oy, ox = -(-sz // B), -(-sy // B), -(-sx // B)
+    # Cells of one output row along y (or x): full ones of edge B, and a last,
+    # partial one of edge size % B.
+    def groups(size):
+        full = size // B
+        out = [(0, full, B)] if full else []
+        if size % B:
+            out.append((full, full + 1, size % B))
+        return out
+
+    by = np.minimum(B, sy - np.arange(oy) * B)
+    bx = np.minimum(B, sx - np.arange(ox) * B)
+    out = np.empty((oz, oy, ox), dense.dtype)
+    with np.errstate(all="ignore"):
+        for zc in range(oz):
+            acc = np.zeros((oy, ox))                         # +0.0
+            z0, z1 = zc * B, min((zc + 1) * B, sz)
+            for z in range(z0, z1):                          # z, then y, then x
+                plane = decode_values(dense[z], ix.value_encoding)
+                for gy0, gy1, ey in groups(sy):
+                    for gx0, gx1, ex in groups(sx):
+                        part = plane[gy0 * B:gy0 * B + (gy1 - gy0) * ey,
+                                     gx0 * B:gx0 * B + (gx1 - gx0) * ex]
+                        part = part.reshape(gy1 - gy0, ey, gx1 - gx0, ex)
+                        part = part.transpose(0, 2, 1, 3).reshape(gy1 - gy0, gx1 - gx0,
+                                                                  ey * ex)
+                        seq = np.concatenate((acc[gy0:gy1, gx0:gx1, None], part), axis=2)
+                        acc[gy0:gy1, gx0:gx1] = np.cumsum(seq, axis=2)[:, :, -1]
+            number = ((z1 - z0) * by[:, None] * bx[None, :]).astype(np.float64)
+            out[zc] = encode_values(acc / number, ix.value_encoding)
+    return out
+
+
+def check_dense_limit(ix):
+    need = output_bytes(ix, ix.depth)
+    if need > LIMIT_OUTPUT_BYTES:
+        raise ReaderLimit("the dense export, from which the level of detail of a %s is "
+                          "computed, needs %d bytes, this reader's limit is %d"
+                          % (ix.structure_name, need, LIMIT_OUTPUT_BYTES))
+
+
 # ============================================================ whole-file operations
 
 def verify_file(path, want_dense=False):
@@ -970,6 +1279,10 @@ def verify_file(path, want_dense=False):
         D = ix.depth
         if want_dense:
             check_output_limit(ix, D)
+        if ix.structure_kind != KIND_OCTREE:          # §8A
+            g = read_grid_streams(r, ix, check_ignorable=True)
+            dense = grid_dense(ix, g).tobytes() if want_dense else None
+            return ix, meta, dense
         nodes, values = read_streams(r, ix, D, check_ignorable=True)
         levels = walk_octree(ix, nodes, values, D)
         check_averages(ix, values, levels)
@@ -992,6 +1305,10 @@ def level_of_detail(path, k):
             raise UsageError("level of detail %d out of range 0..%d for this file" % (k, D))
         top = D - k
         check_output_limit(ix, top)
+        if ix.structure_kind != KIND_OCTREE:          # §8A: from the dense export
+            check_dense_limit(ix)
+            g = read_grid_streams(r, ix, check_ignorable=(k == 0))
+            return ix, lod_from_dense(ix, grid_dense(ix, g), k).tobytes()
         nodes, values = read_streams(r, ix, top, check_ignorable=(k == 0))
         levels = walk_octree(ix, nodes, values, top)
         if k == 0:
@@ -1020,7 +1337,7 @@ def info(path):
         s["blocks"] += 1
         s["elements"] += e.element_count
         s["stored_bytes"] += e.stored_size
-    return {
+    out = {
         "version": "%d.%d" % (h.version_major, h.version_minor),
         "version_major": h.version_major, "version_minor": h.version_minor,
         "header_size": h.header_size, "optional_features": h.optional_features,
@@ -1030,11 +1347,24 @@ def info(path):
         "size_z": ix.size[2], "depth": ix.depth,
         "encoding": ix.encoding_name, "value_encoding": ix.value_encoding,
         "scale": ix.value_scale, "offset": ix.value_offset,
+        "structure_kind": ix.structure_kind, "structure": ix.structure_name,
         "inner_count": ix.inner_count, "total_inner": ix.total_inner,
         "total_values": ix.total_values,
         "block_count": len(ix.blocks), "blocks_per_stream": per_stream,
         "blocks": blocks, "metadata": meta,
     }
+    if ix.structure_kind != KIND_OCTREE:
+        # §8A: total_values of kinds 3 and 4 follows from streams 4 and 5, which
+        # info does not read (null then); value_elements is what stream 3 covers.
+        out["value_elements"] = ix.value_elements
+    if ix.structure_kind == KIND_RECTILINEAR:
+        out["border_elements"] = ix.border_elements
+    if ix.structure_kind == KIND_NESTED:
+        out["cell_log2"] = ix.cell_log2
+        out["cell_edge"] = 1 << ix.cell_log2
+        out["cells"] = list(ix.cells)
+        out["cell_count"] = ix.cell_count
+    return out
 
 
 # ============================================================ conformance runner
@@ -1109,7 +1439,7 @@ def first_difference(a, b):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(
-        prog="ivolref.py", description="Reference reader for .ivol version 1.0 "
+        prog="ivolref.py", description="Reference reader for .ivol version 1.1 "
         "(written from format-spec/ivol.md alone).")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("check", help="full verification; prints ok")

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Conformance test vectors for the .ivol format, version 1.0.
+"""Conformance test vectors for the .ivol format, version 1.1.
 
 Written from format-spec/ivol.md alone (no code of the ivol project is used).
 Needs only the Python standard library, numpy and zstandard; run it with
@@ -19,6 +19,10 @@ The script contains
     level and split by a size limit, stored or zstd blocks, index, footer,
   * an independent level-of-detail computation by weighted 2x2x2 box
     filtering of the dense source (§12.3 / §10),
+  * writers of the structures of §8A (version 1.1): regular grid, rectilinear
+    grid (stream 4, borders) and nested grid (stream 5, cells), and their
+    levels of detail from the dense source by the flat binary64 sum of
+    §12.3 (sequential, z then y then x, from +0.0; not numpy's pairwise sum),
   * a small reader that follows the check order of §13; it is used only as a
     self-test: every valid vector must read back to its expected dense export
     and levels of detail, and every invalid vector must fail with its
@@ -51,6 +55,10 @@ VWIDTH = {BINARY16: 2, UINT16: 2, FLOAT32: 4}
 NPBITS = {BINARY16: np.uint16, UINT16: np.uint16, FLOAT32: np.uint32}
 
 STREAM_META, STREAM_NODES, STREAM_VALUES = 1, 2, 3
+STREAM_BORDERS, STREAM_CELLS = 4, 5                     # since 1.1 (§6.4, §8A)
+KIND_OCTREE, KIND_REGULAR, KIND_RECTILINEAR, KIND_NESTED = 1, 2, 3, 4
+KIND_NAME = {KIND_OCTREE: "octree", KIND_REGULAR: "regular",           # as metadata structure.kind
+             KIND_RECTILINEAR: "rectilinear", KIND_NESTED: "nested"}
 CODEC_STORED, CODEC_ZSTD = 0, 1
 
 
@@ -348,6 +356,46 @@ def pyramid_lods(src, enc, D):
     return out
 
 
+def flat_lods(src, enc, D):
+    """Levels of detail 1..D of the structures of §8A (§12.3), from the dense
+    source alone: for each cell of 2^k voxels per side (clipped at the
+    volume's border) the decoded values are summed in binary64 starting from
+    +0.0, strictly one after the other in the order z, then y, then x (x
+    fastest), the sum is divided by the number of voxels and the mean is
+    encoded once.  No leaf exception: a cell of uniform -0 gives +0, a NaN
+    gives the canonical NaN.  The loops run over the offsets inside a cell,
+    each step adds one voxel to every cell at once (vectorised over cells,
+    sequential within a cell; numpy's sum is pairwise and is not used)."""
+    Z, Y, X = src.shape
+    dec = np.array([decode(enc, b) for b in src.ravel()], dtype=np.float64).reshape(src.shape)
+    out = {}
+    for k in range(1, D + 1):
+        s = 1 << k
+        nz, ny, nx = ceil_div(Z, s), ceil_div(Y, s), ceil_div(X, s)
+        P = np.zeros((nz * s, ny * s, nx * s), dtype=np.float64)
+        M = np.zeros((nz * s, ny * s, nx * s), dtype=bool)
+        P[:Z, :Y, :X] = dec
+        M[:Z, :Y, :X] = True
+        acc = np.zeros((nz, ny, nx), dtype=np.float64)          # +0.0
+        with np.errstate(all="ignore"):
+            for dz in range(min(s, Z)):
+                for dy in range(min(s, Y)):
+                    for dx in range(min(s, X)):
+                        v = P[dz::s, dy::s, dx::s]
+                        msk = M[dz::s, dy::s, dx::s]
+                        acc = np.where(msk, acc + v, acc)
+            cz = np.minimum(s, Z - s * np.arange(nz))
+            cy = np.minimum(s, Y - s * np.arange(ny))
+            cx = np.minimum(s, X - s * np.arange(nx))
+            cnt = cz[:, None, None] * cy[None, :, None] * cx[None, None, :]
+            mean = acc / cnt.astype(np.float64)
+        res = np.zeros((nz, ny, nx), dtype=NPBITS[enc])
+        for idx in np.ndindex(nz, ny, nx):
+            res[idx] = encode(enc, float(mean[idx]))
+        out[k] = res
+    return out
+
+
 # ------------------------------------------------------------------- file writer
 
 class Blk:
@@ -418,6 +466,131 @@ def level_blocks(t, codec=CODEC_ZSTD, limit=None, zcheck=True):
         else:
             b.codec = codec
     return blocks
+
+
+# ------------------------------------------------ §8A structures (version 1.1)
+
+class Grid:
+    """A structure of §8A, standing in for Tree in assemble(): enc, D, size,
+    an all-zero level table, the value list, and the border list (kind 3)
+    or the cell words (kind 4)."""
+
+    def __init__(self, kind, enc, size, values, borders=None, cells=None, cell_log2=0):
+        X, Y, Z = size
+        self.kind, self.enc, self.size = kind, enc, size
+        self.D = min_depth(X, Y, Z)
+        self.inner_count = [0] * (self.D + 1)
+        self.values = list(values)
+        self.borders = list(borders) if borders is not None else None
+        self.cells = list(cells) if cells is not None else None
+        self.cell_log2 = cell_log2
+
+    def copy(self):
+        g = Grid(self.kind, self.enc, self.size, self.values, self.borders, self.cells, self.cell_log2)
+        g.D, g.inner_count = self.D, list(self.inner_count)
+        return g
+
+
+def _uniform(reg):
+    assert reg.size > 0 and bool((reg == reg.flat[0]).all())
+    return int(reg.flat[0])
+
+
+def write_regular(src, enc):
+    """§8A.1: value index (z * size_y + y) * size_x + x."""
+    Z, Y, X = src.shape
+    vals = [_uniform(src[z:z + 1, y:y + 1, x:x + 1]) for z in range(Z) for y in range(Y) for x in range(X)]
+    return Grid(KIND_REGULAR, enc, (X, Y, Z), vals)
+
+
+def write_rectilinear(src, enc, bx, by, bz):
+    """§8A.2: the writer takes one voxel per cell (asserting that the cell is
+    uniform in the source); cell (i, j, k) has value (k * n_y + j) * n_x + i;
+    stream 4 is B_x, B_y, B_z one after the other."""
+    Z, Y, X = src.shape
+    assert bx[0] == by[0] == bz[0] == 0 and (bx[-1], by[-1], bz[-1]) == (X, Y, Z)
+    vals = []
+    for k in range(len(bz) - 1):
+        for j in range(len(by) - 1):
+            for i in range(len(bx) - 1):
+                vals.append(_uniform(src[bz[k]:bz[k + 1], by[j]:by[j + 1], bx[i]:bx[i + 1]]))
+    return Grid(KIND_RECTILINEAR, enc, (X, Y, Z), vals, borders=list(bx) + list(by) + list(bz))
+
+
+def write_nested(src, enc, cell_log2, expo):
+    """§8A.3: expo[k][j][i] is the exponent of coarse cell (i, j, k).  Cell
+    words in order (k * n_y + j) * n_x + i, values of each cell's sub-grid
+    (r * m_y + q) * m_x + p, cells one after the other."""
+    Z, Y, X = src.shape
+    C = 1 << cell_log2
+    nx, ny, nz = ceil_div(X, C), ceil_div(Y, C), ceil_div(Z, C)
+    cells, vals = [], []
+    for k in range(nz):
+        for j in range(ny):
+            for i in range(nx):
+                e = expo[k][j][i]
+                assert 0 <= e <= cell_log2
+                h = C >> e
+                o = (i * C, j * C, k * C)
+                ext = (min(C, X - o[0]), min(C, Y - o[1]), min(C, Z - o[2]))
+                m = [ceil_div(a, h) for a in ext]
+                cells.append((e << 56) | len(vals))
+                for r in range(m[2]):
+                    for q in range(m[1]):
+                        for p in range(m[0]):
+                            lo = (o[0] + p * h, o[1] + q * h, o[2] + r * h)
+                            hi = [min(lo[a] + h, o[a] + ext[a]) for a in range(3)]
+                            vals.append(_uniform(src[lo[2]:hi[2], lo[1]:hi[1], lo[0]:hi[0]]))
+    return Grid(KIND_NESTED, enc, (X, Y, Z), vals, cells=cells, cell_log2=cell_log2)
+
+
+def pack_u32(v):
+    return struct.pack("<%dI" % len(v), *v)
+
+
+def grid_blocks(g, codec=CODEC_ZSTD, limit=None, slimit=None, zcheck=True, struct_first=True):
+    """Blocks of a §8A file, all of level 0: the structure stream (borders or
+    cells) split at slimit decoded bytes and the values split at limit
+    decoded bytes; codec as in level_blocks."""
+    vw = VWIDTH[g.enc]
+    sb, vb = [], []
+    if g.borders is not None:
+        for s, e in split_range(0, len(g.borders), (slimit // 4) if slimit else None):
+            sb.append(Blk(STREAM_BORDERS, 0, s, e - s, pack_u32(g.borders[s:e]), zcheck=zcheck))
+    if g.cells is not None:
+        for s, e in split_range(0, len(g.cells), (slimit // 8) if slimit else None):
+            sb.append(Blk(STREAM_CELLS, 0, s, e - s, pack_nodes(g.cells[s:e]), zcheck=zcheck))
+    for s, e in split_range(0, len(g.values), (limit // vw) if limit else None):
+        vb.append(Blk(STREAM_VALUES, 0, s, e - s, pack_values(g.enc, g.values[s:e]), zcheck=zcheck))
+    blocks = sb + vb if struct_first else vb + sb
+    for n, b in enumerate(blocks):
+        if codec == "auto":
+            b.codec = CODEC_ZSTD if len(zframe(b.data, zcheck)) < len(b.data) else CODEC_STORED
+        elif codec == "alt":
+            b.codec = (CODEC_STORED, CODEC_ZSTD)[n % 2]
+        else:
+            b.codec = codec
+    return blocks
+
+
+def grid_file(g, meta=None, codec=CODEC_ZSTD, limit=None, slimit=None, meta_first=False,
+              struct_first=True, zcheck=True, mutate_blocks=None, **kw):
+    """A complete §8A file: version_minor 1, structure_kind and byte 11
+    (cell_log2) from the grid, level table all zero."""
+    blocks = grid_blocks(g, codec, limit, slimit, zcheck, struct_first)
+    mb = meta_block(meta if meta is not None else DEFAULT_META,
+                    codec if codec in (0, 1) else CODEC_ZSTD, zcheck=zcheck)
+    if meta_first:
+        blocks.insert(0, mb)
+    else:
+        blocks.append(mb)
+    if mutate_blocks:
+        mutate_blocks(blocks)
+    kw.setdefault("minor", 1)
+    kw.setdefault("structure_kind", g.kind)
+    kw.setdefault("ireserved", g.cell_log2)
+    data, lay = assemble(g, blocks, **kw)
+    return data, lay, blocks
 
 
 DEFAULT_META = {
@@ -676,11 +849,14 @@ def read_ivol(data, verify=True):
     if not 48 <= fs <= 4096 or fs > isz:
         _fail("malformed", "fixed_size")
     sk, ve, D, ires = idx[8], idx[9], idx[10], idx[11]
-    if sk != 1:
+    if sk not in (1, 2, 3, 4):
         _fail("unsupported-feature", "structure_kind", str(sk))
     if ve not in (1, 2, 3):
         _fail("unsupported-feature", "value_encoding", str(ve))
-    if ires != 0:
+    if sk == 4:
+        if not 1 <= ires <= 31:
+            _fail("malformed", "cell_log2", str(ires))
+    elif ires != 0:
         _fail("malformed", "index.reserved")
     X, Y, Z = u32(idx, 12), u32(idx, 16), u32(idx, 20)
     if min(X, Y, Z) < 1:
@@ -701,6 +877,8 @@ def read_ivol(data, verify=True):
         _fail("malformed", "index_size")
     # level table
     ic = list(struct.unpack_from("<%dQ" % (D + 1), idx, fs))
+    if sk != 1 and any(ic):
+        _fail("malformed", "level_table.nonzero")
     if ic[0] > 1 or ic[D] != 0:
         _fail("malformed", "level_table")
     for l in range(D):
@@ -712,7 +890,7 @@ def read_ivol(data, verify=True):
     level_values = [1] + [8 * ic[l - 1] for l in range(1, D + 1)]
     first_value = [0] + [1 + 8 * first_inner[l - 1] for l in range(1, D + 1)]
     vw = VWIDTH[ve]
-    width = {1: 1, 2: 8, 3: vw}
+    width = {1: 1, 2: 8, 3: vw, 4: 4, 5: 8}
     # block table
     entries = []
     pos = hs
@@ -728,7 +906,9 @@ def read_ivol(data, verify=True):
         if cnt < 1 or ss < 1:
             _fail("malformed", "block.sizes", "block %d" % b)
         pos += ss
-        if stream in (1, 2, 3):
+        # streams 4 and 5 are known only in files of kinds 3 and 4; elsewhere
+        # they are unknown streams (§6.4 as revised in 1.1)
+        if stream in (1, 2, 3) or (stream == 4 and sk == 3) or (stream == 5 and sk == 4):
             if flags != 0:
                 _fail("malformed", "block.flags", "block %d" % b)
             if codec not in (0, 1):
@@ -747,6 +927,8 @@ def read_ivol(data, verify=True):
         _fail("malformed", "metadata.count")
     if metas[0]["level"] != 0:
         _fail("malformed", "metadata.level")
+    if sk != 1:
+        return _read_grid(data, entries, metas[0], sk, ve, D, ires, (X, Y, Z))
     for stream, total in ((2, total_inner), (3, total_values)):
         pos = 0
         for e in sorted((e for e in entries if e["stream"] == stream), key=lambda e: e["first"]):
@@ -858,6 +1040,152 @@ def read_ivol(data, verify=True):
     return dense, lods, meta
 
 
+def _tile(entries, stream):
+    """Blocks of a stream in order of first_element must tile 0 .. n; returns n."""
+    pos = 0
+    for e in sorted((e for e in entries if e["stream"] == stream), key=lambda e: e["first"]):
+        if e["first"] != pos:
+            _fail("malformed", "stream.coverage", "stream %d" % stream)
+        pos += e["count"]
+    return pos
+
+
+def _read_grid(data, entries, meta_entry, sk, ve, D, cell_log2, size):
+    """The rest of read_ivol for the structures of §8A (§6.4, §8A, §12)."""
+    X, Y, Z = size
+    entries = [e for e in entries if e["stream"] in (1, 2, 3) or e["stream"] == sk + 1]   # drop ignorable unknown
+    present = {e["stream"] for e in entries}
+    if 2 in present:
+        _fail("malformed", "stream.kind", "nodes stream with structure_kind %d" % sk)
+    if sk == 3 and 4 not in present:
+        _fail("malformed", "stream.kind", "no borders stream")
+    if sk == 4 and 5 not in present:
+        _fail("malformed", "stream.kind", "no cells stream")
+    for e in entries:
+        if e["stream"] in (3, 4, 5) and e["level"] != 0:
+            _fail("malformed", "block.level", "block %d" % e["n"])
+    if sk == 3 and sum(e["count"] for e in entries if e["stream"] == 4) > X + Y + Z + 3:
+        _fail("malformed", "borders.count")
+    n_values_cov = _tile(entries, 3)
+    if sk == 2 and n_values_cov != X * Y * Z:
+        _fail("malformed", "stream.coverage", "stream 3")
+    if sk == 3:
+        _tile(entries, 4)
+    if sk == 4:
+        C = 1 << cell_log2
+        ncell = (ceil_div(X, C), ceil_div(Y, C), ceil_div(Z, C))
+        if _tile(entries, 5) != ncell[0] * ncell[1] * ncell[2]:
+            _fail("malformed", "stream.coverage", "stream 5")
+    meta = check_metadata(decode_block(data, meta_entry, 1))
+    vw = VWIDTH[ve]
+
+    def gather(stream, width, fmt):
+        out = []
+        for e in sorted((e for e in entries if e["stream"] == stream), key=lambda e: e["first"]):
+            raw = decode_block(data, e, width)
+            out += struct.unpack("<%d%s" % (e["count"], fmt), raw)
+        return out
+
+    # structure -> list of boxes (x0, x1, y0, y1, z0, z1) in value order
+    boxes = []
+    if sk == 2:
+        total = X * Y * Z
+    elif sk == 3:
+        b = gather(4, 4, "I")
+        pos = [0]
+
+        def take(n):
+            if pos[0] >= len(b) or b[pos[0]] != 0:
+                _fail("malformed", "borders.start")
+            lst = [0]
+            pos[0] += 1
+            while lst[-1] != n:
+                if pos[0] >= len(b):
+                    _fail("malformed", "borders.end")
+                v = b[pos[0]]
+                if v <= lst[-1]:
+                    _fail("malformed", "borders.increasing")
+                if v > n:
+                    _fail("malformed", "borders.end", "border %d beyond size %d" % (v, n))
+                lst.append(v)
+                pos[0] += 1
+            return lst
+
+        bx, by, bz = take(X), take(Y), take(Z)
+        if pos[0] != len(b):
+            _fail("malformed", "borders.extra")
+        for k in range(len(bz) - 1):
+            for j in range(len(by) - 1):
+                for i in range(len(bx) - 1):
+                    boxes.append((bx[i], bx[i + 1], by[j], by[j + 1], bz[k], bz[k + 1]))
+        total = len(boxes)
+    else:
+        words = gather(5, 8, "Q")
+        C = 1 << cell_log2
+        nx, ny, nz = ncell
+        running = 0
+        geo = []
+        for n, w in enumerate(words):
+            e, fv = w >> 56, w & ((1 << 56) - 1)
+            if e > cell_log2:
+                _fail("malformed", "cells.exponent", "cell %d" % n)
+            if fv != running:
+                _fail("malformed", "cells.chain", "cell %d: %d, expected %d" % (n, fv, running))
+            i, j, k = n % nx, (n // nx) % ny, n // (nx * ny)
+            h = C >> e
+            o = (i * C, j * C, k * C)
+            ext = (min(C, X - o[0]), min(C, Y - o[1]), min(C, Z - o[2]))
+            mm = [-(-a // h) for a in ext]
+            geo.append((h, o, ext, mm))
+            running += mm[0] * mm[1] * mm[2]
+            if running > 1 << 56:
+                _fail("malformed", "cells.total", "more than 2^56 values")
+        total = running
+        if n_values_cov != total:
+            _fail("malformed", "stream.coverage", "stream 3: %d values, cells need %d" % (n_values_cov, total))
+        for h, o, ext, mm in geo:
+            for r in range(mm[2]):
+                for q in range(mm[1]):
+                    for p in range(mm[0]):
+                        lo = (o[0] + p * h, o[1] + q * h, o[2] + r * h)
+                        boxes.append((lo[0], min(lo[0] + h, o[0] + ext[0]), lo[1], min(lo[1] + h, o[1] + ext[1]),
+                                      lo[2], min(lo[2] + h, o[2] + ext[2])))
+    if n_values_cov != total:
+        _fail("malformed", "stream.coverage", "stream 3: %d values, structure needs %d" % (n_values_cov, total))
+    values = gather(3, vw, "I" if vw == 4 else "H")
+    dt = NPBITS[ve]
+    if sk == 2:
+        dense = np.array(values, dtype=dt).reshape((Z, Y, X))
+    else:
+        dense = np.zeros((Z, Y, X), dtype=dt)
+        cover = np.zeros((Z, Y, X), dtype=np.int64)
+        for v, (x0, x1, y0, y1, z0, z1) in zip(values, boxes):
+            dense[z0:z1, y0:y1, x0:x1] = v
+            cover[z0:z1, y0:y1, x0:x1] += 1
+        assert (cover == 1).all()
+    # levels of detail (§12.3, §8A): plain Python floats, one voxel at a time
+    dec = [[[decode(ve, dense[z, y, x]) for x in range(X)] for y in range(Y)] for z in range(Z)]
+    lods = {}
+    for kk in range(1, D + 1):
+        s = 1 << kk
+        shape = (ceil_div(Z, s), ceil_div(Y, s), ceil_div(X, s))
+        arr = np.zeros(shape, dtype=dt)
+        for zc in range(shape[0]):
+            for yc in range(shape[1]):
+                for xc in range(shape[2]):
+                    acc = 0.0
+                    n = 0
+                    for z in range(zc * s, min(zc * s + s, Z)):
+                        for y in range(yc * s, min(yc * s + s, Y)):
+                            row = dec[z][y]
+                            for x in range(xc * s, min(xc * s + s, X)):
+                                acc = acc + row[x]
+                                n += 1
+                    arr[zc, yc, xc] = encode(ve, acc / n)
+        lods[kk] = arr
+    return dense, lods, meta
+
+
 # ------------------------------------------------------------------- the vectors
 
 MANIFEST = []
@@ -875,13 +1203,18 @@ def raw_bits(arr):
     return arr.astype(arr.dtype.newbyteorder("<")).tobytes()
 
 
-def add_valid(name, data, src, enc, desc, lods=True):
+def add_valid(name, data, src, enc, desc, lods=True, kind=KIND_OCTREE, extra=None):
     D = min_depth(src.shape[2], src.shape[1], src.shape[0])
     rel = "valid/%s.ivol" % name
     _write(rel, data)
     ent = {"file": rel, "expect": "ok", "dense": "valid/%s.dense.raw" % name}
     _write(ent["dense"], raw_bits(src))
-    exp_lods = pyramid_lods(src, enc, D) if lods else {}
+    if not lods:
+        exp_lods = {}
+    elif kind == KIND_OCTREE:
+        exp_lods = pyramid_lods(src, enc, D)
+    else:
+        exp_lods = flat_lods(src, enc, D)
     if exp_lods:
         ent["lod"] = {}
         for k in sorted(exp_lods):
@@ -889,6 +1222,8 @@ def add_valid(name, data, src, enc, desc, lods=True):
             _write(ent["lod"][str(k)], raw_bits(exp_lods[k]))
     ent["value_encoding"] = ENC_NAME[enc]
     ent["size"] = [src.shape[2], src.shape[1], src.shape[0]]
+    ent["structure"] = KIND_NAME[kind]
+    ent.update(extra or {})
     ent["description"] = desc
     MANIFEST.append(ent)
     # self-test
@@ -1225,7 +1560,7 @@ def gen():
     # optional features
     d, *_ = simple_file(BASE, UINT16, optional=(1 << 0) | (1 << 17) | (1 << 63))
     add_valid("optional_features_unknown", d, BASE, UINT16,
-              "optional_features = bits 0, 17 and 63 set (unknown to 1.0): a reader must ignore them.")
+              "optional_features = bits 0, 17 and 63 set (unknown to 1.0 and 1.1): a reader must ignore them.")
 
     # minor version 1.7 with bigger header, fixed part and entries
     t = build_tree(BASE, UINT16)
@@ -1238,7 +1573,7 @@ def gen():
     add_valid("minor_1_7_extended", d, BASE, UINT16,
               "version 1.7: header_size 56 (16 unknown non-zero bytes at 36..52, header_crc at 52), "
               "fixed_size 80 (32 unknown bytes at 48..80, level table at 80), block_entry_size 40 "
-              "(8 unknown bytes per entry). A 1.0 reader must skip the extra bytes.")
+              "(8 unknown bytes per entry). A 1.0 or 1.1 reader must skip the extra bytes.")
 
     MINOR17 = d
     # the largest header, fixed part and block entries a reader must accept
@@ -1247,12 +1582,14 @@ def gen():
     bl = level_blocks(t, CODEC_STORED)
     bl.append(meta_block(DEFAULT_META, CODEC_STORED))
     pat = lambda nb, s0: bytes((s0 + q) % 251 for q in range(nb))
-    d, _ = assemble(t, bl, minor=1, header_extra=pat(4056, 1), fixed_extra=pat(4048, 2),
+    d, _ = assemble(t, bl, minor=2, header_extra=pat(4056, 1), fixed_extra=pat(4048, 2),
                     entry_extra=pat(4064, 3))
     assert u32(d, 12) == 4096
     add_valid("limits_4096", d, src, FLOAT32,
-              "1x1x1 float32 with header_size, fixed_size and block_entry_size all 4096 (the largest "
-              "a reader must accept), the unknown bytes filled with a non-zero pattern.")
+              "1x1x1 float32, version 1.2, with header_size, fixed_size and block_entry_size all 4096 "
+              "(the largest a reader must accept), the unknown bytes filled with a non-zero pattern. "
+              "(version_minor was 1 in the 1.0 vectors; since 1.1 defines minor 1 without any extension "
+              "bytes, the file now claims a later minor version, 2.)")
 
     # metadata with all keys
     text = METADATA_FULL.encode("utf-8")
@@ -1392,7 +1729,7 @@ def gen():
     inv("header_reserved_nonzero", reseal(patch(base, 32, "<I", 1), index=False), "malformed",
         "header.reserved", "Header reserved field (offset 32) = 1, header CRC recomputed.")
     inv("required_feature_bit0", reseal(patch(base, 16, "<Q", 1), index=False), "unsupported-feature",
-        "required_features", "required_features bit 0 set (unknown in 1.0), header CRC recomputed.")
+        "required_features", "required_features bit 0 set (unknown in 1.0 and 1.1), header CRC recomputed.")
     inv("required_feature_bit63", reseal(patch(base, 16, "<Q", 1 << 63), index=False),
         "unsupported-feature", "required_features", "required_features bit 63 set.")
     inv("order_reserved_before_required", reseal(patch(patch(base, 16, "<Q", 1), 32, "<I", 7), index=False),
@@ -1440,8 +1777,9 @@ def gen():
     inv("index_signature_bad", pix(0, "<4s", b"IVIY"), "malformed", "index_signature",
         "index_signature 'IVIY' (CRCs recomputed).")
     inv("fixed_size_47", pix(4, "<I", 47), "malformed", "fixed_size", "fixed_size = 47 (< 48).")
-    inv("structure_kind_2", pix(8, "<B", 2), "unsupported-feature", "structure_kind",
-        "structure_kind = 2 (unknown).")
+    inv("structure_kind_9", pix(8, "<B", 9), "unsupported-feature", "structure_kind",
+        "structure_kind = 9 (unknown; was structure_kind_2 in the 1.0 vectors, but 1.1 made 2 the "
+        "regular grid).")
     inv("structure_kind_0", pix(8, "<B", 0), "unsupported-feature", "structure_kind",
         "structure_kind = 0 (not defined: 'other values').")
     inv("value_encoding_4", pix(9, "<B", 4), "unsupported-feature", "value_encoding",
@@ -1449,7 +1787,8 @@ def gen():
     inv("value_encoding_0", pix(9, "<B", 0), "unsupported-feature", "value_encoding",
         "value_encoding = 0 (not defined).")
     inv("index_reserved_nonzero", pix(11, "<B", 1), "malformed", "index.reserved",
-        "Index reserved byte (offset 11) = 1.")
+        "Octree file (structure_kind 1) with index byte 11 = 1: since 1.1 the byte is cell_log2 "
+        "for structure_kind 4 only and stays reserved (0) for the other kinds.")
     inv("size_x_zero", pix(12, "<I", 0), "malformed", "size", "size_x = 0 (depth still matches max(size)).")
     inv("value_scale_zero", pix(24, "<d", 0.0), "malformed", "value_scale", "value_scale = 0.")
     inv("value_scale_nan", pix(24, "<Q", 0x7FF8000000000000), "malformed", "value_scale",
@@ -1505,7 +1844,7 @@ def gen():
     inv("block_flags_reserved_bit", pen(vblk, "flags", "<B", 2), "malformed", "block.flags",
         "A values block with flags bit 1 (reserved) set.")
     inv("block_ignorable_on_values", pen(vblk, "flags", "<B", 1), "malformed", "block.flags",
-        "A values block (stream 3) with the ignorable flag: streams 1-3 must have flags = 0.")
+        "A values block (stream 3) with the ignorable flag: streams 1-5 (1-3 in 1.0) must have flags = 0.")
     inv("block_first_offset_wrong", pen(0, "file_offset", "<Q", 0), "malformed", "block.placement",
         "First block entry file_offset = 0 instead of header_size.")
     inv("block_offset_plus_1", pen(vblk, "file_offset", "<Q", blay.block_offsets[vblk] + 1), "malformed",
@@ -1842,10 +2181,480 @@ def gen():
     inv("metadata_nan", meta_file(b'{"voxel_size":[NaN,1,1],"unit":"mm","origin":[0,0,0],'
                                   b'"value":{"quantity":"density"}}'),
         "malformed", "metadata.json", "Metadata with the token NaN, which is not JSON (RFC 8259).")
+    gen_grids_valid()
+    gen_grids_invalid(base, bblocks, bt)
     return SAMPLE
 
 
-README_HEAD = """# .ivol 1.0 conformance vectors
+# ------------------------------------------------- vectors of §8A (version 1.1)
+
+def _f32_from_bits(b):
+    return decode(FLOAT32, b)
+
+
+def rect_source(enc, bx, by, bz, cellvals):
+    """Dense source of a rectilinear grid, voxel by voxel: the cell of a
+    voxel is found by searching the border lists."""
+    X, Y, Z = bx[-1], by[-1], bz[-1]
+    nx, ny = len(bx) - 1, len(by) - 1
+    src = np.zeros((Z, Y, X), dtype=NPBITS[enc])
+    for z in range(Z):
+        k = int(np.searchsorted(bz, z, side="right")) - 1
+        for y in range(Y):
+            j = int(np.searchsorted(by, y, side="right")) - 1
+            for x in range(X):
+                i = int(np.searchsorted(bx, x, side="right")) - 1
+                src[z, y, x] = cellvals[(k * ny + j) * nx + i]
+    return src
+
+
+def nested_source(enc, size, cell_log2, expo, gen_value):
+    """Dense source of a nested grid, voxel by voxel: coarse cell c = x // C,
+    sub-voxel p = (x - c*C) // h; each sub-voxel gets gen_value() once."""
+    X, Y, Z = size
+    C = 1 << cell_log2
+    table = {}
+    src = np.zeros((Z, Y, X), dtype=NPBITS[enc])
+    for z in range(Z):
+        for y in range(Y):
+            for x in range(X):
+                c = (x // C, y // C, z // C)
+                h = C >> expo[c[2]][c[1]][c[0]]
+                key = (c, (x - c[0] * C) // h, (y - c[1] * C) // h, (z - c[2] * C) // h)
+                if key not in table:
+                    table[key] = None
+                src[z, y, x] = 0
+    for key in sorted(table):             # fixed order, independent of the file's value order
+        table[key] = gen_value()
+    for z in range(Z):
+        for y in range(Y):
+            for x in range(X):
+                c = (x // C, y // C, z // C)
+                h = C >> expo[c[2]][c[1]][c[0]]
+                src[z, y, x] = table[(c, (x - c[0] * C) // h, (y - c[1] * C) // h, (z - c[2] * C) // h)]
+    return src
+
+
+def _order_sensitive_cells_f32(src):
+    """Put LoD-1 cells whose flat sum depends on the order (§12.3): in z, y, x
+    order (x fastest) the voxels are v[n], n = (dz*2 + dy)*2 + dx."""
+    big = f32(2.0 ** 60)
+    nbig = f32(-(2.0 ** 60))
+    one = f32(1.0)
+    cells = {
+        (0, 0, 0): [big, one, nbig, one, one, one, one, one],   # sequential 5/8, exact 6/8, pairwise 4/8
+        (1, 0, 0): [big, nbig, one, one, one, one, one, one],   # z,y,x: 6/8; x,y,z (z fastest): 3/8
+        (2, 0, 0): [one, big, nbig, one, one, one, one, one],   # sequential 5/8
+        (3, 1, 0): [nbig, one, one, one, one, one, one, big],   # sequential +0, exact 6/8
+    }
+    for (cx, cy, cz), v in cells.items():
+        for n in range(8):
+            dx, dy, dz = n & 1, (n >> 1) & 1, (n >> 2) & 1
+            src[2 * cz + dz, 2 * cy + dy, 2 * cx + dx] = v[n]
+    return cells
+
+
+def gen_grids_valid():
+    # ---- regular grid (§8A.1)
+    rng = np.random.default_rng(101)          # the voxels of odd_3x5x7_uint16
+    src = rng.integers(0, 4096, size=(7, 5, 3)).astype(np.uint16)
+    src[0:2, 0:2, 0:2] = 777
+    src[4:7, 4:5, 0:3] = 1234
+    src[2:4, 2:4, 2:3] = 55
+    g = write_regular(src, UINT16)
+    d, lay, bl = grid_file(g, limit=64, meta_first=True, scale=0.0007, offset=-1.25)
+    assert sum(1 for b in bl if b.stream == STREAM_VALUES) == 4
+    add_valid("regular_3x5x7_uint16", d, src, UINT16,
+              "Regular grid (structure_kind 2, version 1.1) of the voxels of odd_3x5x7_uint16: 105 values "
+              "in 4 value blocks of at most 32 values (zstd), metadata block first, value_scale 0.0007, "
+              "value_offset -1.25, depth 3, level table [0, 0, 0, 0]. Levels of detail by the flat sum of "
+              "§12.3 over the decoded (unscaled) integers, clipped cells at the border, ties to even.",
+              kind=KIND_REGULAR)
+
+    rng = np.random.default_rng(201)
+    vals = rng.standard_normal(16 ** 3) * 10.0 ** rng.integers(-3, 12, 16 ** 3)
+    src = arr_f32(vals, (16, 16, 16))
+    cells = _order_sensitive_cells_f32(src)
+    exp = flat_lods(src, FLOAT32, 4)
+    # the sequential z, y, x sum is what is tested: show that other orders differ
+    for (cx, cy, cz), v in cells.items():
+        got = exp[1][cz, cy, cx]
+        exact = f32(float(sum(Fraction(_f32_from_bits(b)) for b in v) / 8))
+        seq = 0.0
+        for b in v:
+            seq = seq + _f32_from_bits(b)
+        assert got == f32(seq / 8)
+        assert (got == exact) == ((cx, cy, cz) == (1, 0, 0))     # the exact mean differs elsewhere
+    assert exp[1][0, 0, 0] == f32(0.625) and exp[1][0, 0, 1] == f32(0.75) and exp[1][0, 1, 3] == 0
+    g = write_regular(src, FLOAT32)
+    d, lay, bl = grid_file(g, codec="alt", limit=4096)
+    add_valid("regular_16_float32", d, src, FLOAT32,
+              "Regular grid 16^3 float32, random values of magnitudes 1e-3 .. 1e12, 4 value blocks of 1024 "
+              "values, codecs alternate stored/zstd. Some level-of-detail-1 cells hold 2^60, -2^60 and 1s "
+              "so that only the exact order of §12.3 (binary64 from +0.0, z then y then x, one value after "
+              "the other) gives the expected bits: cell (0,0,0) = 0.625 (exact mean 0.75, pairwise sum "
+              "0.5), cell (1,0,0) = 0.75 (z-fastest order: 0.375), cell (3,1,0) = +0 (exact mean 0.75).",
+              kind=KIND_REGULAR)
+
+    rng = np.random.default_rng(202)
+    vals = rng.uniform(-100.0, 100.0, (5, 6, 9))
+    src = arr_f16(vals, (5, 6, 9))
+    src[0:2, 0:2, 0:2] = 0x8000            # uniform -0: level of detail +0 (no leaf exception)
+    src[0:2, 0:2, 2:4] = 0x7C01            # uniform signalling NaN: level of detail 0x7E00
+    src[0:2, 2:4, 0:2] = 0x7C00            # +inf
+    src[0:2, 2:4, 2] = 0xFC00              # -inf beside +inf: NaN
+    src[2:4, 0:2, 0:2] = [[[1, 0], [1, 0]], [[1, 0], [1, 0]]]   # mean 2^-25: tie -> +0
+    src[4, 4:6, 8] = 0x8000                # a clipped cell (x = 8, z = 4) of two -0
+    src[2:4, 2:4, 2:4] = f16(0.1)          # uniform finite: keeps its bits
+    g = write_regular(src, BINARY16)
+    d, lay, bl = grid_file(g, codec=CODEC_STORED, limit=64)
+    add_valid("regular_9x6x5_binary16", d, src, BINARY16,
+              "Regular grid 9x6x5 binary16, stored codec, 9 value blocks. Special values: a uniform -0 "
+              "2x2x2 cell and a clipped cell of two -0 give +0 in the levels of detail (+0.0 + -0 = +0; "
+              "unlike an octree leaf), a uniform signalling NaN 0x7C01 gives 0x7E00, +inf with -inf gives "
+              "0x7E00, a mean of 2^-25 rounds to +0 (tie to even), a uniform 0.1 keeps its bits.",
+              kind=KIND_REGULAR)
+
+    # ---- rectilinear grid (§8A.2)
+    bx, by, bz = [0, 1, 4, 5, 11, 19, 20], [0, 11], [0, 2, 3, 7]
+    rng = np.random.default_rng(203)
+    cv = [int(v) for v in rng.integers(0, 65536, 18)]
+    src = rect_source(UINT16, bx, by, bz, cv)
+    g = write_rectilinear(src, UINT16, bx, by, bz)
+    assert g.values == cv
+    d, lay, bl = grid_file(g, codec="alt", limit=16, slimit=8, meta_first=True, scale=0.5, offset=-1000.0)
+    assert [len(b.data) // 4 for b in bl if b.stream == STREAM_BORDERS] == [2] * 6 + [1]
+    add_valid("rectilinear_20x11x7_uint16", d, src, UINT16,
+              "Rectilinear grid (structure_kind 3) 20x11x7 uint16, B_x = [0,1,4,5,11,19,20] (uneven), "
+              "B_y = [0,11] (one cell along y), B_z = [0,2,3,7]; 13 borders in 7 blocks (blocks straddle "
+              "the lists: [0,1] [4,5] [11,19] [20,0] [11,0] [2,3] [7]), 18 values in 3 blocks; "
+              "codecs alternate stored/zstd; metadata first; scale 0.5, offset -1000; depth 5.",
+              kind=KIND_RECTILINEAR)
+
+    bx, by, bz = [0, 1, 2, 3, 64, 100, 128, 255, 256, 257], [0, 1], [0, 1, 2]
+    rng = np.random.default_rng(204)
+    cv = [f16(v) for v in rng.uniform(-8.0, 8.0, 18)]
+    src = rect_source(BINARY16, bx, by, bz, cv)
+    g = write_rectilinear(src, BINARY16, bx, by, bz)
+    d, lay, bl = grid_file(g, limit=8, slimit=12, struct_first=False)
+    add_valid("rectilinear_257x1x2_binary16", d, src, BINARY16,
+              "Rectilinear grid 257x1x2 binary16, depth 9, B_x = [0,1,2,3,64,100,128,255,256,257], B_y = "
+              "[0,1], B_z = [0,1,2]: 15 borders in 5 blocks of 3, 18 values in 5 blocks, all zstd, values "
+              "before borders in the file; 9 levels of detail, cells clipped at x = 257.",
+              kind=KIND_RECTILINEAR)
+
+    bx, by, bz = [0, 1, 2, 3, 4, 5], [0, 1, 2, 3], [0, 1, 2]
+    rng = np.random.default_rng(205)
+    cv = [f32(v) for v in rng.normal(0.0, 1.0, 30)]
+    src = rect_source(FLOAT32, bx, by, bz, cv)
+    g = write_rectilinear(src, FLOAT32, bx, by, bz)
+    assert len(g.borders) == 5 + 3 + 2 + 3
+    d, lay, bl = grid_file(g, codec=CODEC_STORED)
+    add_valid("rectilinear_full_5x3x2_float32", d, src, FLOAT32,
+              "Rectilinear grid 5x3x2 float32 with a border at every voxel: the borders stream holds "
+              "size_x + size_y + size_z + 3 = 13 elements, the most allowed; stored codec.",
+              kind=KIND_RECTILINEAR)
+
+    bx, by, bz = [0, 6], [0, 4], [0, 3]
+    src = rect_source(FLOAT32, bx, by, bz, [f32(-2.75)])
+    g = write_rectilinear(src, FLOAT32, bx, by, bz)
+    d, lay, bl = grid_file(g)
+    add_valid("rectilinear_one_cell_6x4x3_float32", d, src, FLOAT32,
+              "Rectilinear grid 6x4x3 float32 of one cell (borders [0,6] [0,4] [0,3], 6 elements, the "
+              "fewest), one value -2.75; zstd.",
+              kind=KIND_RECTILINEAR)
+
+    # ---- streams 4 and 5 outside their kinds are unknown streams (§6.4)
+    BASE = vol_object_in_air(6, 5, 4, UINT16, 107, 100, (2.0, 2.0, 1.5), 2.2, 1000, 2000)
+    t = build_tree(BASE, UINT16)
+    bl = level_blocks(t, CODEC_ZSTD)
+    bl.insert(2, Blk(STREAM_BORDERS, 0, 0, 24, b"future stream, skip me\x00\x01", codec=CODEC_STORED, flags=1))
+    bl.append(meta_block(DEFAULT_META))
+    d, _ = assemble(t, bl)
+    add_valid("ignorable_stream_4_octree", d, BASE, UINT16,
+              "The file of ignorable_stream_200 (6x5x4 uint16 octree, version_minor 0) with stream 4 "
+              "instead of 200, ignorable flag set: stream 4 is known only in files of structure_kind 3, so "
+              "here it is an unknown ignorable stream that a 1.0 and a 1.1 reader skip.")
+
+    # ---- nested grid (§8A.3)
+    expo = [[[(i + j + 2 * k) % 4 for i in range(5)] for j in range(3)] for k in range(2)]
+    rng = np.random.default_rng(206)
+    src = nested_source(UINT16, (37, 21, 10), 3, expo, lambda: int(rng.integers(0, 65536)))
+    g = write_nested(src, UINT16, 3, expo)
+    assert len(g.cells) == 30
+    meta = dict(DEFAULT_META)
+    meta["structure"] = {"kind": "nested", "lossless": True, "source_encoding": "uint16"}
+    d, lay, bl = grid_file(g, meta=meta, limit=512, slimit=64, scale=0.25, offset=-512.0)
+    assert sum(1 for b in bl if b.stream == STREAM_CELLS) == 4 and sum(1 for b in bl if b.stream == 3) >= 3
+    add_valid("nested_37x21x10_uint16_c8", d, src, UINT16,
+              "Nested grid (structure_kind 4) 37x21x10 uint16, cell_log2 3 (C = 8): 5x3x2 = 30 cells, "
+              "exponent of cell (i,j,k) = (i + j + 2k) mod 4, so 0, 1, 2 and 3 all occur, also on the "
+              "cells clipped at x = 32..36, y = 16..20 and z = 8..9 (e.g. e = 2, h = 2 on 5 voxels: "
+              "sub-voxels of 2, 2 and 1); %d values in %d blocks, cells in 4 blocks, zstd; scale 0.25, "
+              "offset -512; depth 6; metadata structure.kind \"nested\"." % (len(g.values), sum(1 for b in bl if b.stream == 3)),
+              kind=KIND_NESTED, extra={"cell_log2": 3})
+
+    rng = np.random.default_rng(207)
+    expo = [[[int(rng.integers(0, 2)) for i in range(4)] for j in range(3)] for k in range(2)]
+    assert {e for pl in expo for row in pl for e in row} == {0, 1}
+    src = nested_source(FLOAT32, (7, 5, 3), 1, expo, lambda: f32(rng.normal(10.0, 3.0)))
+    g = write_nested(src, FLOAT32, 1, expo)
+    d, lay, bl = grid_file(g, codec=CODEC_STORED, limit=64, slimit=32)
+    add_valid("nested_7x5x3_float32_c2", d, src, FLOAT32,
+              "Nested grid 7x5x3 float32, cell_log2 1 (C = 2): 4x3x2 = 24 cells with exponents 0 and 1, "
+              "cells clipped to 1 voxel at x = 6, y = 4 and z = 2; stored codec, cells in 6 blocks, "
+              "values in several blocks.",
+              kind=KIND_NESTED, extra={"cell_log2": 1})
+
+    vals = iter([f16(v) for v in (1.5, -2.25, 0.375, 1000.0)])
+    src = nested_source(BINARY16, (5, 3, 6), 4, [[[2]]], lambda: next(vals))
+    g = write_nested(src, BINARY16, 4, [[[2]]])
+    assert len(g.values) == 4
+    d, lay, bl = grid_file(g, mutate_blocks=lambda bl: bl.insert(1, Blk(
+        STREAM_BORDERS, 0, 0, 12, pack_u32([0, 5, 0, 3, 0, 6]), codec=CODEC_ZSTD, flags=1)))
+    add_valid("nested_5x3x6_binary16_c16", d, src, BINARY16,
+              "Nested grid 5x3x6 binary16, cell_log2 4 (C = 16, larger than the volume, depth 3): one cell "
+              "clipped to 5x3x6, exponent 2 (h = 4): a 2x1x2 sub-grid whose voxels cover x 0..3 and 4, "
+              "y 0..2, z 0..3 and 4..5; zstd. Between the cells and values blocks an ignorable block of "
+              "stream 4 (flags 1, 12 bytes of border-like data): in a nested grid stream 4 is an unknown "
+              "stream and is skipped.",
+              kind=KIND_NESTED, extra={"cell_log2": 4})
+
+    rng = np.random.default_rng(208)
+    src = nested_source(UINT16, (6, 5, 3), 31, [[[30]]], lambda: int(rng.integers(0, 65536)))
+    g = write_nested(src, UINT16, 31, [[[30]]])
+    assert len(g.values) == 18
+    d, lay, bl = grid_file(g, struct_first=False)
+    add_valid("nested_6x5x3_uint16_c2p31", d, src, UINT16,
+              "Nested grid 6x5x3 uint16, cell_log2 31 (C = 2^31, the largest): one cell, exponent 30 "
+              "(h = 2): 3x3x2 sub-voxels; the cells block after the values block; zstd.",
+              kind=KIND_NESTED, extra={"cell_log2": 31})
+
+
+def gen_grids_invalid(octree_base, octree_blocks, octree_tree):
+    def inv(name, data, expect, tag, desc):
+        add_invalid(name, data, expect, tag, desc)
+
+    # base files
+    rng = np.random.default_rng(301)
+    RB_src = rng.integers(0, 65536, size=(2, 3, 4)).astype(np.uint16)
+    RB = write_regular(RB_src, UINT16)
+    RB_kw = dict(limit=16)
+    rb, rblay, rbbl = grid_file(RB, **RB_kw)
+    bx, by, bz = [0, 2, 3, 6], [0, 2, 4], [0, 3]
+    RC_src = rect_source(UINT16, bx, by, bz, [int(v) for v in rng.integers(0, 65536, 6)])
+    RC = write_rectilinear(RC_src, UINT16, bx, by, bz)
+    RC_kw = dict(slimit=20)
+    rc, rclay, rcbl = grid_file(RC, **RC_kw)
+    expo = [[[(i + j + k) % 3 for i in range(3)] for j in range(2)] for k in range(2)]
+    NB_src = nested_source(UINT16, (10, 6, 5), 2, expo, lambda: int(rng.integers(0, 65536)))
+    NB = write_nested(NB_src, UINT16, 2, expo)
+    NB_kw = dict(limit=32, slimit=32)
+    nb, nblay, nbbl = grid_file(NB, **NB_kw)
+    assert len(NB.cells) == 12
+    # the bases are valid
+    for d_, s_ in ((rb, RB_src), (rc, RC_src), (nb, NB_src)):
+        assert np.array_equal(read_ivol(d_)[0], s_)
+    gdesc = {"RB": "regular grid 4x3x2 uint16 (24 values in 3 blocks)",
+             "RC": "rectilinear grid 6x4x3 uint16 (B_x = [0,2,3,6], B_y = [0,2,4], B_z = [0,3]; 6 values)",
+             "NB": "nested grid 10x6x5 uint16, cell_log2 2 (C = 4, 3x2x2 = 12 cells, exponents 0..2)"}
+
+    def pg(data, lay, rel, fmt, *v):
+        return patch_index(data, lay, rel, fmt, *v)
+
+    def gf(g, kw, **more):
+        k2 = dict(kw)
+        k2.update(more)
+        return grid_file(g, **k2)[0]
+
+    # level table (§6.2)
+    inv("regular_level_table_nonzero", pg(rb, rblay, rblay.level_table_offset, "<Q", 1), "malformed",
+        "level_table.nonzero", "%s with inner_count[0] = 1 (a table that would be valid for an octree): "
+        "every level table entry must be 0 for kinds 2-4." % gdesc["RB"])
+    inv("rectilinear_level_table_nonzero", pg(rc, rclay, rclay.level_table_offset, "<QQ", 1, 1), "malformed",
+        "level_table.nonzero", "%s with level table [1, 1, 0, 0]." % gdesc["RC"])
+    inv("nested_level_table_nonzero", pg(nb, nblay, nblay.level_table_offset, "<QQ", 1, 8), "malformed",
+        "level_table.nonzero", "%s with level table [1, 8, 0, 0, 0]." % gdesc["NB"])
+
+    # streams that do not belong to the kind (§6.4)
+    def add_block(blk, pos=0):
+        return lambda bl: bl.insert(pos, blk)
+
+    inv("regular_with_nodes_stream", gf(RB, RB_kw, mutate_blocks=add_block(
+        Blk(STREAM_NODES, 0, 0, 1, pack_nodes([1]), codec=CODEC_STORED))), "malformed", "stream.kind",
+        "%s with an extra nodes block (stream 2, one node word, level 0): stream 2 appears only with "
+        "structure_kind 1 (its coverage rule, total_inner = 0, is broken with it)." % gdesc["RB"])
+    inv("regular_with_borders_stream", gf(RB, RB_kw, mutate_blocks=add_block(
+        Blk(STREAM_BORDERS, 0, 0, 6, pack_u32([0, 4, 0, 3, 0, 2]), codec=CODEC_STORED))), "unsupported-feature",
+        "stream", "%s with an extra borders block [0,4, 0,3, 0,2] (valid lists for its size), flags 0: "
+        "stream 4 is known only in files of structure_kind 3, elsewhere it is an unknown stream, and "
+        "without the ignorable flag the file is refused." % gdesc["RB"])
+    inv("rectilinear_borders_missing", gf(RC, RC_kw, mutate_blocks=lambda bl: bl.__setitem__(
+        slice(None), [b for b in bl if b.stream != STREAM_BORDERS])), "malformed", "stream.kind",
+        "%s without its borders blocks: stream 4 must appear with structure_kind 3." % gdesc["RC"])
+    inv("rectilinear_with_cells_stream", gf(RC, RC_kw, mutate_blocks=add_block(
+        Blk(STREAM_CELLS, 0, 0, 1, pack_nodes([0]), codec=CODEC_STORED), 3)), "unsupported-feature", "stream",
+        "%s with an extra cells block (stream 5, one word 0, flags 0): an unknown stream outside "
+        "structure_kind 4, not ignorable." % gdesc["RC"])
+    inv("nested_with_borders_stream", gf(NB, NB_kw, mutate_blocks=add_block(
+        Blk(STREAM_BORDERS, 0, 0, 6, pack_u32([0, 10, 0, 6, 0, 5]), codec=CODEC_ZSTD), 2)),
+        "unsupported-feature", "stream", "%s with an extra borders block [0,10, 0,6, 0,5], flags 0: an "
+        "unknown stream outside structure_kind 3, not ignorable." % gdesc["NB"])
+    inv("nested_cells_missing", gf(NB, NB_kw, mutate_blocks=lambda bl: bl.__setitem__(
+        slice(None), [b for b in bl if b.stream != STREAM_CELLS])), "malformed", "stream.kind",
+        "%s without its cells blocks: stream 5 must appear with structure_kind 4." % gdesc["NB"])
+    bl = [Blk(b.stream, b.level, b.first, b.count, b.data, b.codec, b.flags) for b in octree_blocks]
+    bl.insert(2, Blk(STREAM_CELLS, 0, 0, 1, pack_nodes([0]), codec=CODEC_STORED))
+    d, _ = assemble(octree_tree, bl)
+    inv("octree_with_cells_stream", d, "unsupported-feature", "stream",
+        "Octree file (6x5x4 uint16, structure_kind 1, version_minor 0) with an extra block of stream 5, "
+        "flags 0: as in 1.0, an unknown non-ignorable stream (stream 5 is known only in files of "
+        "structure_kind 4).")
+
+    # block level (§6.4)
+    vb = [i for i, b in enumerate(rbbl) if b.stream == STREAM_VALUES][1]
+    inv("regular_values_block_level_1", pg(rb, rblay, entry_off(rblay, vb, "level"), "<B", 1), "malformed",
+        "block.level", "%s: the second values block has level 1 (depth 2): blocks of kinds 2-4 have "
+        "level 0." % gdesc["RB"])
+    sb = [i for i, b in enumerate(rcbl) if b.stream == STREAM_BORDERS][0]
+    inv("rectilinear_borders_block_level_1", pg(rc, rclay, entry_off(rclay, sb, "level"), "<B", 1),
+        "malformed", "block.level", "%s: the first borders block has level 1." % gdesc["RC"])
+    cb = [i for i, b in enumerate(nbbl) if b.stream == STREAM_CELLS][-1]
+    inv("nested_cells_block_level_2", pg(nb, nblay, entry_off(nblay, cb, "level"), "<B", 2),
+        "malformed", "block.level", "%s: the last cells block has level 2." % gdesc["NB"])
+
+    # borders (§8A.2)
+    def rect_with(borders, values=None):
+        g = RC.copy()
+        g.borders = list(borders)
+        if values is not None:
+            g.values = list(values)
+        return gf(g, RC_kw)
+
+    inv("borders_y_not_starting_at_0", rect_with([0, 2, 3, 6, 1, 2, 4, 0, 3]), "malformed", "borders.start",
+        "%s with B_y = [1,2,4] (does not start with 0; the number of cells is unchanged)." % gdesc["RC"])
+    inv("borders_x_decreasing", rect_with([0, 3, 2, 6, 0, 2, 4, 0, 3]), "malformed", "borders.increasing",
+        "%s with B_x = [0,3,2,6] (not increasing)." % gdesc["RC"])
+    inv("borders_x_repeated", rect_with([0, 2, 2, 6, 0, 2, 4, 0, 3]), "malformed", "borders.increasing",
+        "%s with B_x = [0,2,2,6] (not strictly increasing: an empty interval)." % gdesc["RC"])
+    inv("borders_z_not_ending_at_size", rect_with([0, 2, 3, 6, 0, 2, 4, 0, 2]), "malformed", "borders.end",
+        "%s with B_z = [0,2] although size_z = 3: the stream ends before B_z reaches size_z." % gdesc["RC"])
+    inv("borders_x_past_size", rect_with([0, 2, 3, 7, 0, 2, 4, 0, 3]), "malformed", "borders.end",
+        "%s with B_x = [0,2,3,7]: it never equals size_x = 6 (7 > size_x)." % gdesc["RC"])
+    inv("borders_y_list_missing", rect_with([0, 2, 3, 6, 0, 3]), "malformed", "borders.end",
+        "%s whose borders stream holds B_x and B_z only ([0,2,3,6, 0,3]): read as B_y = [0,3] it never "
+        "reaches size_y = 4; B_z is missing." % gdesc["RC"])
+    inv("borders_extra_list", rect_with([0, 2, 3, 6, 0, 2, 4, 0, 3, 0, 3]), "malformed", "borders.extra",
+        "%s with a fourth list [0,3] after B_z (11 elements, within the limit of size_x + size_y + "
+        "size_z + 3 = 16): B_z must end at the last element of the stream." % gdesc["RC"])
+    full = list(range(7)) + list(range(5)) + list(range(4))
+    assert len(full) == 6 + 4 + 3 + 3
+    inv("borders_too_many", rect_with(full + [3], [int(v) for v in rng.integers(0, 65536, 72)]),
+        "malformed", "borders.count",
+        "%s variant with a border at every voxel (16 elements, the most allowed, 72 values) plus one "
+        "element 3 more: 17 > size_x + size_y + size_z + 3, to be refused from the block table before "
+        "the stream is read." % gdesc["RC"])
+
+    def huge_borders(bl):
+        i = [n for n, b in enumerate(bl) if b.stream == STREAM_BORDERS]
+        data = pack_u32(RC.borders) + bytes(4 * ((1 << 24) - len(RC.borders)))
+        big = Blk(STREAM_BORDERS, 0, 0, 1 << 24, data, codec=CODEC_ZSTD)
+        bl[i[0]:i[-1] + 1] = [big]
+
+    d, _, hbl = grid_file(RC, mutate_blocks=huge_borders, **RC_kw)
+    hsz = [len(b.stored_bytes()) for b in hbl if b.stream == STREAM_BORDERS][0]
+    inv("borders_count_huge", d, "malformed", "borders.count",
+        "%s whose borders are one zstd block of element_count 2^24 (decoded 64 MiB, exactly the block "
+        "limit; the lists followed by zeros, %d bytes stored): far more than size_x + size_y + size_z + 3 "
+        "= 16; a reader must refuse it before allocating or decoding." % (gdesc["RC"], hsz))
+
+    # values totals (§8A)
+    g = RB.copy()
+    g.values = g.values[:-1]
+    inv("regular_values_one_short", gf(g, RB_kw), "malformed", "stream.coverage",
+        "%s whose values stream holds 23 values instead of size_x * size_y * size_z = 24." % gdesc["RB"])
+    g = RC.copy()
+    g.values = g.values + [7]
+    inv("rectilinear_values_one_extra", gf(g, RC_kw), "malformed", "stream.coverage",
+        "%s whose values stream holds 7 values instead of n_x * n_y * n_z = 6." % gdesc["RC"])
+    g = NB.copy()
+    g.values = g.values + [7]
+    inv("nested_values_one_extra", gf(g, NB_kw), "malformed", "stream.coverage",
+        "%s whose values stream holds one value more than the last cell's first_value plus its voxel "
+        "count (%d)." % (gdesc["NB"], len(NB.values)))
+
+    # cell_log2 (§6.1)
+    inv("nested_cell_log2_0", pg(nb, nblay, 11, "<B", 0), "malformed", "cell_log2",
+        "%s with index byte 11 (cell_log2) = 0: must be 1 .. 31 for structure_kind 4." % gdesc["NB"])
+    inv("nested_cell_log2_32", pg(nb, nblay, 11, "<B", 32), "malformed", "cell_log2",
+        "%s with cell_log2 = 32." % gdesc["NB"])
+    inv("regular_cell_log2_set", pg(rb, rblay, 11, "<B", 3), "malformed", "index.reserved",
+        "%s with index byte 11 = 3: reserved (0) for kinds other than 4." % gdesc["RB"])
+    inv("rectilinear_cell_log2_set", pg(rc, rclay, 11, "<B", 1), "malformed", "index.reserved",
+        "%s with index byte 11 = 1: reserved (0) for kinds other than 4." % gdesc["RC"])
+
+    # cell words (§8A.3)
+    def nest_with(cells, values=None):
+        g = NB.copy()
+        g.cells = list(cells)
+        if values is not None:
+            g.values = list(values)
+        return gf(g, NB_kw)
+
+    FV = (1 << 56) - 1
+    cw = NB.cells
+    last_e = cw[-1] >> 56
+    inv("nested_exponent_too_big", nest_with(cw[:-1] + [(3 << 56) | (cw[-1] & FV)]), "malformed",
+        "cells.exponent", "%s: the last cell (exponent %d) has exponent 3 > cell_log2 = 2 (h = C >> 3 "
+        "would be 0); values unchanged." % (gdesc["NB"], last_e))
+    inv("nested_exponent_255", nest_with([(255 << 56) | (cw[0] & FV)] + cw[1:]), "malformed",
+        "cells.exponent", "%s: the first cell has exponent 255 (a shift a C reader must not "
+        "perform)." % gdesc["NB"])
+    counts = [(cw[n + 1] & FV) - (cw[n] & FV) for n in range(len(cw) - 1)] + [len(NB.values) - (cw[-1] & FV)]
+    inv("nested_first_value_not_zero", nest_with([w + 1 for w in cw], [0] + NB.values), "malformed",
+        "cells.chain", "%s with every first_value one larger and one extra value in front: the chain "
+        "is intact but the first cell's first_value is 1, not 0." % gdesc["NB"])
+    inv("nested_chain_gap", nest_with(cw[:5] + [w + 1 for w in cw[5:]],
+                                      NB.values[:cw[5] & FV] + [0] + NB.values[cw[5] & FV:]),
+        "malformed", "cells.chain", "%s: cells 5 .. 11 have first_value one larger (one unused value "
+        "between cells 4 and 5, values stream one longer): cell 5 breaks the chain." % gdesc["NB"])
+    assert counts[4] >= 2
+    inv("nested_chain_overlap", nest_with(cw[:5] + [w - 1 for w in cw[5:]],
+                                          NB.values[:(cw[5] & FV) - 1] + NB.values[cw[5] & FV:]),
+        "malformed", "cells.chain", "%s: cells 5 .. 11 have first_value one smaller (cells 4 and 5 "
+        "share a value, values stream one shorter)." % gdesc["NB"])
+    inv("nested_cells_one_extra", nest_with(cw + [len(NB.values)], NB.values + [9]), "malformed",
+        "stream.coverage", "%s with a 13th cell word (exponent 0, first_value continuing the chain) "
+        "and its value: the cells stream must hold n_x * n_y * n_z = 12 words." % gdesc["NB"])
+    inv("nested_cells_one_short", nest_with(cw[:-1], NB.values[:cw[-1] & FV]), "malformed",
+        "stream.coverage", "%s without its last cell word and the last cell's %d values: 11 cell words "
+        "instead of 12." % (gdesc["NB"], counts[-1]))
+
+    # totals beyond 64 bits (§8A): 2^31 voxels per axis
+    S = 1 << 31
+    g = Grid(KIND_NESTED, UINT16, (S, S, S), [], cells=[31 << 56], cell_log2=31)
+    d, _ = assemble(g, [Blk(STREAM_CELLS, 0, 0, 1, pack_nodes(g.cells)), meta_block(DEFAULT_META)],
+                    minor=1, structure_kind=KIND_NESTED, ireserved=31)
+    inv("nested_total_values_wraps", d, "malformed", "cells.total",
+        "Nested grid of 2^31 x 2^31 x 2^31 voxels, cell_log2 31, depth 31: one cell at full resolution "
+        "(exponent 31, first_value 0), so total_values = 2^93 > 2^56 (§8A.3 bound), and 2^93 is 0 "
+        "modulo 2^64; the file has no values block at all (two blocks: cells, metadata) -> malformed; a reader that computes the total in 64 bits sees 0 values and must still not "
+        "accept it or read values that are not there.")
+    g = Grid(KIND_REGULAR, UINT16, (S, S, S), [])
+    d, _ = assemble(g, [Blk(200, 0, 0, 9, b"ignore me", codec=CODEC_STORED, flags=1),
+                        meta_block(DEFAULT_META)], minor=1, structure_kind=KIND_REGULAR)
+    inv("regular_total_values_wraps", d, "malformed", "stream.coverage",
+        "Regular grid of 2^31 x 2^31 x 2^31 voxels (total_values = 2^93, 0 modulo 2^64), depth 31, "
+        "with no values block: an ignorable block of stream 200 and the metadata block only. The "
+        "values stream does not cover its 2^93 elements -> malformed.")
+
+    # structure kinds (§6.1)
+    inv("structure_kind_5", pg(rb, rblay, 8, "<B", 5), "unsupported-feature", "structure_kind",
+        "%s with structure_kind = 5 (not defined in 1.1)." % gdesc["RB"])
+    return rb
+
+
+README_HEAD = """# .ivol 1.1 conformance vectors
 
 Generated by `make_vectors.py` from the specification `format-spec/ivol.md`
 alone. Regenerate with
@@ -1873,6 +2682,8 @@ to the folder of the manifest:
 | `dense` | (valid files) the expected dense export (§12.2): raw little-endian element bits, `u16` per voxel for binary16 and uint16, `u32` for float32, in order `[z][y][x]`, x fastest |
 | `lod` | (valid files) `{"k": file}`: expected level of detail k (§12.3) for every k = 1 .. D, same layout as `dense`, array shape `ceil(size/2^k)` per axis |
 | `value_encoding`, `size` | (valid files) for convenience: the encoding name and `[size_x, size_y, size_z]` |
+| `structure` | (valid files) for convenience: `octree` (structure_kind 1), `regular` (2), `rectilinear` (3) or `nested` (4, since 1.1), the names of §11 `structure.kind` |
+| `cell_log2` | (valid nested grids) for convenience: index byte 11 |
 | `expect_without_verify` | (some invalid files) the result for a reader that does not verify inner averages (§10): `"ok"`; `dense` then gives the dense export it must produce |
 | `description` | what the file tests |
 
@@ -1889,6 +2700,37 @@ rounded once per cell to the encoding, except that a cell whose non-padding
 voxels all have the same bits keeps those bits (such a cell is one leaf in a
 file written with lossless merging, and §12.3 then takes the leaf's value;
 this matters only for -0 and NaN payloads).
+
+For the structures of §8A (regular, rectilinear and nested grids, version
+1.1) the expected levels of detail follow §12.3's own rule for them: for each
+cell of 2^k voxels per side, clipped at the volume's border, the decoded
+values (§9: the integer for uint16, without scale and offset) are added in
+binary64 starting from +0.0, one after the other in the order z, then y, then
+x (x fastest), the sum is divided by the number of voxels and the mean is
+encoded once. There is no leaf exception: a cell of uniform -0 gives +0, a
+uniform NaN with a payload gives the canonical NaN. The order matters for
+float32 (`regular_16_float32` has cells where an exact, pairwise or
+z-fastest sum gives other bits). These files carry version_minor 1. The
+octree files of 1.0 are unchanged, except where the list of changes below
+says otherwise.
+
+### Changes to the 1.0 vectors for 1.1
+
+* `invalid/structure_kind_2.ivol` is now `invalid/structure_kind_9.ivol`:
+  1.1 made structure_kind 2 the regular grid, so the unknown kind is 9 (same
+  class, `unsupported-feature`).
+* `valid/limits_4096.ivol` now has version_minor 2 instead of 1: its
+  extension bytes belong to a later minor version, and 1.1 (minor 1) defines
+  none. A reader must accept it either way.
+* `invalid/index_reserved_nonzero.ivol` (index byte 11 = 1 in an octree file)
+  is unchanged; byte 11 is now cell_log2 for structure_kind 4 and stays
+  reserved for kinds 1-3. Descriptions of a few other vectors now say
+  "1.0 and 1.1" where they said "1.0".
+* The manifest's valid entries have a new key `structure`.
+* Streams 4 and 5 are known only in files of structure_kind 3 and 4; in other
+  files they are unknown streams as in 1.0 (§6.4), so the old vectors with
+  stream 200 keep their meaning, and `valid/ignorable_stream_4_octree.ivol`
+  shows the same for stream 4.
 
 ## Vectors
 """
@@ -1919,6 +2761,10 @@ def write_readme(zver):
   allocating. A reader that imposes lower limits of its own (§13) may report
   its limit for `metadata_16mib` instead of reading it; that is not an error
   of the file.
+* `invalid/borders_count_huge.ivol` declares a borders block of 2^24
+  elements (64 MiB decoded, within the block limit of §7); a reader must
+  refuse it by the limit of §8A.2 (at most size_x + size_y + size_z + 3
+  borders) from the block table, before it allocates or decodes.
 * Invalid files marked "ok without verify" break the inner-average rule of
   §10, which only a verifying reader checks.
 * Questions about the specification that came up while writing these vectors
@@ -1938,7 +2784,7 @@ def main():
         os.makedirs(p)
     gen()
     zver = ".".join(str(v) for v in zstandard.ZSTD_VERSION)
-    man = {"format": "ivol 1.0", "generator": "make_vectors.py", "zstd_version": zver,
+    man = {"format": "ivol 1.1", "generator": "make_vectors.py", "zstd_version": zver,
            "vectors": MANIFEST}
     with open(os.path.join(HERE, "manifest.json"), "w", encoding="utf-8") as fh:
         json.dump(man, fh, indent=1, ensure_ascii=False)

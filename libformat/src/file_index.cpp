@@ -300,9 +300,18 @@ class StructureReader {
         check_coverage(2, v.total_inner());
         check_coverage(3, v.total_values());
         break;
-      case StructureKind::Regular:
-        check_coverage(3, voxel_count(v.dims));
+      case StructureKind::Regular: {
+        // Sizes up to 2^31 per axis: bound the product as it grows (spec §8A).
+        constexpr std::uint64_t kMaxValues = std::uint64_t{1} << 56;
+        std::uint64_t total = 1;
+        for (int a = 0; a < 3; ++a) {
+          if (total > kMaxValues / v.dims[a])
+            fail(ErrorClass::Malformed, "index", "a regular grid of more than 2^56 voxels");
+          total *= v.dims[a];
+        }
+        check_coverage(3, total);
         break;
+      }
       case StructureKind::Rectilinear: {
         const std::uint64_t borders = check_coverage(4, kAnyTotal);
         if (borders == 0) fail(ErrorClass::Malformed, "block table", "a rectilinear grid needs a borders stream");
