@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Builds the libFuzzer harness with clang, ASan and UBSan, and runs it on a
-# corpus seeded with the conformance vectors. Arguments go to libFuzzer
-# (e.g. -max_total_time=60 or -runs=10000000).
+# Builds the libFuzzer harness for the .ivol reader with clang, ASan and
+# UBSan, and runs it on a corpus seeded with the conformance vectors.
+# Arguments go to libFuzzer (e.g. -max_total_time=60 or -runs=10000000).
+# The converters' harness: tests/fuzz/run_converters.sh.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 out=${IVOL_FUZZ_DIR:-$root/build-fuzz}
