@@ -29,6 +29,21 @@ int run_reference(const std::string& arguments, std::string* output = nullptr) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
+// The reference reader's dense export and level of detail 1 of `path` are
+// libformat's, byte for byte.
+void expect_readers_agree(const std::string& path) {
+  Reader reader(path);
+  const Dims dims = reader.layout().dims;
+  const std::string out = test::temp_path("ref.raw");
+  std::string log;
+  ASSERT_EQ(run_reference("dense " + path + " -o " + out, &log), 0) << log;
+  EXPECT_EQ(test::read_bytes(out), reader.read_box_bits(full_box(dims))) << "dense export differs";
+  if (reader.layout().depth >= 1) {
+    ASSERT_EQ(run_reference("lod " + path + " 1 -o " + out, &log), 0) << log;
+    EXPECT_EQ(test::read_bytes(out), reader.read_box_bits(full_box(dims, 1), 1)) << "level of detail 1 differs";
+  }
+}
+
 TEST(ReferenceReader, PassesEveryConformanceVector) {
   std::string output;
   const int status =
@@ -63,15 +78,7 @@ TEST(ReferenceReader, AgreesWithLibformatOnRandomFiles) {
     m.user = {{"n", n}};
     write_octree(build_octree(volume.data(), dims, options).octree, m, path, w);
 
-    Reader reader(path);
-    const std::string out = test::temp_path("ref.raw");
-    std::string log;
-    ASSERT_EQ(run_reference("dense " + path + " -o " + out, &log), 0) << log;
-    EXPECT_EQ(test::read_bytes(out), reader.read_box_bits(full_box(dims))) << "dense export differs";
-    if (reader.layout().depth >= 1) {
-      ASSERT_EQ(run_reference("lod " + path + " 1 -o " + out, &log), 0) << log;
-      EXPECT_EQ(test::read_bytes(out), reader.read_box_bits(full_box(dims, 1), 1)) << "level of detail 1 differs";
-    }
+    expect_readers_agree(path);
   }
 }
 
@@ -102,15 +109,7 @@ TEST(ReferenceReader, AgreesWithLibformatOnEveryStructureKind) {
       const std::string path = test::temp_path("grid-" + std::to_string(n) + ".ivol");
       write_structure(*structure, path, Metadata{}, options);
       SCOPED_TRACE(std::string(structure_name(kind)) + " " + std::to_string(n));
-      Reader reader(path);
-      const std::string out = test::temp_path("ref-grid.raw");
-      std::string log;
-      ASSERT_EQ(run_reference("dense " + path + " -o " + out, &log), 0) << log;
-      EXPECT_EQ(test::read_bytes(out), reader.read_box_bits(full_box(dims))) << "dense export differs";
-      if (reader.layout().depth >= 1) {
-        ASSERT_EQ(run_reference("lod " + path + " 1 -o " + out, &log), 0) << log;
-        EXPECT_EQ(test::read_bytes(out), reader.read_box_bits(full_box(dims, 1), 1)) << "level of detail 1 differs";
-      }
+      expect_readers_agree(path);
     }
   }
 }
