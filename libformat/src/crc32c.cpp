@@ -39,7 +39,7 @@ std::uint32_t extend_portable(std::uint32_t state, const unsigned char* p, std::
     std::uint32_t hi;
     std::memcpy(&lo, p, 4);
     std::memcpy(&hi, p + 4, 4);
-    lo ^= state;  // little-endian host assumed (checked in CMake-independent test)
+    lo ^= state;  // a little-endian host (layout.hpp refuses others at compile time)
     state = t[7][lo & 0xFF] ^ t[6][(lo >> 8) & 0xFF] ^ t[5][(lo >> 16) & 0xFF] ^ t[4][lo >> 24] ^ t[3][hi & 0xFF] ^
             t[2][(hi >> 8) & 0xFF] ^ t[1][(hi >> 16) & 0xFF] ^ t[0][hi >> 24];
     p += 8;
