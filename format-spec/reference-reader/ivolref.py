@@ -778,6 +778,14 @@ def open_ivol(path):
 
 # ============================================================ §13 step 6: other blocks
 
+def check_ignorable_block(r, ix, e):
+    """§6.4: an ignorable block of an unknown stream is skipped; a verifying
+    reader still checks its CRC-32C."""
+    stored = r.read(e.file_offset, e.stored_size)
+    if crc32c(stored) != e.crc:
+        fail("checksum", "%s: CRC-32C of the ignorable block does not match" % ix.where(e))
+
+
 def read_streams(r, ix, top_level, check_ignorable):
     """§13 step 6 (SPEC-NOTES 10, 27): read the node blocks of levels < top_level
     and the value blocks of levels <= top_level, in table (file) order; check the
@@ -794,10 +802,7 @@ def read_streams(r, ix, top_level, check_ignorable):
     for e in ix.blocks:
         if not known_stream(e.stream, ix.structure_kind):   # ignorable, unknown (§6.4)
             if check_ignorable:
-                stored = r.read(e.file_offset, e.stored_size)
-                if crc32c(stored) != e.crc:
-                    fail("checksum", "%s: CRC-32C of the ignorable block does not match"
-                         % ix.where(e))
+                check_ignorable_block(r, ix, e)
             continue
         if e.stream == STREAM_NODES and e.level < top_level:
             target = nodes
@@ -1072,10 +1077,7 @@ def read_grid_streams(r, ix, check_ignorable):
     for e in ix.blocks:
         if not known_stream(e.stream, ix.structure_kind):   # ignorable, unknown (§6.4)
             if check_ignorable:
-                stored = r.read(e.file_offset, e.stored_size)
-                if crc32c(stored) != e.crc:
-                    fail("checksum", "%s: CRC-32C of the ignorable block does not match"
-                         % ix.where(e))
+                check_ignorable_block(r, ix, e)
             continue
         if e.stream == STREAM_METADATA:
             continue                        # already read
