@@ -10,7 +10,7 @@ packages=(
   libhdf5-dev libopenvdb-dev libboost-iostreams-dev
   hdf5-tools python3-h5py libopenvdb-tools libtiff-tools
   python3 python3-numpy python3-zstandard python3-tifffile
-  ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo libpugixml-dev
+  ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers pocl-opencl-icd clinfo libpugixml-dev
 )
 
 missing=()

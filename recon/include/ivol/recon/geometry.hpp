@@ -41,13 +41,13 @@ struct Detector {
 // One projection's pose. Everything is per view so that scans with a wobbling
 // detector or uneven angles (RTK's geometry files) are represented exactly.
 struct View {
-  double angle = 0.0;               // gantry angle θ in radians
-  double source_to_isocenter = 0.0; // SID, mm
-  double source_to_detector = 0.0;  // SDD, mm
-  double detector_offset_u = 0.0;   // mm
-  double detector_offset_v = 0.0;   // mm
-  double source_offset_u = 0.0;     // mm, along û(θ)
-  double source_offset_v = 0.0;     // mm, along z
+  double angle = 0.0;                // gantry angle θ in radians
+  double source_to_isocenter = 0.0;  // SID, mm
+  double source_to_detector = 0.0;   // SDD, mm
+  double detector_offset_u = 0.0;    // mm
+  double detector_offset_v = 0.0;    // mm
+  double source_offset_u = 0.0;      // mm, along û(θ)
+  double source_offset_v = 0.0;      // mm, along z
 };
 
 struct ScanGeometry {
@@ -91,9 +91,7 @@ struct VolumeGrid {
   Vec3 voxel_size{1.0, 1.0, 1.0};
   Vec3 origin{0.0, 0.0, 0.0};
 
-  std::uint64_t voxel_count() const {
-    return std::uint64_t{size[0]} * size[1] * size[2];
-  }
+  std::uint64_t voxel_count() const { return std::uint64_t{size[0]} * size[1] * size[2]; }
   Vec3 voxel_centre(double i, double j, double k) const {
     return {origin[0] + i * voxel_size[0], origin[1] + j * voxel_size[1], origin[2] + k * voxel_size[2]};
   }

@@ -1,0 +1,95 @@
+/* Voxel-driven FDK backprojection with bilinear interpolation.
+ *
+ * A work-item adds one batch of IVOL_BACKPROJECT_BATCH views to
+ * IVOL_BACKPROJECT_DEPTH voxels stacked along k. Both loops have constant
+ * trip counts, so compilers unroll them and the body has no loop left: PoCL
+ * then vectorises across neighbouring work-items (along i), and GPUs keep
+ * everything in registers. For a circular scan a voxel column (i, j) keeps
+ * its detector column and distance weight along k, so they are computed once
+ * per view for the whole stack; only the detector row moves with k. The
+ * order of accumulation is fixed, so a voxel's bits do not depend on the slab
+ * it was computed in. A batch short of views is padded with views whose
+ * rays miss the detector. */
+__kernel void fdk_backproject(__global float* restrict slab, int nx, int ny, int k_first,
+                              __global const float* restrict filtered, int stride_cols, int stride_rows,
+                              int band_first_row, __global const BackprojectView* restrict views, int view_offset) {
+  const int i = get_global_id(0);
+  const int j = get_global_id(1);
+  const int k_stack = get_global_id(2) * IVOL_BACKPROJECT_DEPTH;
+  if (i >= nx || j >= ny) return;
+  const float fi = (float)i;
+  const float fj = (float)j;
+  /* Positions outside the band are clamped into its zero border: one pixel
+   * before the first stored one, up to IVOL_BAND_BORDER_AFTER after. The
+   * floor is taken before the border offset is added as an integer, and the
+   * band's first row is subtracted from a float of larger magnitude, so both
+   * steps are exact and a voxel's bits do not depend on the band. */
+  const float column_limit = (float)(stride_cols - IVOL_BAND_BORDER_BEFORE - IVOL_BAND_BORDER_AFTER);
+  const float row_limit = (float)(stride_rows - IVOL_BAND_BORDER_BEFORE - IVOL_BAND_BORDER_AFTER);
+  const float band_first = (float)band_first_row;
+  const size_t plane = (size_t)stride_cols * (size_t)stride_rows;
+
+  float sum[IVOL_BACKPROJECT_DEPTH];
+#pragma unroll
+  for (int d = 0; d < IVOL_BACKPROJECT_DEPTH; ++d) sum[d] = 0.0f;
+
+#pragma unroll
+  for (int v = 0; v < IVOL_BACKPROJECT_BATCH; ++v) {
+    const BackprojectView m = views[view_offset + v];
+    const float w = m.depth[0] * fi + m.depth[1] * fj + m.depth[3];
+    const float inv_w = 1.0f / w;
+    const float column = clamp((m.column[0] * fi + m.column[1] * fj + m.column[3]) * inv_w, -1.0f, column_limit);
+    const float column_floor = floor(column);
+    const float column_frac = column - column_floor;
+    const float weight = inv_w * inv_w;
+    const float row_at_zero = (m.row[0] * fi + m.row[1] * fj + m.row[3]) * inv_w;
+    const float row_step = m.row[2] * inv_w;
+    __global const float* image = filtered + (size_t)v * plane + (size_t)((int)column_floor + IVOL_BAND_BORDER_BEFORE);
+#pragma unroll
+    for (int d = 0; d < IVOL_BACKPROJECT_DEPTH; ++d) {
+      const float fk = (float)(k_first + k_stack + d);
+      const float row = clamp((row_at_zero + fk * row_step) - band_first, -1.0f, row_limit);
+      const float row_floor = floor(row);
+      const float row_frac = row - row_floor;
+      __global const float* p = image + (size_t)((int)row_floor + IVOL_BAND_BORDER_BEFORE) * (size_t)stride_cols;
+      const float top = p[0] + column_frac * (p[1] - p[0]);
+      const float bottom = p[stride_cols] + column_frac * (p[stride_cols + 1] - p[stride_cols]);
+      sum[d] += weight * (top + row_frac * (bottom - top));
+    }
+  }
+
+  __global float* voxel = slab + ((size_t)k_stack * (size_t)ny + (size_t)j) * (size_t)nx + (size_t)i;
+  const size_t slice = (size_t)nx * (size_t)ny;
+#pragma unroll
+  for (int d = 0; d < IVOL_BACKPROJECT_DEPTH; ++d) voxel[(size_t)d * slice] += sum[d];
+}
+
+#ifndef offsetof
+#define offsetof(type, member) __builtin_offsetof(type, member)
+#endif
+
+/* Reads the device's own view of the shared layouts back to the host. */
+__kernel void layout_probe(__global int* out) {
+  if (get_global_id(0) != 0) return;
+  out[0] = (int)sizeof(FilterView);
+  out[1] = (int)offsetof(FilterView, scale);
+  out[2] = (int)offsetof(FilterView, sdd);
+  out[3] = (int)offsetof(FilterView, foot_u);
+  out[4] = (int)offsetof(FilterView, foot_v);
+  out[5] = (int)offsetof(FilterView, u_first);
+  out[6] = (int)offsetof(FilterView, v_first);
+  out[7] = (int)offsetof(FilterView, pitch_u);
+  out[8] = (int)offsetof(FilterView, pitch_v);
+  out[9] = (int)offsetof(FilterView, parker_beta);
+  out[10] = (int)offsetof(FilterView, parker_delta);
+  out[11] = (int)offsetof(FilterView, parker_sign);
+  out[12] = (int)offsetof(FilterView, reserved);
+  out[13] = (int)sizeof(BackprojectView);
+  out[14] = (int)offsetof(BackprojectView, column);
+  out[15] = (int)offsetof(BackprojectView, row);
+  out[16] = (int)offsetof(BackprojectView, depth);
+  out[17] = IVOL_BAND_BORDER_BEFORE;
+  out[18] = IVOL_BAND_BORDER_AFTER;
+  out[19] = IVOL_BACKPROJECT_BATCH;
+  out[20] = IVOL_BACKPROJECT_DEPTH;
+}

@@ -1,0 +1,96 @@
+// Feldkamp–Davis–Kress cone-beam reconstruction on OpenCL devices.
+//
+// The volume is reconstructed in slabs of whole z-slices, each small enough
+// for the device's memory; a slab reads only the detector rows its voxels
+// project onto, filters them on the device and backprojects them. Finished
+// slabs are handed to the caller in z order, so a caller that writes them out
+// (an .ivol streaming writer) never holds the dense volume. A voxel's value
+// does not depend on how the volume was cut into slabs.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "ivol/recon/geometry.hpp"
+#include "ivol/recon/projections.hpp"
+
+namespace ivol::recon {
+
+// Apodisation of the ramp filter, as a function of frequency over Nyquist.
+enum class RampWindow { RamLak, SheppLogan, Cosine, Hamming, Hann };
+const char* ramp_window_name(RampWindow window);
+// "ram-lak", "shepp-logan", "cosine", "hamming", "hann"; throws
+// std::invalid_argument listing the names otherwise.
+RampWindow parse_ramp_window(const std::string& name);
+
+struct FdkOptions {
+  RampWindow window = RampWindow::RamLak;
+  // Frequencies above cutoff × Nyquist are removed; 1 keeps them all.
+  double cutoff = 1.0;
+  // Which OpenCL devices to use: empty means every GPU, or the first CPU
+  // device when there is no GPU. Entries are indices into list_devices().
+  std::vector<int> devices;
+  // Bytes of device memory one device may use; 0 takes 80 % of what the
+  // device reports. Slabs are cut to fit.
+  std::uint64_t device_memory_limit = 0;
+  // Upper bound on a slab's slices; 0 means no bound beyond memory.
+  std::uint32_t max_slab_slices = 0;
+  // Keep the FFT scratch in global memory even where local memory would do
+  // (for testing the path long detectors take on GPUs).
+  bool fft_in_global_memory = false;
+};
+
+// Where the time went, in seconds of wall clock (phases overlap between
+// devices, so they need not sum to the total).
+struct FdkTimings {
+  double setup = 0;           // devices, kernels, plans
+  double reading = 0;         // ProjectionSource::read_rows
+  double filtering = 0;       // weighting and ramp filter on the device
+  double backprojection = 0;  // backprojection kernels
+  double transfer = 0;        // host <-> device copies
+  double delivery = 0;        // the caller's slab callback
+  double total = 0;
+};
+
+struct FdkReport {
+  FdkTimings timings;
+  std::size_t slab_count = 0;
+  std::uint32_t slab_slices = 0;            // slices of a full slab
+  std::uint64_t device_bytes_per_slab = 0;  // device memory one slab used
+  bool short_scan = false;
+  std::vector<std::string> devices;   // names of the devices used
+  std::vector<std::string> warnings;  // e.g. an arc too short for Parker
+  // Voxel updates per second of backprojection (voxels × views / time).
+  double gups() const;
+  std::uint64_t voxel_updates = 0;
+};
+
+// Receives slices [k_begin, k_end) of the volume, nx·ny·(k_end − k_begin)
+// floats with x fastest, in increasing k, from one thread.
+using SlabSink = std::function<void(std::uint32_t k_begin, std::uint32_t k_end, const float* data)>;
+
+FdkReport reconstruct_fdk(ProjectionSource& projections, const ScanGeometry& geometry, const VolumeGrid& grid,
+                          const FdkOptions& options, const SlabSink& sink);
+
+// The whole volume in memory (x fastest), for small volumes and tests.
+std::vector<float> reconstruct_fdk_dense(ProjectionSource& projections, const ScanGeometry& geometry,
+                                         const VolumeGrid& grid, const FdkOptions& options = {},
+                                         FdkReport* report = nullptr);
+
+struct DeviceInfo {
+  int index = 0;
+  std::string name;
+  std::string platform;
+  std::string version;
+  bool is_gpu = false;
+  std::uint64_t global_memory = 0;
+  std::uint64_t max_allocation = 0;
+  std::uint64_t local_memory = 0;
+  unsigned compute_units = 0;
+};
+std::vector<DeviceInfo> list_devices();
+
+}  // namespace ivol::recon

@@ -1,0 +1,197 @@
+#include "fdk_device.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <stdexcept>
+
+namespace ivol::recon::detail {
+namespace {
+
+constexpr int kBatch = IVOL_BACKPROJECT_BATCH;
+constexpr std::uint32_t kDepth = IVOL_BACKPROJECT_DEPTH;
+constexpr int kBorder = IVOL_BAND_BORDER_BEFORE + IVOL_BAND_BORDER_AFTER;
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+std::uint64_t fft_scratch_bytes(const FdkProblem& problem, int band_rows) {
+  const std::uint64_t n = std::uint64_t{1} << problem.log2n;
+  const std::uint64_t pairs = static_cast<std::uint64_t>((band_rows + 1) / 2);
+  return std::uint64_t{kBatch} * pairs * 2 * n * 2 * sizeof(float);
+}
+
+}  // namespace
+
+std::uint32_t padded_slices(std::uint32_t slices) { return (slices + kDepth - 1) / kDepth * kDepth; }
+
+std::uint64_t slab_device_bytes(const FdkProblem& problem, std::uint32_t slices, int band_rows, bool fft_in_global) {
+  const VolumeGrid& grid = *problem.grid;
+  const std::uint64_t columns = static_cast<std::uint64_t>(problem.geometry->detector.columns);
+  const std::uint64_t slab = std::uint64_t{grid.size[0]} * grid.size[1] * padded_slices(slices) * sizeof(float);
+  const std::uint64_t raw = std::uint64_t{kBatch} * static_cast<std::uint64_t>(band_rows) * columns * sizeof(float);
+  const std::uint64_t filtered =
+      std::uint64_t{kBatch} * static_cast<std::uint64_t>(band_rows + kBorder) * (columns + kBorder) * sizeof(float);
+  const std::uint64_t views = problem.filter_views.size() * (sizeof(FilterView) + sizeof(BackprojectView));
+  const std::uint64_t ramp = (std::uint64_t{1} << problem.log2n) * 2 * sizeof(float);
+  return slab + 2 * (raw + filtered) + views + ramp + (fft_in_global ? fft_scratch_bytes(problem, band_rows) : 0);
+}
+
+FdkDevice::FdkDevice(const DeviceHandle& handle, const FdkProblem& problem, std::uint32_t max_slices, int max_band_rows)
+    : problem_(problem), name_(handle.info.name), max_band_rows_(max_band_rows) {
+  const int n = 1 << problem.log2n;
+  // Two complex buffers of n per work-group must fit in local memory.
+  fft_in_global_ = problem.fft_in_global_memory ||
+                   handle.info.local_memory < static_cast<std::uint64_t>(2 * n) * 2 * sizeof(float) + 1024;
+  context_ = cl::Context(handle.device);
+  queue_ = cl::CommandQueue(context_, handle.device, CL_QUEUE_PROFILING_ENABLE);
+  program_ = build_recon_program(context_, handle.device, fft_in_global_ ? "-DIVOL_FFT_IN_GLOBAL" : "");
+  filter_ = cl::Kernel(program_, "fdk_filter_rows");
+  backproject_ = cl::Kernel(program_, "fdk_backproject");
+  const std::size_t max_group =
+      std::min<std::size_t>(handle.device.getInfo<CL_DEVICE_MAX_WORK_GROUP_SIZE>(),
+                            filter_.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(handle.device));
+  filter_local_size_ = static_cast<int>(std::min<std::size_t>({static_cast<std::size_t>(n / 2), 256, max_group}));
+
+  const VolumeGrid& grid = *problem.grid;
+  const int columns = problem.geometry->detector.columns;
+  stride_cols_ = columns + kBorder;
+  const std::size_t slab_bytes = std::size_t{grid.size[0]} * grid.size[1] * padded_slices(max_slices) * sizeof(float);
+  const std::size_t raw_floats = static_cast<std::size_t>(kBatch) * max_band_rows * columns;
+  const std::size_t filtered_bytes =
+      static_cast<std::size_t>(kBatch) * (max_band_rows + kBorder) * stride_cols_ * sizeof(float);
+  slab_ = cl::Buffer(context_, CL_MEM_READ_WRITE, slab_bytes);
+  for (int p = 0; p < 2; ++p) {
+    raw_[p] = cl::Buffer(context_, CL_MEM_READ_ONLY, std::max<std::size_t>(raw_floats, 1) * sizeof(float));
+    filtered_[p] = cl::Buffer(context_, CL_MEM_READ_WRITE, filtered_bytes);
+    host_raw_[p].resize(raw_floats);
+  }
+  if (fft_in_global_) fft_scratch_ = cl::Buffer(context_, CL_MEM_READ_WRITE, fft_scratch_bytes(problem, max_band_rows));
+  filter_views_ =
+      cl::Buffer(context_, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, problem.filter_views.size() * sizeof(FilterView),
+                 const_cast<FilterView*>(problem.filter_views.data()));
+  backproject_views_ = cl::Buffer(context_, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR,
+                                  problem.backproject_views.size() * sizeof(BackprojectView),
+                                  const_cast<BackprojectView*>(problem.backproject_views.data()));
+  response_ = cl::Buffer(context_, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, problem.response.size() * sizeof(float),
+                         const_cast<float*>(problem.response.data()));
+  twiddles_ = cl::Buffer(context_, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, problem.twiddles.size() * sizeof(float),
+                         const_cast<float*>(problem.twiddles.data()));
+}
+
+double FdkDevice::event_seconds(const cl::Event& event) const {
+  const cl_ulong start = event.getProfilingInfo<CL_PROFILING_COMMAND_START>();
+  const cl_ulong end = event.getProfilingInfo<CL_PROFILING_COMMAND_END>();
+  return end > start ? static_cast<double>(end - start) * 1e-9 : 0.0;
+}
+
+void FdkDevice::collect(std::vector<cl::Event>& events, double& into) {
+  for (const cl::Event& e : events) into += event_seconds(e);
+  events.clear();
+}
+
+void FdkDevice::run_batch(int parity, std::size_t first_view, int view_count, const RowBand& band,
+                          std::uint32_t k_begin, std::uint32_t slices) {
+  const int columns = problem_.geometry->detector.columns;
+  const std::size_t image = static_cast<std::size_t>(band.rows()) * columns;
+  std::vector<float>& host = host_raw_[parity];
+  {
+    const auto start = std::chrono::steady_clock::now();
+    std::lock_guard<std::mutex> lock(*problem_.projections_mutex);
+    for (int v = 0; v < view_count; ++v)
+      problem_.projections->read_rows(first_view + static_cast<std::size_t>(v), band.first, band.end,
+                                      host.data() + static_cast<std::size_t>(v) * image);
+    timings_.reading += seconds_since(start);
+  }
+  cl::Event write;
+  queue_.enqueueWriteBuffer(raw_[parity], CL_FALSE, 0, image * view_count * sizeof(float), host.data(), nullptr,
+                            &write);
+  transfer_events_.push_back(write);
+
+  const int n = 1 << problem_.log2n;
+  const int pairs = (band.rows() + 1) / 2;
+  const int stride_rows = band.rows() + kBorder;
+  int arg = 0;
+  filter_.setArg(arg++, raw_[parity]);
+  filter_.setArg(arg++, filtered_[parity]);
+  filter_.setArg(arg++, filter_views_);
+  filter_.setArg(arg++, static_cast<cl_int>(first_view));
+  filter_.setArg(arg++, response_);
+  filter_.setArg(arg++, twiddles_);
+  filter_.setArg(arg++, static_cast<cl_int>(columns));
+  filter_.setArg(arg++, static_cast<cl_int>(band.rows()));
+  filter_.setArg(arg++, static_cast<cl_int>(band.first));
+  filter_.setArg(arg++, static_cast<cl_int>(problem_.log2n));
+  filter_.setArg(arg++, static_cast<cl_int>(stride_cols_));
+  filter_.setArg(arg++, static_cast<cl_int>(stride_rows));
+  if (fft_in_global_)
+    filter_.setArg(arg++, fft_scratch_);
+  else
+    filter_.setArg(arg++, cl::Local(static_cast<std::size_t>(2 * n) * 2 * sizeof(float)));
+  cl::Event filtered;
+  queue_.enqueueNDRangeKernel(filter_, cl::NullRange,
+                              cl::NDRange(static_cast<std::size_t>(filter_local_size_) * pairs, view_count),
+                              cl::NDRange(static_cast<std::size_t>(filter_local_size_), 1), nullptr, &filtered);
+  filter_events_.push_back(filtered);
+
+  const VolumeGrid& grid = *problem_.grid;
+  arg = 0;
+  backproject_.setArg(arg++, slab_);
+  backproject_.setArg(arg++, static_cast<cl_int>(grid.size[0]));
+  backproject_.setArg(arg++, static_cast<cl_int>(grid.size[1]));
+  backproject_.setArg(arg++, static_cast<cl_int>(k_begin));
+  backproject_.setArg(arg++, filtered_[parity]);
+  backproject_.setArg(arg++, static_cast<cl_int>(stride_cols_));
+  backproject_.setArg(arg++, static_cast<cl_int>(stride_rows));
+  backproject_.setArg(arg++, static_cast<cl_int>(band.first));
+  backproject_.setArg(arg++, backproject_views_);
+  backproject_.setArg(arg++, static_cast<cl_int>(first_view));
+  const std::size_t local_x = 16;
+  const std::size_t global_x = (grid.size[0] + local_x - 1) / local_x * local_x;
+  queue_.enqueueNDRangeKernel(backproject_, cl::NullRange,
+                              cl::NDRange(global_x, grid.size[1], padded_slices(slices) / kDepth),
+                              cl::NDRange(local_x, 1, 1), nullptr, &batch_done_[parity]);
+  backproject_events_.push_back(batch_done_[parity]);
+  queue_.flush();
+}
+
+void FdkDevice::reconstruct_slab(std::uint32_t k_begin, std::uint32_t k_end, std::vector<float>& out) {
+  const VolumeGrid& grid = *problem_.grid;
+  const std::uint32_t slices = k_end - k_begin;
+  const std::size_t slice_bytes = std::size_t{grid.size[0]} * grid.size[1] * sizeof(float);
+  const std::size_t slab_bytes = slice_bytes * slices;
+  const RowBand band = rows_for_slab(*problem_.geometry, grid, k_begin, k_end);
+  if (band.rows() > max_band_rows_)
+    throw std::logic_error("FDK: slab needs " + std::to_string(band.rows()) + " detector rows, planned for " +
+                           std::to_string(max_band_rows_));
+  const float zero = 0.0F;
+  std::vector<cl::Event> fills(3);
+  queue_.enqueueFillBuffer(slab_, zero, 0, slice_bytes * padded_slices(slices), nullptr, &fills[0]);
+  const std::size_t filtered_bytes =
+      static_cast<std::size_t>(kBatch) * (band.rows() + kBorder) * stride_cols_ * sizeof(float);
+  queue_.enqueueFillBuffer(filtered_[0], zero, 0, filtered_bytes, nullptr, &fills[1]);
+  queue_.enqueueFillBuffer(filtered_[1], zero, 0, filtered_bytes, nullptr, &fills[2]);
+
+  if (band.rows() > 0) {
+    const std::size_t views = problem_.geometry->view_count();
+    int parity = 0;
+    for (std::size_t first = 0; first < views; first += kBatch, parity ^= 1) {
+      // The host buffer of this parity is free once its last batch is done.
+      if (batch_done_[parity]()) batch_done_[parity].wait();
+      const int count = static_cast<int>(std::min<std::size_t>(kBatch, views - first));
+      run_batch(parity, first, count, band, k_begin, slices);
+    }
+  }
+  out.resize(slab_bytes / sizeof(float));
+  cl::Event read;
+  queue_.enqueueReadBuffer(slab_, CL_TRUE, 0, slab_bytes, out.data(), nullptr, &read);
+  transfer_events_.push_back(read);
+  for (cl::Event& e : batch_done_) e = cl::Event();
+  collect(filter_events_, timings_.filtering);
+  collect(backproject_events_, timings_.backprojection);
+  collect(transfer_events_, timings_.transfer);
+  collect(fills, timings_.transfer);
+}
+
+}  // namespace ivol::recon::detail

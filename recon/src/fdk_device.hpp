@@ -1,0 +1,82 @@
+// One OpenCL device reconstructing slabs: its context, queue, kernels and
+// buffers, sized once for the largest slab of the plan.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <mutex>
+#include <vector>
+
+#include "fdk_plan.hpp"
+#include "opencl_runtime.hpp"
+
+namespace ivol::recon::detail {
+
+// What every device shares: the scan, the grid and the per-view parameters.
+struct FdkProblem {
+  const ScanGeometry* geometry = nullptr;
+  const VolumeGrid* grid = nullptr;
+  ProjectionSource* projections = nullptr;
+  std::mutex* projections_mutex = nullptr;  // ProjectionSource is single-threaded
+  std::vector<FilterView> filter_views;
+  // One per view, then IVOL_BACKPROJECT_BATCH views whose rays miss the
+  // detector, which pad the last batch.
+  std::vector<BackprojectView> backproject_views;
+  int log2n = 0;
+  std::vector<float> response;
+  std::vector<float> twiddles;  // n/2 complex values, interleaved
+  bool fft_in_global_memory = false;
+};
+
+struct DeviceTimings {
+  double reading = 0, filtering = 0, backprojection = 0, transfer = 0;
+};
+
+// Slabs are computed in whole stacks of IVOL_BACKPROJECT_DEPTH slices.
+std::uint32_t padded_slices(std::uint32_t slices);
+
+// Device memory a slab of `slices` slices needing `band_rows` detector rows
+// takes, all buffers included.
+std::uint64_t slab_device_bytes(const FdkProblem& problem, std::uint32_t slices, int band_rows, bool fft_in_global);
+
+class FdkDevice {
+ public:
+  FdkDevice(const DeviceHandle& handle, const FdkProblem& problem, std::uint32_t max_slices, int max_band_rows);
+  // Reconstructs slices [k_begin, k_end) into `out` (x fastest).
+  void reconstruct_slab(std::uint32_t k_begin, std::uint32_t k_end, std::vector<float>& out);
+  const DeviceTimings& timings() const { return timings_; }
+  const std::string& name() const { return name_; }
+  bool fft_in_global() const { return fft_in_global_; }
+
+ private:
+  void run_batch(int parity, std::size_t first_view, int view_count, const RowBand& band, std::uint32_t k_begin,
+                 std::uint32_t slices);
+  double event_seconds(const cl::Event& event) const;
+  void collect(std::vector<cl::Event>& events, double& into);
+
+  const FdkProblem& problem_;
+  std::string name_;
+  bool fft_in_global_ = false;
+  int filter_local_size_ = 64;
+  cl::Context context_;
+  cl::CommandQueue queue_;
+  cl::Program program_;
+  cl::Kernel filter_;
+  cl::Kernel backproject_;
+  cl::Buffer slab_;
+  cl::Buffer filter_views_;
+  cl::Buffer backproject_views_;
+  cl::Buffer response_;
+  cl::Buffer twiddles_;
+  cl::Buffer raw_[2];
+  cl::Buffer filtered_[2];
+  cl::Buffer fft_scratch_;
+  std::vector<float> host_raw_[2];
+  cl::Event batch_done_[2];
+  std::vector<cl::Event> filter_events_, backproject_events_, transfer_events_;
+  DeviceTimings timings_;
+  int stride_cols_ = 0;
+  int max_band_rows_ = 0;
+};
+
+}  // namespace ivol::recon::detail
