@@ -134,6 +134,37 @@ TEST(Fdk, SlabsDoNotChangeBits) {
   EXPECT_EQ(0, std::memcmp(cut.data(), whole.data(), whole.size() * sizeof(float)));
 }
 
+TEST(Fdk, PartsOfAGridMatchTheWhole) {
+  SmallCase c = small_case(2 * M_PI, 40, 1.0, 3.0);
+  InMemoryProjections p = project_ball(c.geometry, {1, 2, -3}, 12.0, 0.02);
+  const std::vector<float> whole = reconstruct_fdk_dense(p, c.geometry, c.grid);
+  FdkReconstructor reconstructor(p, c.geometry);
+  // A coarse grid first: the reconstructor is reused across grids.
+  const VolumeGrid coarse = VolumeGrid::centred({6, 6, 5}, 6.0);
+  std::vector<float> low(coarse.voxel_count());
+  reconstructor.reconstruct(coarse, [&](std::uint32_t k0, std::uint32_t k1, const float* d) {
+    std::copy(d, d + 36 * (k1 - k0), low.begin() + 36 * k0);
+  });
+  EXPECT_GT(low[(2 * 6 + 3) * 6 + 3], 0.01F);  // the ball shows at low resolution
+  const std::size_t slice = std::size_t{c.grid.size[0]} * c.grid.size[1];
+  for (auto [k0, k1] : {std::pair<std::uint32_t, std::uint32_t>{0, 3}, {5, 6}, {7, 20}}) {
+    std::vector<float> part;
+    std::uint32_t next = k0;
+    reconstructor.reconstruct(
+        c.grid,
+        [&](std::uint32_t a, std::uint32_t b, const float* d) {
+          EXPECT_EQ(a, next);
+          next = b;
+          part.insert(part.end(), d, d + slice * (b - a));
+        },
+        k0, k1);
+    EXPECT_EQ(next, k1);
+    ASSERT_EQ(part.size(), slice * (k1 - k0));
+    EXPECT_EQ(0, std::memcmp(part.data(), whole.data() + slice * k0, part.size() * sizeof(float)))
+        << "slices " << k0 << ".." << k1;
+  }
+}
+
 TEST(Fdk, GlobalMemoryFftGivesSameBits) {
   SmallCase c = small_case(2 * M_PI, 20);
   InMemoryProjections p = project_ball(c.geometry, {0, 0, 0}, 12.0, 0.02);

@@ -24,9 +24,8 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-void check_inputs(ProjectionSource& projections, const ScanGeometry& geometry, const VolumeGrid& grid) {
+void check_inputs(ProjectionSource& projections, const ScanGeometry& geometry) {
   geometry.validate();
-  grid.validate();
   if (projections.columns() != geometry.detector.columns || projections.rows() != geometry.detector.rows)
     throw std::invalid_argument("FDK: the projections are " + std::to_string(projections.columns()) + "x" +
                                 std::to_string(projections.rows()) + " pixels but the geometry's detector is " +
@@ -38,21 +37,14 @@ void check_inputs(ProjectionSource& projections, const ScanGeometry& geometry, c
                                 " views");
 }
 
-FdkProblem make_problem(ProjectionSource& projections, const ScanGeometry& geometry, const VolumeGrid& grid,
-                        const FdkOptions& options, const detail::ScanShape& shape) {
+FdkProblem make_problem(ProjectionSource& projections, const ScanGeometry& geometry, const FdkOptions& options,
+                        const detail::ScanShape& shape) {
   FdkProblem problem;
   problem.geometry = &geometry;
-  problem.grid = &grid;
   problem.projections = &projections;
   problem.fft_in_global_memory = options.fft_in_global_memory;
-  for (std::size_t v = 0; v < geometry.view_count(); ++v) {
+  for (std::size_t v = 0; v < geometry.view_count(); ++v)
     problem.filter_views.push_back(detail::filter_view(geometry, shape, v));
-    problem.backproject_views.push_back(detail::backproject_view(geometry, grid, v));
-  }
-  BackprojectView miss{};
-  miss.depth[3] = 1.0F;
-  miss.column[3] = -1e6F;  // clamped into the zero border
-  problem.backproject_views.insert(problem.backproject_views.end(), IVOL_BACKPROJECT_BATCH, miss);
   problem.log2n = detail::ramp_log2_length(geometry.detector.columns);
   for (double r : detail::ramp_response(problem.log2n, options.window, options.cutoff))
     problem.response.push_back(static_cast<float>(r));
@@ -64,21 +56,39 @@ FdkProblem make_problem(ProjectionSource& projections, const ScanGeometry& geome
   return problem;
 }
 
-// The widest band of detector rows among slabs of `slices` slices. Estimated
-// from the outer slabs, which see the cone's divergence most, and a middle
-// one (plus the rounding of band ends to even rows); exact when `every`.
-int widest_band(const FdkProblem& problem, std::uint32_t slices, bool every) {
-  const std::uint32_t nz = problem.grid->size[2];
+void set_grid(FdkProblem& problem, const VolumeGrid& grid) {
+  problem.grid = &grid;
+  problem.backproject_views.clear();
+  for (std::size_t v = 0; v < problem.geometry->view_count(); ++v)
+    problem.backproject_views.push_back(detail::backproject_view(*problem.geometry, grid, v));
+  BackprojectView miss{};
+  miss.depth[3] = 1.0F;
+  miss.column[3] = -1e6F;  // clamped into the zero border
+  problem.backproject_views.insert(problem.backproject_views.end(), IVOL_BACKPROJECT_BATCH, miss);
+}
+
+struct SlabRange {
+  std::uint32_t first = 0;
+  std::uint32_t end = 0;
+};
+
+// The widest band of detector rows among slabs of `slices` slices cutting
+// `range`. Estimated from the outer slabs, which see the cone's divergence
+// most, and a middle one (plus the rounding of band ends to even rows);
+// exact when `every`.
+int widest_band(const FdkProblem& problem, SlabRange range, std::uint32_t slices, bool every) {
   int widest = 0;
   auto consider = [&](std::uint32_t begin) {
-    const std::uint32_t end = std::min(nz, begin + slices);
+    const std::uint32_t end = std::min(range.end, begin + slices);
     widest = std::max(widest, detail::rows_for_slab(*problem.geometry, *problem.grid, begin, end).rows());
   };
+  const std::uint32_t count = range.end - range.first;
   if (every) {
-    for (std::uint32_t begin = 0; begin < nz; begin += slices) consider(begin);
+    for (std::uint32_t begin = range.first; begin < range.end; begin += slices) consider(begin);
     return widest;
   }
-  for (std::uint32_t begin : {0U, (nz / 2) / slices * slices, (nz - 1) / slices * slices}) consider(begin);
+  for (std::uint32_t offset : {0U, (count / 2) / slices * slices, (count - 1) / slices * slices})
+    consider(range.first + offset);
   return std::min(widest + 2, problem.geometry->detector.rows + 1);
 }
 
@@ -89,7 +99,7 @@ struct SlabPlan {
 };
 
 SlabPlan plan_slabs(const FdkProblem& problem, const std::vector<detail::DeviceHandle>& devices,
-                    const FdkOptions& options) {
+                    const FdkOptions& options, SlabRange range) {
   std::uint64_t budget = ~std::uint64_t{0};
   std::uint64_t max_allocation = ~std::uint64_t{0};
   const int n = 1 << problem.log2n;
@@ -101,15 +111,14 @@ SlabPlan plan_slabs(const FdkProblem& problem, const std::vector<detail::DeviceH
     max_allocation = std::min(max_allocation, d.info.max_allocation);
     any_global_fft = any_global_fft || d.info.local_memory < static_cast<std::uint64_t>(2 * n) * 8 + 1024;
   }
-  const std::uint32_t nz = problem.grid->size[2];
   const std::uint64_t slice_bytes = std::uint64_t{problem.grid->size[0]} * problem.grid->size[1] * sizeof(float);
   auto fits = [&](std::uint32_t slices, SlabPlan& plan, bool exact = false) {
     plan.slices = slices;
-    plan.band_rows = widest_band(problem, slices, exact);
+    plan.band_rows = widest_band(problem, range, slices, exact);
     plan.bytes = detail::slab_device_bytes(problem, slices, plan.band_rows, any_global_fft);
-    return plan.bytes <= budget && slice_bytes * slices <= max_allocation;
+    return plan.bytes <= budget && slice_bytes * detail::padded_slices(slices) <= max_allocation;
   };
-  std::uint32_t high = nz;
+  std::uint32_t high = range.end - range.first;
   if (options.max_slab_slices > 0) high = std::min(high, options.max_slab_slices);
   SlabPlan plan;
   if (fits(high, plan, true)) return plan;
@@ -204,47 +213,94 @@ double FdkReport::gups() const {
   return timings.backprojection > 0 ? static_cast<double>(voxel_updates) / timings.backprojection * 1e-9 : 0.0;
 }
 
-FdkReport reconstruct_fdk(ProjectionSource& projections, const ScanGeometry& geometry, const VolumeGrid& grid,
-                          const FdkOptions& options, const SlabSink& sink) {
-  const auto start = std::chrono::steady_clock::now();
-  check_inputs(projections, geometry, grid);
-  FdkReport report;
-  const detail::ScanShape shape = detail::analyse_scan(geometry);
-  report.short_scan = shape.short_scan;
-  report.warnings = shape.warnings;
+struct FdkReconstructor::Impl {
+  ProjectionSource& projections;
+  ScanGeometry geometry;
+  FdkOptions options;
+  detail::ScanShape shape;
   std::mutex projections_mutex;
-  FdkProblem problem = make_problem(projections, geometry, grid, options, shape);
-  problem.projections_mutex = &projections_mutex;
-
-  const std::vector<detail::DeviceHandle> handles = detail::choose_devices(options.devices);
-  const SlabPlan plan = plan_slabs(problem, handles, options);
+  FdkProblem problem;
+  std::vector<detail::DeviceHandle> handles;
   std::vector<std::unique_ptr<FdkDevice>> devices;
+  double setup_seconds = 0;
+
+  Impl(ProjectionSource& p, const ScanGeometry& g, const FdkOptions& o) : projections(p), geometry(g), options(o) {}
+};
+
+FdkReconstructor::FdkReconstructor(ProjectionSource& projections, const ScanGeometry& geometry,
+                                   const FdkOptions& options)
+    : impl_(std::make_unique<Impl>(projections, geometry, options)) {
+  const auto start = std::chrono::steady_clock::now();
+  Impl& m = *impl_;
+  check_inputs(projections, m.geometry);
+  m.shape = detail::analyse_scan(m.geometry);
+  m.problem = make_problem(projections, m.geometry, options, m.shape);
+  m.problem.projections_mutex = &m.projections_mutex;
+  m.handles = detail::choose_devices(options.devices);
   try {
-    for (const detail::DeviceHandle& h : handles) {
-      devices.push_back(std::make_unique<FdkDevice>(h, problem, plan.slices, plan.band_rows));
-      report.devices.push_back(h.info.name);
-    }
+    for (const detail::DeviceHandle& h : m.handles) m.devices.push_back(std::make_unique<FdkDevice>(h, m.problem));
   } catch (const cl::Error& error) {
     throw std::runtime_error("FDK: setting up the OpenCL device: " + detail::describe(error));
   }
-  const std::uint32_t nz = grid.size[2];
-  const std::size_t slab_count = (nz + plan.slices - 1) / plan.slices;
+  m.setup_seconds = seconds_since(start);
+}
+
+FdkReconstructor::~FdkReconstructor() = default;
+
+std::vector<std::string> FdkReconstructor::device_names() const {
+  std::vector<std::string> names;
+  for (const auto& h : impl_->handles) names.push_back(h.info.name);
+  return names;
+}
+
+const std::vector<std::string>& FdkReconstructor::warnings() const { return impl_->shape.warnings; }
+
+FdkReport FdkReconstructor::reconstruct(const VolumeGrid& grid, const SlabSink& sink, std::uint32_t k_begin,
+                                        std::uint32_t k_end) {
+  const auto start = std::chrono::steady_clock::now();
+  Impl& m = *impl_;
+  grid.validate();
+  k_end = std::min(k_end, grid.size[2]);
+  if (k_begin >= k_end)
+    throw std::invalid_argument("FDK: slices " + std::to_string(k_begin) + ".." + std::to_string(k_end) +
+                                " of a volume of " + std::to_string(grid.size[2]) + " are empty");
+  FdkReport report;
+  report.short_scan = m.shape.short_scan;
+  report.warnings = m.shape.warnings;
+  report.devices = device_names();
+  const VolumeGrid grid_copy = grid;
+  set_grid(m.problem, grid_copy);
+  const SlabRange range{k_begin, k_end};
+  const SlabPlan plan = plan_slabs(m.problem, m.handles, m.options, range);
+  try {
+    for (auto& device : m.devices) device->configure(plan.slices, plan.band_rows);
+  } catch (const cl::Error& error) {
+    throw std::runtime_error("FDK: allocating device memory: " + detail::describe(error));
+  }
+  const std::size_t slab_count = (k_end - k_begin + plan.slices - 1) / plan.slices;
   report.slab_count = slab_count;
   report.slab_slices = plan.slices;
   report.device_bytes_per_slab = plan.bytes;
-  report.timings.setup = seconds_since(start);
+  std::vector<detail::DeviceTimings> before;
+  for (const auto& device : m.devices) before.push_back(device->timings());
+  const double constructor_setup = m.setup_seconds;
+  m.setup_seconds = 0;  // counted in the first reconstruction only
+  report.timings.setup = constructor_setup + seconds_since(start);
 
-  SlabQueue queue(devices.size() + 1);
+  SlabQueue queue(m.devices.size() + 1);
   std::atomic<std::size_t> next_slab{0};
+  auto slab_bounds = [&](std::size_t s) {
+    const std::uint32_t first = k_begin + static_cast<std::uint32_t>(s) * plan.slices;
+    return SlabRange{first, std::min(k_end, first + plan.slices)};
+  };
   std::vector<std::thread> workers;
-  for (auto& device : devices) {
+  for (auto& device : m.devices) {
     workers.emplace_back([&, d = device.get()] {
       try {
         for (std::size_t s = next_slab++; s < slab_count; s = next_slab++) {
-          const std::uint32_t k_begin = static_cast<std::uint32_t>(s) * plan.slices;
-          const std::uint32_t k_end = std::min(nz, k_begin + plan.slices);
+          const SlabRange bounds = slab_bounds(s);
           std::vector<float> data;
-          d->reconstruct_slab(k_begin, k_end, data);
+          d->reconstruct_slab(bounds.first, bounds.end, data);
           queue.put(s, std::move(data));
         }
       } catch (const cl::Error& error) {
@@ -260,8 +316,8 @@ FdkReport reconstruct_fdk(ProjectionSource& projections, const ScanGeometry& geo
     for (std::size_t s = 0; s < slab_count; ++s) {
       if (!queue.take(s, data)) break;
       const auto delivered = std::chrono::steady_clock::now();
-      const std::uint32_t k_begin = static_cast<std::uint32_t>(s) * plan.slices;
-      sink(k_begin, std::min(nz, k_begin + plan.slices), data.data());
+      const SlabRange bounds = slab_bounds(s);
+      sink(bounds.first, bounds.end, data.data());
       report.timings.delivery += seconds_since(delivered);
     }
   } catch (...) {
@@ -269,16 +325,27 @@ FdkReport reconstruct_fdk(ProjectionSource& projections, const ScanGeometry& geo
     queue.fail(failure);
   }
   for (std::thread& t : workers) t.join();
+  m.problem.grid = nullptr;
   if (failure) std::rethrow_exception(failure);
   if (std::exception_ptr error = queue.error()) std::rethrow_exception(error);
 
-  for (const auto& device : devices) {
-    report.timings.reading += device->timings().reading;
-    report.timings.filtering += device->timings().filtering;
-    report.timings.backprojection += device->timings().backprojection;
-    report.timings.transfer += device->timings().transfer;
+  for (std::size_t d = 0; d < m.devices.size(); ++d) {
+    const detail::DeviceTimings& t = m.devices[d]->timings();
+    report.timings.reading += t.reading - before[d].reading;
+    report.timings.filtering += t.filtering - before[d].filtering;
+    report.timings.backprojection += t.backprojection - before[d].backprojection;
+    report.timings.transfer += t.transfer - before[d].transfer;
   }
-  report.voxel_updates = grid.voxel_count() * geometry.view_count();
+  report.voxel_updates = std::uint64_t{grid.size[0]} * grid.size[1] * (k_end - k_begin) * m.geometry.view_count();
+  report.timings.total = constructor_setup + seconds_since(start);
+  return report;
+}
+
+FdkReport reconstruct_fdk(ProjectionSource& projections, const ScanGeometry& geometry, const VolumeGrid& grid,
+                          const FdkOptions& options, const SlabSink& sink) {
+  const auto start = std::chrono::steady_clock::now();
+  FdkReconstructor reconstructor(projections, geometry, options);
+  FdkReport report = reconstructor.reconstruct(grid, sink);
   report.timings.total = seconds_since(start);
   return report;
 }

@@ -38,8 +38,8 @@ std::uint64_t slab_device_bytes(const FdkProblem& problem, std::uint32_t slices,
   return slab + 2 * (raw + filtered) + views + ramp + (fft_in_global ? fft_scratch_bytes(problem, band_rows) : 0);
 }
 
-FdkDevice::FdkDevice(const DeviceHandle& handle, const FdkProblem& problem, std::uint32_t max_slices, int max_band_rows)
-    : problem_(problem), name_(handle.info.name), max_band_rows_(max_band_rows) {
+FdkDevice::FdkDevice(const DeviceHandle& handle, const FdkProblem& problem)
+    : problem_(problem), name_(handle.info.name) {
   const int n = 1 << problem.log2n;
   // Two complex buffers of n per work-group must fit in local memory.
   fft_in_global_ = problem.fft_in_global_memory ||
@@ -53,31 +53,41 @@ FdkDevice::FdkDevice(const DeviceHandle& handle, const FdkProblem& problem, std:
       std::min<std::size_t>(handle.device.getInfo<CL_DEVICE_MAX_WORK_GROUP_SIZE>(),
                             filter_.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(handle.device));
   filter_local_size_ = static_cast<int>(std::min<std::size_t>({static_cast<std::size_t>(n / 2), 256, max_group}));
-
-  const VolumeGrid& grid = *problem.grid;
-  const int columns = problem.geometry->detector.columns;
-  stride_cols_ = columns + kBorder;
-  const std::size_t slab_bytes = std::size_t{grid.size[0]} * grid.size[1] * padded_slices(max_slices) * sizeof(float);
-  const std::size_t raw_floats = static_cast<std::size_t>(kBatch) * max_band_rows * columns;
-  const std::size_t filtered_bytes =
-      static_cast<std::size_t>(kBatch) * (max_band_rows + kBorder) * stride_cols_ * sizeof(float);
-  slab_ = cl::Buffer(context_, CL_MEM_READ_WRITE, slab_bytes);
-  for (int p = 0; p < 2; ++p) {
-    raw_[p] = cl::Buffer(context_, CL_MEM_READ_ONLY, std::max<std::size_t>(raw_floats, 1) * sizeof(float));
-    filtered_[p] = cl::Buffer(context_, CL_MEM_READ_WRITE, filtered_bytes);
-    host_raw_[p].resize(raw_floats);
-  }
-  if (fft_in_global_) fft_scratch_ = cl::Buffer(context_, CL_MEM_READ_WRITE, fft_scratch_bytes(problem, max_band_rows));
+  stride_cols_ = problem.geometry->detector.columns + kBorder;
   filter_views_ =
       cl::Buffer(context_, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, problem.filter_views.size() * sizeof(FilterView),
                  const_cast<FilterView*>(problem.filter_views.data()));
-  backproject_views_ = cl::Buffer(context_, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR,
-                                  problem.backproject_views.size() * sizeof(BackprojectView),
-                                  const_cast<BackprojectView*>(problem.backproject_views.data()));
   response_ = cl::Buffer(context_, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, problem.response.size() * sizeof(float),
                          const_cast<float*>(problem.response.data()));
   twiddles_ = cl::Buffer(context_, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, problem.twiddles.size() * sizeof(float),
                          const_cast<float*>(problem.twiddles.data()));
+}
+
+void FdkDevice::configure(std::uint32_t max_slices, int max_band_rows) {
+  const VolumeGrid& grid = *problem_.grid;
+  const int columns = problem_.geometry->detector.columns;
+  const std::size_t slice_bytes = std::size_t{grid.size[0]} * grid.size[1] * sizeof(float);
+  // Keep buffers that are large enough from an earlier grid of the same shape.
+  if (max_slices > max_slices_ || !slab_() || slab_.getInfo<CL_MEM_SIZE>() < slice_bytes * padded_slices(max_slices)) {
+    slab_ = cl::Buffer(context_, CL_MEM_READ_WRITE, slice_bytes * padded_slices(max_slices));
+    max_slices_ = max_slices;
+  }
+  if (max_band_rows > max_band_rows_) {
+    const std::size_t raw_floats = static_cast<std::size_t>(kBatch) * max_band_rows * columns;
+    const std::size_t filtered_bytes =
+        static_cast<std::size_t>(kBatch) * (max_band_rows + kBorder) * stride_cols_ * sizeof(float);
+    for (int p = 0; p < 2; ++p) {
+      raw_[p] = cl::Buffer(context_, CL_MEM_READ_ONLY, std::max<std::size_t>(raw_floats, 1) * sizeof(float));
+      filtered_[p] = cl::Buffer(context_, CL_MEM_READ_WRITE, filtered_bytes);
+      host_raw_[p].resize(raw_floats);
+    }
+    if (fft_in_global_)
+      fft_scratch_ = cl::Buffer(context_, CL_MEM_READ_WRITE, fft_scratch_bytes(problem_, max_band_rows));
+    max_band_rows_ = max_band_rows;
+  }
+  backproject_views_ = cl::Buffer(context_, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR,
+                                  problem_.backproject_views.size() * sizeof(BackprojectView),
+                                  const_cast<BackprojectView*>(problem_.backproject_views.data()));
 }
 
 double FdkDevice::event_seconds(const cl::Event& event) const {
@@ -147,7 +157,7 @@ void FdkDevice::run_batch(int parity, std::size_t first_view, int view_count, co
   backproject_.setArg(arg++, static_cast<cl_int>(band.first));
   backproject_.setArg(arg++, backproject_views_);
   backproject_.setArg(arg++, static_cast<cl_int>(first_view));
-  const std::size_t local_x = 16;
+  const std::size_t local_x = 64;
   const std::size_t global_x = (grid.size[0] + local_x - 1) / local_x * local_x;
   queue_.enqueueNDRangeKernel(backproject_, cl::NullRange,
                               cl::NDRange(global_x, grid.size[1], padded_slices(slices) / kDepth),

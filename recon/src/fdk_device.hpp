@@ -41,7 +41,12 @@ std::uint64_t slab_device_bytes(const FdkProblem& problem, std::uint32_t slices,
 
 class FdkDevice {
  public:
-  FdkDevice(const DeviceHandle& handle, const FdkProblem& problem, std::uint32_t max_slices, int max_band_rows);
+  // Builds the kernels; `problem` must stay alive and may change its grid
+  // between configure() calls.
+  FdkDevice(const DeviceHandle& handle, const FdkProblem& problem);
+  // Sizes the buffers for slabs of up to `max_slices` slices needing up to
+  // `max_band_rows` detector rows, and uploads the grid's view matrices.
+  void configure(std::uint32_t max_slices, int max_band_rows);
   // Reconstructs slices [k_begin, k_end) into `out` (x fastest).
   void reconstruct_slab(std::uint32_t k_begin, std::uint32_t k_end, std::vector<float>& out);
   const DeviceTimings& timings() const { return timings_; }
@@ -77,6 +82,7 @@ class FdkDevice {
   DeviceTimings timings_;
   int stride_cols_ = 0;
   int max_band_rows_ = 0;
+  std::uint32_t max_slices_ = 0;
 };
 
 }  // namespace ivol::recon::detail

@@ -8,9 +8,11 @@
 // does not depend on how the volume was cut into slabs.
 #pragma once
 
+#include <climits>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -71,6 +73,29 @@ struct FdkReport {
 // Receives slices [k_begin, k_end) of the volume, nx·ny·(k_end − k_begin)
 // floats with x fastest, in increasing k, from one thread.
 using SlabSink = std::function<void(std::uint32_t k_begin, std::uint32_t k_end, const float* data)>;
+
+// Keeps the devices, their compiled kernels and the scan's filter setup
+// between reconstructions of the same scan: several grids (a quick
+// low-resolution pass, then the full one) or parts of one grid.
+class FdkReconstructor {
+ public:
+  FdkReconstructor(ProjectionSource& projections, const ScanGeometry& geometry, const FdkOptions& options = {});
+  ~FdkReconstructor();
+  FdkReconstructor(const FdkReconstructor&) = delete;
+  FdkReconstructor& operator=(const FdkReconstructor&) = delete;
+
+  // Slices [k_begin, k_end) of `grid`, each voxel with the same bits as in a
+  // reconstruction of the whole grid.
+  FdkReport reconstruct(const VolumeGrid& grid, const SlabSink& sink, std::uint32_t k_begin = 0,
+                        std::uint32_t k_end = UINT32_MAX);
+  std::vector<std::string> device_names() const;
+  // Warnings about the scan (e.g. a short arc), known before reconstructing.
+  const std::vector<std::string>& warnings() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 FdkReport reconstruct_fdk(ProjectionSource& projections, const ScanGeometry& geometry, const VolumeGrid& grid,
                           const FdkOptions& options, const SlabSink& sink);
