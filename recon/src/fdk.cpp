@@ -255,6 +255,8 @@ std::vector<std::string> FdkReconstructor::device_names() const {
 
 const std::vector<std::string>& FdkReconstructor::warnings() const { return impl_->shape.warnings; }
 
+bool FdkReconstructor::short_scan() const { return impl_->shape.short_scan; }
+
 FdkReport FdkReconstructor::reconstruct(const VolumeGrid& grid, const SlabSink& sink, std::uint32_t k_begin,
                                         std::uint32_t k_end) {
   const auto start = std::chrono::steady_clock::now();

@@ -26,5 +26,8 @@ Runner add_verify_command(CLI::App& app, const GlobalOptions& global);
 Runner add_convert_command(CLI::App& app, const GlobalOptions& global);
 Runner add_extract_command(CLI::App& app, const GlobalOptions& global);
 Runner add_slice_command(CLI::App& app, const GlobalOptions& global);
+Runner add_phantom_command(CLI::App& app, const GlobalOptions& global);
+Runner add_devices_command(CLI::App& app, const GlobalOptions& global);
+Runner add_recon_command(CLI::App& app, const GlobalOptions& global);
 
 }  // namespace ivol::cli

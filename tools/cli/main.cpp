@@ -30,6 +30,9 @@ int run(int argc, char** argv) {
   add(add_convert_command);
   add(add_extract_command);
   add(add_slice_command);
+  add(add_phantom_command);
+  add(add_devices_command);
+  add(add_recon_command);
 
   if (argc > 1 && argv[1][0] != '-') {
     bool known = false;

@@ -91,6 +91,8 @@ class FdkReconstructor {
   std::vector<std::string> device_names() const;
   // Warnings about the scan (e.g. a short arc), known before reconstructing.
   const std::vector<std::string>& warnings() const;
+  // Whether the views cover less than a full circle (Parker weights apply).
+  bool short_scan() const;
 
  private:
   struct Impl;

@@ -1,0 +1,163 @@
+#include "scan_input.hpp"
+
+#include <cmath>
+#include <filesystem>
+
+#include "ivol/error.hpp"
+#include "ivol/recon/rtk_geometry_xml.hpp"
+#include "projection_io.hpp"
+
+namespace ivol::cli {
+namespace {
+
+[[noreturn]] void bad(const std::string& message) { throw Error(ErrorClass::InvalidArgument, message); }
+
+std::vector<double> parse_numbers(const std::string& text, const char* option, std::size_t low, std::size_t high) {
+  std::vector<double> values;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    const std::size_t comma = text.find(',', start);
+    const std::string item = text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    try {
+      std::size_t used = 0;
+      values.push_back(std::stod(item, &used));
+      if (used != item.size()) throw std::invalid_argument(item);
+    } catch (const std::exception&) {
+      bad(std::string(option) + ": '" + item + "' is not a number");
+    }
+    if (comma == std::string::npos) break;
+    start = comma + 1;
+  }
+  if (values.size() < low || values.size() > high)
+    bad(std::string(option) + ": expected " + std::to_string(low) + (low == high ? "" : " or " + std::to_string(high)) +
+        " comma-separated numbers, got '" + text + "'");
+  return values;
+}
+
+std::string lower_extension(const std::string& path) {
+  std::string e = std::filesystem::path(path).extension().string();
+  for (char& c : e) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return e;
+}
+
+std::string detect_format(const ScanSettings& s) {
+  if (!s.format.empty()) return s.format;
+  if (std::filesystem::is_directory(s.projections)) return "tiff";
+  const std::string e = lower_extension(s.projections);
+  if (e == ".h5" || e == ".hdf5" || e == ".hdf" || e == ".nxs") return "hdf5";
+  if (e == ".tif" || e == ".tiff") return "tiff";
+  if (e == ".raw" || e == ".bin") return "raw";
+  bad(s.projections + ": cannot tell the format from the name; give --format raw|tiff|hdf5");
+}
+
+}  // namespace
+
+void add_scan_options(CLI::App* cmd, ScanSettings& s) {
+  cmd->add_option("PROJECTIONS", s.projections, "Projections: raw file, TIFF file/folder/glob, or HDF5 (DXchange)")
+      ->required();
+  cmd->add_option("--format", s.format, "raw, tiff or hdf5 (default: by extension)")
+      ->check(CLI::IsMember({"raw", "tiff", "hdf5"}));
+  auto* raw = cmd->add_option_group("raw projections");
+  raw->add_option("--detector", s.detector, "C,R: detector columns and rows");
+  raw->add_option("--views", s.views, "Number of projections");
+  raw->add_option("--sample", s.sample, "f32 or u16")->check(CLI::IsMember({"f32", "u16"}))->capture_default_str();
+  raw->add_option("--header-bytes", s.header_bytes, "Bytes to skip at the start of each raw file");
+  auto* intensity = cmd->add_option_group("intensities");
+  intensity->add_flag("--intensities", s.intensities, "Values are intensities, not line integrals (u16 always are)");
+  intensity->add_option("--flat", s.flats, "Flat (bright) field file(s), averaged");
+  intensity->add_option("--dark", s.darks, "Dark field file(s), averaged");
+  intensity->add_option("--incident", s.incident, "Unattenuated intensity, when there is no flat field");
+  auto* geometry = cmd->add_option_group("geometry");
+  geometry->add_option("--geometry", s.geometry_xml, "RTK geometry XML (ThreeDCircularProjectionGeometry)");
+  geometry->add_option("--pitch", s.pitch, "U or U,V: detector pixel pitch in mm")->required();
+  geometry->add_option("--projection-origin", s.projection_origin,
+                       "U,V: RTK projection image origin in mm (default: centred)");
+  geometry->add_option("--sid", s.sid, "Source to isocentre distance, mm (without --geometry)");
+  geometry->add_option("--sdd", s.sdd, "Source to detector distance, mm (without --geometry)");
+  geometry->add_option("--arc", s.arc_deg, "Degrees covered by the views (without --geometry)")->capture_default_str();
+  geometry->add_option("--first-angle", s.first_angle_deg, "Angle of the first view, degrees")->capture_default_str();
+  geometry->add_option("--offset", s.offset, "U,V: detector offset in mm (without --geometry)");
+}
+
+OpenedScan open_scan(const ScanSettings& s) {
+  OpenedScan scan;
+  const std::string format = detect_format(s);
+  convert::IntensityOptions intensity;
+  intensity.flat_paths = s.flats;
+  intensity.dark_paths = s.darks;
+  intensity.incident_intensity = s.incident;
+  const bool intensities = s.intensities || !s.flats.empty() || s.incident > 0;
+  const auto quantity = intensities ? convert::StoredQuantity::Intensities : convert::StoredQuantity::LineIntegrals;
+  std::vector<double> theta_deg;
+  if (format == "raw") {
+    if (s.detector.empty() || s.views == 0) bad("raw projections need --detector C,R and --views V");
+    const std::vector<double> d = parse_numbers(s.detector, "--detector", 2, 2);
+    convert::RawProjectionLayout layout;
+    layout.columns = static_cast<int>(d[0]);
+    layout.rows = static_cast<int>(d[1]);
+    layout.views = s.views;
+    layout.sample = s.sample == "u16" ? convert::RawSampleType::UInt16 : convert::RawSampleType::Float32;
+    layout.quantity = quantity;
+    layout.header_bytes = s.header_bytes;
+    scan.projections = convert::open_raw_projections(s.projections, layout, intensity);
+  } else if (format == "tiff") {
+    scan.projections = convert::open_tiff_projections(s.projections, quantity, intensity);
+  } else {
+    convert::DxchangeOptions options;
+    options.assume_line_integrals = !intensities;
+    convert::DxchangeProjections d = convert::open_dxchange_projections(s.projections, options);
+    scan.projections = std::move(d.projections);
+    theta_deg = std::move(d.theta_deg);
+  }
+  recon::ProjectionSource& p = *scan.projections;
+
+  const std::vector<double> pitch = parse_numbers(s.pitch, "--pitch", 1, 2);
+  recon::Detector detector{p.columns(), p.rows(), pitch[0], pitch.size() > 1 ? pitch[1] : pitch[0]};
+  if (!(detector.pitch_u > 0) || !(detector.pitch_v > 0)) bad("--pitch: must be positive");
+  if (!s.geometry_xml.empty()) {
+    double origin_u = -0.5 * (detector.columns - 1) * detector.pitch_u;
+    double origin_v = -0.5 * (detector.rows - 1) * detector.pitch_v;
+    if (!s.projection_origin.empty()) {
+      const std::vector<double> o = parse_numbers(s.projection_origin, "--projection-origin", 2, 2);
+      origin_u = o[0];
+      origin_v = o[1];
+    }
+    scan.geometry = recon::read_rtk_geometry_xml(s.geometry_xml, detector, origin_u, origin_v);
+    scan.description["geometry"] = {{"rtk_xml", s.geometry_xml}, {"projection_origin_mm", {origin_u, origin_v}}};
+  } else {
+    if (!(s.sid > 0) || !(s.sdd > s.sid))
+      bad("without --geometry, give --sid and --sdd (mm, SDD > SID) and optionally --arc, --first-angle, --offset");
+    std::vector<double> offset{0.0, 0.0};
+    if (!s.offset.empty()) offset = parse_numbers(s.offset, "--offset", 2, 2);
+    scan.geometry = recon::circular_scan(detector, p.view_count(), s.sid, s.sdd, s.arc_deg * M_PI / 180.0,
+                                         s.first_angle_deg * M_PI / 180.0, offset[0], offset[1]);
+    if (!theta_deg.empty()) {
+      if (theta_deg.size() != p.view_count())
+        throw std::runtime_error(s.projections + ": /exchange/theta has " + std::to_string(theta_deg.size()) +
+                                 " angles for " + std::to_string(p.view_count()) + " projections");
+      for (std::size_t v = 0; v < theta_deg.size(); ++v) scan.geometry.views[v].angle = theta_deg[v] * M_PI / 180.0;
+    }
+    scan.description["geometry"] = {{"sid_mm", s.sid},
+                                    {"sdd_mm", s.sdd},
+                                    {"detector_offset_mm", offset},
+                                    {"angles", theta_deg.empty() ? "uniform" : "/exchange/theta"}};
+    if (theta_deg.empty()) {
+      scan.description["geometry"]["arc_deg"] = s.arc_deg;
+      scan.description["geometry"]["first_angle_deg"] = s.first_angle_deg;
+    }
+  }
+  scan.geometry.validate();
+  if (scan.geometry.view_count() != p.view_count())
+    throw std::runtime_error(s.geometry_xml + ": " + std::to_string(scan.geometry.view_count()) +
+                             " projections in the geometry, " + std::to_string(p.view_count()) + " in " +
+                             s.projections);
+  scan.description["projections"] = {{"path", s.projections},
+                                     {"format", format},
+                                     {"views", p.view_count()},
+                                     {"detector", {detector.columns, detector.rows}},
+                                     {"pitch_mm", {detector.pitch_u, detector.pitch_v}},
+                                     {"quantity", intensities ? "intensities" : "line_integrals"}};
+  return scan;
+}
+
+}  // namespace ivol::cli

@@ -1,0 +1,86 @@
+#include "recon_slabs.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+
+#include "ivol/keep_mask.hpp"
+
+namespace ivol::convert {
+namespace {
+
+void add(recon::FdkTimings& into, const recon::FdkTimings& t) {
+  into.setup += t.setup;
+  into.reading += t.reading;
+  into.filtering += t.filtering;
+  into.backprojection += t.backprojection;
+  into.transfer += t.transfer;
+  into.delivery += t.delivery;
+  into.total += t.total;
+}
+
+}  // namespace
+
+ReconstructionSlabs::ReconstructionSlabs(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid)
+    : reconstructor_(reconstructor), grid_(grid) {
+  shape_.dims = Dims{grid.size[0], grid.size[1], grid.size[2]};
+  shape_.type = SampleType::Float32;
+  shape_.has_geometry = true;
+  shape_.voxel_size = {grid.voxel_size[0], grid.voxel_size[1], grid.voxel_size[2]};
+  shape_.origin = {grid.origin[0], grid.origin[1], grid.origin[2]};
+  shape_.unit = "mm";
+}
+
+void ReconstructionSlabs::read(std::uint32_t z0, std::uint32_t count, void* out) {
+  const auto start = std::chrono::steady_clock::now();
+  const std::size_t slice = std::size_t{grid_.size[0]} * grid_.size[1];
+  float* target = static_cast<float*>(out);
+  const std::uint32_t cached = static_cast<std::uint32_t>(cache_.size() / slice);
+  std::uint32_t first = z0;
+  // Slices at the start of this read that the previous one already made.
+  if (z0 >= cache_first_ && z0 < cache_first_ + cached) {
+    const std::uint32_t reuse = std::min(count, cache_first_ + cached - z0);
+    std::memcpy(target, cache_.data() + (z0 - cache_first_) * slice, reuse * slice * sizeof(float));
+    first = z0 + reuse;
+  }
+  if (first < z0 + count) {
+    const recon::FdkReport report = reconstructor_.reconstruct(
+        grid_,
+        [&](std::uint32_t k0, std::uint32_t k1, const float* data) {
+          std::memcpy(target + (k0 - z0) * slice, data, (k1 - k0) * slice * sizeof(float));
+        },
+        first, z0 + count);
+    add(timings_, report.timings);
+    voxel_updates_ += report.voxel_updates;
+    slices_reconstructed_ += z0 + count - first;
+  }
+  cache_first_ = z0;
+  cache_.assign(target, target + count * slice);
+  read_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+double ReconstructionSlabs::gups() const {
+  return timings_.backprojection > 0 ? static_cast<double>(voxel_updates_) / timings_.backprojection * 1e-9 : 0.0;
+}
+
+Preview reconstruct_preview(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid, unsigned factor) {
+  const auto start = std::chrono::steady_clock::now();
+  Preview preview;
+  recon::VolumeGrid& coarse = preview.grid;
+  for (int a = 0; a < 3; ++a) {
+    coarse.size[a] = (grid.size[a] + factor - 1) / factor;
+    coarse.voxel_size[a] = grid.voxel_size[a] * factor;
+    // A coarse voxel's centre is the centre of the factor³ fine voxels it covers.
+    coarse.origin[a] = grid.origin[a] + 0.5 * (factor - 1) * grid.voxel_size[a];
+  }
+  preview.values.resize(coarse.voxel_count());
+  const std::size_t slice = std::size_t{coarse.size[0]} * coarse.size[1];
+  reconstructor.reconstruct(coarse, [&](std::uint32_t k0, std::uint32_t k1, const float* data) {
+    std::copy(data, data + (k1 - k0) * slice, preview.values.begin() + static_cast<std::ptrdiff_t>(k0 * slice));
+  });
+  preview.otsu_threshold = otsu_threshold(preview.values.data(), preview.values.size());
+  preview.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return preview;
+}
+
+}  // namespace ivol::convert

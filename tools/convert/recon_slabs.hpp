@@ -1,0 +1,52 @@
+// Reconstruction as a source of slabs: the slices of a grid are
+// reconstructed when they are read, so that import_to_ivol writes an .ivol
+// file straight from the FDK, slab by slab, and the dense volume is never
+// held in memory.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "ivol/recon/fdk.hpp"
+#include "slab_io.hpp"
+
+namespace ivol::convert {
+
+class ReconstructionSlabs final : public SlabReader {
+ public:
+  // float32 samples, the grid's voxel size and origin in mm.
+  ReconstructionSlabs(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid);
+  // Slices read twice in a row (import_to_ivol re-reads a keep mask's margin)
+  // are kept from the previous read, not reconstructed again.
+  void read(std::uint32_t z0, std::uint32_t count, void* out) override;
+
+  // Sums over every reconstruction so far.
+  const recon::FdkTimings& timings() const { return timings_; }
+  std::uint64_t slices_reconstructed() const { return slices_reconstructed_; }
+  // Wall-clock seconds spent inside read().
+  double read_seconds() const { return read_seconds_; }
+  double gups() const;
+
+ private:
+  recon::FdkReconstructor& reconstructor_;
+  recon::VolumeGrid grid_;
+  recon::FdkTimings timings_;
+  std::uint64_t slices_reconstructed_ = 0;
+  std::uint64_t voxel_updates_ = 0;
+  double read_seconds_ = 0.0;
+  std::uint32_t cache_first_ = 0;
+  std::vector<float> cache_;  // the last read's slices
+};
+
+// A low-resolution preview of `grid` (each voxel `factor` voxels a side), for
+// finding the object before the full reconstruction: Otsu's threshold over
+// its values.
+struct Preview {
+  recon::VolumeGrid grid;
+  std::vector<float> values;
+  float otsu_threshold = 0.0F;
+  double seconds = 0.0;
+};
+Preview reconstruct_preview(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid, unsigned factor);
+
+}  // namespace ivol::convert
