@@ -114,5 +114,26 @@ fi
 [ -e "$work/big.ivol" ] || "$IVOL" -q convert "$work/big.raw" "$work/big.ivol" --dims 128,128,1024
 case_ big-verifies       0 "OK"                      -- "$IVOL" verify "$work/big.ivol"
 
+# Simulated scans of analytic phantoms (recon/phantom.hpp) and the OpenCL devices.
+scan=(--views 24 --detector 48 --radius 20)
+case_ phantom-help       0 "lattice-part"            -- "$IVOL" phantom --help
+case_ phantom-unknown    1 "known phantoms: shepp-logan" -- "$IVOL" phantom teapot -o "$work/p.h5"
+case_ phantom-bad-sdd    1 "--sdd"                   -- "$IVOL" phantom thin-pipe "${scan[@]}" --sdd 500 -o "$work/p.h5"
+case_ phantom-h5         0 "ivol recon $work/p.h5 --geometry $work/p.xml --pitch" -- "$IVOL" phantom shepp-logan "${scan[@]}" -o "$work/p.h5" --truth "$work/p-truth.ivol"
+case_ phantom-no-clobber 2 "p.h5: exists"            -- "$IVOL" phantom shepp-logan "${scan[@]}" -o "$work/p.h5"
+case_ phantom-force      0 ""                        -- "$IVOL" -q phantom shepp-logan "${scan[@]}" -o "$work/p.h5" -f
+case_ phantom-h5-shape   0 "(24, 48, 48) float32 24" -- /usr/bin/python3 -c "import h5py; f=h5py.File('$work/p.h5'); d=f['/exchange/data']; print(d.shape, d.dtype, len(f['/exchange/theta']))"
+case_ phantom-xml        0 "24 projections"          -- /usr/bin/python3 -c "import xml.etree.ElementTree as E; print(len(E.parse('$work/p.xml').getroot().findall('Projection')), 'projections')"
+case_ phantom-truth      0 "OK"                      -- "$IVOL" verify "$work/p-truth.ivol"
+case_ phantom-provenance 0 '"phantom": "shepp-logan"' -- "$IVOL" info --json "$work/p-truth.ivol"
+case_ phantom-raw        0 "--geometry $work/p-raw.xml --pitch 1.835 --detector 48,48 --views 24" -- "$IVOL" phantom thin-pipe "${scan[@]}" --photons 1e5 -o "$work/p.raw" --geometry-out "$work/p-raw.xml"
+case_ phantom-raw-size   0 "221184"                  -- stat -c %s "$work/p.raw"
+case_ phantom-raw-xml    0 "24 projections"          -- /usr/bin/python3 -c "import xml.etree.ElementTree as E; print(len(E.parse('$work/p-raw.xml').getroot().findall('Projection')), 'projections')"
+case_ phantom-no-dir     2 "nodir"                   -- "$IVOL" phantom shepp-logan "${scan[@]}" -o "$work/q.h5" --truth "$work/nodir/q.ivol"
+case_ phantom-no-partial 0 ""                        -- bash -c "test ! -e '$work/q.h5' && test ! -e '$work/q.xml' && ! ls -A '$work' | grep -q 'tmp-'"
+case_ devices            0 "compute units"           -- "$IVOL" devices
+"$IVOL" devices --json > "$work/devices.json"
+case_ devices-json       0 "devices:"                -- /usr/bin/python3 -c "import json,sys; d=json.load(open('$work/devices.json'))['devices']; print('devices:', len(d), d[0]['name']); sys.exit(0 if d and d[0]['compute_units'] > 0 else 1)"
+
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]
