@@ -67,6 +67,102 @@ __kernel void fdk_backproject(__global float* restrict slab, int nx, int ny, int
   for (int d = 0; d < IVOL_BACKPROJECT_DEPTH; ++d) voxel[(size_t)d * slice] += sum[d];
 }
 
+
+/* One view's contribution at a point given as a fractional grid index. */
+static float sample_view(BackprojectView m, float fi, float fj, float fk, __global const float* image,
+                         float column_limit, float row_limit, float band_first, int stride_cols) {
+  const float w = m.depth[0] * fi + m.depth[1] * fj + m.depth[3];
+  const float inv_w = 1.0f / w;
+  const float column = clamp((m.column[0] * fi + m.column[1] * fj + m.column[3]) * inv_w, -1.0f, column_limit);
+  const float column_floor = floor(column);
+  const float column_frac = column - column_floor;
+  const float row_at_zero = (m.row[0] * fi + m.row[1] * fj + m.row[3]) * inv_w;
+  const float row = clamp((row_at_zero + fk * (m.row[2] * inv_w)) - band_first, -1.0f, row_limit);
+  const float row_floor = floor(row);
+  const float row_frac = row - row_floor;
+  const int at = ((int)row_floor + IVOL_BAND_BORDER_BEFORE) * stride_cols + (int)column_floor + IVOL_BAND_BORDER_BEFORE;
+  const float top = image[at] + column_frac * (image[at + 1] - image[at]);
+  const float bottom = image[at + stride_cols] + column_frac * (image[at + stride_cols + 1] - image[at + stride_cols]);
+  return inv_w * inv_w * (top + row_frac * (bottom - top));
+}
+
+/* The dense kernel's arithmetic on a list of stacks (the full-resolution
+ * bricks of a structure): sums[out_offset + 8·t + d] for stack t, voxel d. */
+__kernel void fdk_backproject_fine(__global float* restrict sums, uint out_offset, __global const FineTask* restrict tasks,
+                                   int task_count, __global const float* restrict filtered, int stride_cols,
+                                   int stride_rows, int band_first_row, __global const BackprojectView* restrict views,
+                                   int view_offset) {
+  const int t = get_global_id(0);
+  if (t >= task_count) return;
+  const FineTask task = tasks[t];
+  const float fi = task.i;
+  const float fj = task.j;
+  const float column_limit = (float)(stride_cols - IVOL_BAND_BORDER_BEFORE - IVOL_BAND_BORDER_AFTER);
+  const float row_limit = (float)(stride_rows - IVOL_BAND_BORDER_BEFORE - IVOL_BAND_BORDER_AFTER);
+  const float band_first = (float)band_first_row;
+  const size_t plane = (size_t)stride_cols * (size_t)stride_rows;
+  float sum[IVOL_BACKPROJECT_DEPTH];
+#pragma unroll
+  for (int d = 0; d < IVOL_BACKPROJECT_DEPTH; ++d) sum[d] = 0.0f;
+#pragma unroll
+  for (int v = 0; v < IVOL_BACKPROJECT_BATCH; ++v) {
+    const BackprojectView m = views[view_offset + v];
+    const float w = m.depth[0] * fi + m.depth[1] * fj + m.depth[3];
+    const float inv_w = 1.0f / w;
+    const float column = clamp((m.column[0] * fi + m.column[1] * fj + m.column[3]) * inv_w, -1.0f, column_limit);
+    const float column_floor = floor(column);
+    const float column_frac = column - column_floor;
+    const float weight = inv_w * inv_w;
+    const float row_at_zero = (m.row[0] * fi + m.row[1] * fj + m.row[3]) * inv_w;
+    const float row_step = m.row[2] * inv_w;
+    __global const float* image = filtered + (size_t)v * plane;
+    const int column_index = (int)column_floor + IVOL_BAND_BORDER_BEFORE;
+#pragma unroll
+    for (int d = 0; d < IVOL_BACKPROJECT_DEPTH; ++d) {
+      const float fk = task.k + (float)d;
+      const float row = clamp((row_at_zero + fk * row_step) - band_first, -1.0f, row_limit);
+      const float row_floor = floor(row);
+      const float row_frac = row - row_floor;
+      const int at = ((int)row_floor + IVOL_BAND_BORDER_BEFORE) * stride_cols + column_index;
+      const float top = image[at] + column_frac * (image[at + 1] - image[at]);
+      const float bottom = image[at + stride_cols] + column_frac * (image[at + stride_cols + 1] - image[at + stride_cols]);
+      sum[d] += weight * (top + row_frac * (bottom - top));
+    }
+  }
+  __global float* out = sums + out_offset + (size_t)t * IVOL_BACKPROJECT_DEPTH;
+#pragma unroll
+  for (int d = 0; d < IVOL_BACKPROJECT_DEPTH; ++d) out[d] += sum[d];
+}
+
+/* Coarse voxels: the mean over the centres of their eight octants. */
+__kernel void fdk_backproject_coarse(__global float* restrict sums, uint out_offset,
+                                     __global const CoarseTask* restrict tasks, int task_count,
+                                     __global const float* restrict filtered, int stride_cols, int stride_rows,
+                                     int band_first_row, __global const BackprojectView* restrict views,
+                                     int view_offset) {
+  const int t = get_global_id(0);
+  if (t >= task_count) return;
+  const CoarseTask task = tasks[t];
+  const float column_limit = (float)(stride_cols - IVOL_BAND_BORDER_BEFORE - IVOL_BAND_BORDER_AFTER);
+  const float row_limit = (float)(stride_rows - IVOL_BAND_BORDER_BEFORE - IVOL_BAND_BORDER_AFTER);
+  const float band_first = (float)band_first_row;
+  const size_t plane = (size_t)stride_cols * (size_t)stride_rows;
+  float sum = 0.0f;
+#pragma unroll
+  for (int v = 0; v < IVOL_BACKPROJECT_BATCH; ++v) {
+    const BackprojectView m = views[view_offset + v];
+    __global const float* image = filtered + (size_t)v * plane;
+#pragma unroll
+    for (int octant = 0; octant < 8; ++octant) {
+      const float fi = task.i + ((octant & 1) ? task.quarter_i : -task.quarter_i);
+      const float fj = task.j + ((octant & 2) ? task.quarter_j : -task.quarter_j);
+      const float fk = task.k + ((octant & 4) ? task.quarter_k : -task.quarter_k);
+      sum += sample_view(m, fi, fj, fk, image, column_limit, row_limit, band_first, stride_cols);
+    }
+  }
+  sums[out_offset + t] += 0.125f * sum;
+}
+
 #ifndef offsetof
 #define offsetof(type, member) __builtin_offsetof(type, member)
 #endif
@@ -95,4 +191,11 @@ __kernel void layout_probe(__global int* out) {
   out[18] = IVOL_BAND_BORDER_AFTER;
   out[19] = IVOL_BACKPROJECT_BATCH;
   out[20] = IVOL_BACKPROJECT_DEPTH;
+  out[21] = (int)sizeof(FineTask);
+  out[22] = (int)offsetof(FineTask, k);
+  out[23] = (int)offsetof(FineTask, count);
+  out[24] = (int)sizeof(CoarseTask);
+  out[25] = (int)offsetof(CoarseTask, quarter_i);
+  out[26] = (int)offsetof(CoarseTask, quarter_k);
+  out[27] = (int)offsetof(CoarseTask, reserved);
 }

@@ -45,6 +45,30 @@ typedef struct BackprojectView {
   float depth[4];       /* 32: row 2: w */
 } BackprojectView;      /* 48 bytes */
 
+/* Backprojection into the bricks of an inhomogeneous structure. A fine
+ * task is a stack of up to IVOL_BACKPROJECT_DEPTH full-resolution voxels
+ * along k; (i, j, k) is its first voxel's centre as a grid index, so that a
+ * fine voxel gets exactly the bits the dense kernel gives it. */
+typedef struct FineTask {
+  float i;              /*  0 */
+  float j;              /*  4 */
+  float k;              /*  8 */
+  ivol_u32 count;       /* 12: voxels in the stack, 1..IVOL_BACKPROJECT_DEPTH */
+} FineTask;             /* 16 bytes */
+
+/* A coarse voxel, sampled at the centres of its eight octants (so that it
+ * averages what it covers instead of aliasing): (i, j, k) is its centre as a
+ * fractional grid index, quarter its edge / 4 along each axis. */
+typedef struct CoarseTask {
+  float i;              /*  0 */
+  float j;              /*  4 */
+  float k;              /*  8 */
+  float quarter_i;      /* 12 */
+  float quarter_j;      /* 16 */
+  float quarter_k;      /* 20 */
+  ivol_u32 reserved[2]; /* 24: zero */
+} CoarseTask;           /* 32 bytes */
+
 /* Filtered bands are stored with zero pixels around them so that bilinear
  * interpolation needs no bounds test: one zero column/row before the first
  * and BAND_BORDER_AFTER after the last. */

@@ -69,6 +69,13 @@ TEST(Fdk, LayoutAgrees) {
     EXPECT_EQ(v[18], IVOL_BAND_BORDER_AFTER);
     EXPECT_EQ(v[19], IVOL_BACKPROJECT_BATCH);
     EXPECT_EQ(v[20], IVOL_BACKPROJECT_DEPTH);
+    EXPECT_EQ(v[21], static_cast<int>(sizeof(FineTask)));
+    EXPECT_EQ(v[22], static_cast<int>(offsetof(FineTask, k)));
+    EXPECT_EQ(v[23], static_cast<int>(offsetof(FineTask, count)));
+    EXPECT_EQ(v[24], static_cast<int>(sizeof(CoarseTask)));
+    EXPECT_EQ(v[25], static_cast<int>(offsetof(CoarseTask, quarter_i)));
+    EXPECT_EQ(v[26], static_cast<int>(offsetof(CoarseTask, quarter_k)));
+    EXPECT_EQ(v[27], static_cast<int>(offsetof(CoarseTask, reserved)));
   }
 }
 

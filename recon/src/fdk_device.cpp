@@ -49,6 +49,8 @@ FdkDevice::FdkDevice(const DeviceHandle& handle, const FdkProblem& problem)
   program_ = build_recon_program(context_, handle.device, fft_in_global_ ? "-DIVOL_FFT_IN_GLOBAL" : "");
   filter_ = cl::Kernel(program_, "fdk_filter_rows");
   backproject_ = cl::Kernel(program_, "fdk_backproject");
+  backproject_fine_ = cl::Kernel(program_, "fdk_backproject_fine");
+  backproject_coarse_ = cl::Kernel(program_, "fdk_backproject_coarse");
   const std::size_t max_group =
       std::min<std::size_t>(handle.device.getInfo<CL_DEVICE_MAX_WORK_GROUP_SIZE>(),
                             filter_.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(handle.device));
@@ -101,8 +103,7 @@ void FdkDevice::collect(std::vector<cl::Event>& events, double& into) {
   events.clear();
 }
 
-void FdkDevice::run_batch(int parity, std::size_t first_view, int view_count, const RowBand& band,
-                          std::uint32_t k_begin, std::uint32_t slices) {
+void FdkDevice::filter_batch(int parity, std::size_t first_view, int view_count, const RowBand& band) {
   const int columns = problem_.geometry->detector.columns;
   const std::size_t image = static_cast<std::size_t>(band.rows()) * columns;
   std::vector<float>& host = host_raw_[parity];
@@ -121,7 +122,6 @@ void FdkDevice::run_batch(int parity, std::size_t first_view, int view_count, co
 
   const int n = 1 << problem_.log2n;
   const int pairs = (band.rows() + 1) / 2;
-  const int stride_rows = band.rows() + kBorder;
   int arg = 0;
   filter_.setArg(arg++, raw_[parity]);
   filter_.setArg(arg++, filtered_[parity]);
@@ -134,7 +134,7 @@ void FdkDevice::run_batch(int parity, std::size_t first_view, int view_count, co
   filter_.setArg(arg++, static_cast<cl_int>(band.first));
   filter_.setArg(arg++, static_cast<cl_int>(problem_.log2n));
   filter_.setArg(arg++, static_cast<cl_int>(stride_cols_));
-  filter_.setArg(arg++, static_cast<cl_int>(stride_rows));
+  filter_.setArg(arg++, static_cast<cl_int>(band.rows() + kBorder));
   if (fft_in_global_)
     filter_.setArg(arg++, fft_scratch_);
   else
@@ -144,26 +144,36 @@ void FdkDevice::run_batch(int parity, std::size_t first_view, int view_count, co
                               cl::NDRange(static_cast<std::size_t>(filter_local_size_) * pairs, view_count),
                               cl::NDRange(static_cast<std::size_t>(filter_local_size_), 1), nullptr, &filtered);
   filter_events_.push_back(filtered);
+}
 
-  const VolumeGrid& grid = *problem_.grid;
-  arg = 0;
-  backproject_.setArg(arg++, slab_);
-  backproject_.setArg(arg++, static_cast<cl_int>(grid.size[0]));
-  backproject_.setArg(arg++, static_cast<cl_int>(grid.size[1]));
-  backproject_.setArg(arg++, static_cast<cl_int>(k_begin));
-  backproject_.setArg(arg++, filtered_[parity]);
-  backproject_.setArg(arg++, static_cast<cl_int>(stride_cols_));
-  backproject_.setArg(arg++, static_cast<cl_int>(stride_rows));
-  backproject_.setArg(arg++, static_cast<cl_int>(band.first));
-  backproject_.setArg(arg++, backproject_views_);
-  backproject_.setArg(arg++, static_cast<cl_int>(first_view));
-  const std::size_t local_x = 64;
-  const std::size_t global_x = (grid.size[0] + local_x - 1) / local_x * local_x;
-  queue_.enqueueNDRangeKernel(backproject_, cl::NullRange,
-                              cl::NDRange(global_x, grid.size[1], padded_slices(slices) / kDepth),
-                              cl::NDRange(local_x, 1, 1), nullptr, &batch_done_[parity]);
-  backproject_events_.push_back(batch_done_[parity]);
-  queue_.flush();
+void FdkDevice::run_views(const RowBand& band, const Backprojector& backproject) {
+  const float zero = 0.0F;
+  const std::size_t filtered_bytes =
+      static_cast<std::size_t>(kBatch) * (band.rows() + kBorder) * stride_cols_ * sizeof(float);
+  for (int p = 0; p < 2; ++p) {
+    cl::Event fill;
+    queue_.enqueueFillBuffer(filtered_[p], zero, 0, filtered_bytes, nullptr, &fill);
+    transfer_events_.push_back(fill);
+  }
+  if (band.rows() == 0) return;  // the voxels project off the detector
+  const std::size_t views = problem_.geometry->view_count();
+  int parity = 0;
+  for (std::size_t first = 0; first < views; first += kBatch, parity ^= 1) {
+    // The host buffer of this parity is free once its last batch is done.
+    if (batch_done_[parity]()) batch_done_[parity].wait();
+    const int count = static_cast<int>(std::min<std::size_t>(kBatch, views - first));
+    filter_batch(parity, first, count, band);
+    backproject(filtered_[parity], band.rows() + kBorder, first, &batch_done_[parity]);
+    backproject_events_.push_back(batch_done_[parity]);
+    queue_.flush();
+  }
+}
+
+void FdkDevice::finish_timings() {
+  for (cl::Event& e : batch_done_) e = cl::Event();
+  collect(filter_events_, timings_.filtering);
+  collect(backproject_events_, timings_.backprojection);
+  collect(transfer_events_, timings_.transfer);
 }
 
 void FdkDevice::reconstruct_slab(std::uint32_t k_begin, std::uint32_t k_end, std::vector<float>& out) {
@@ -175,33 +185,91 @@ void FdkDevice::reconstruct_slab(std::uint32_t k_begin, std::uint32_t k_end, std
   if (band.rows() > max_band_rows_)
     throw std::logic_error("FDK: slab needs " + std::to_string(band.rows()) + " detector rows, planned for " +
                            std::to_string(max_band_rows_));
-  const float zero = 0.0F;
-  std::vector<cl::Event> fills(3);
-  queue_.enqueueFillBuffer(slab_, zero, 0, slice_bytes * padded_slices(slices), nullptr, &fills[0]);
-  const std::size_t filtered_bytes =
-      static_cast<std::size_t>(kBatch) * (band.rows() + kBorder) * stride_cols_ * sizeof(float);
-  queue_.enqueueFillBuffer(filtered_[0], zero, 0, filtered_bytes, nullptr, &fills[1]);
-  queue_.enqueueFillBuffer(filtered_[1], zero, 0, filtered_bytes, nullptr, &fills[2]);
-
-  if (band.rows() > 0) {
-    const std::size_t views = problem_.geometry->view_count();
-    int parity = 0;
-    for (std::size_t first = 0; first < views; first += kBatch, parity ^= 1) {
-      // The host buffer of this parity is free once its last batch is done.
-      if (batch_done_[parity]()) batch_done_[parity].wait();
-      const int count = static_cast<int>(std::min<std::size_t>(kBatch, views - first));
-      run_batch(parity, first, count, band, k_begin, slices);
-    }
-  }
+  cl::Event fill;
+  queue_.enqueueFillBuffer(slab_, 0.0F, 0, slice_bytes * padded_slices(slices), nullptr, &fill);
+  transfer_events_.push_back(fill);
+  run_views(band, [&](cl::Buffer& filtered, int stride_rows, std::size_t first_view, cl::Event* done) {
+    int arg = 0;
+    backproject_.setArg(arg++, slab_);
+    backproject_.setArg(arg++, static_cast<cl_int>(grid.size[0]));
+    backproject_.setArg(arg++, static_cast<cl_int>(grid.size[1]));
+    backproject_.setArg(arg++, static_cast<cl_int>(k_begin));
+    backproject_.setArg(arg++, filtered);
+    backproject_.setArg(arg++, static_cast<cl_int>(stride_cols_));
+    backproject_.setArg(arg++, static_cast<cl_int>(stride_rows));
+    backproject_.setArg(arg++, static_cast<cl_int>(band.first));
+    backproject_.setArg(arg++, backproject_views_);
+    backproject_.setArg(arg++, static_cast<cl_int>(first_view));
+    const std::size_t local_x = 64;
+    const std::size_t global_x = (grid.size[0] + local_x - 1) / local_x * local_x;
+    queue_.enqueueNDRangeKernel(backproject_, cl::NullRange,
+                                cl::NDRange(global_x, grid.size[1], padded_slices(slices) / kDepth),
+                                cl::NDRange(local_x, 1, 1), nullptr, done);
+  });
   out.resize(slab_bytes / sizeof(float));
   cl::Event read;
   queue_.enqueueReadBuffer(slab_, CL_TRUE, 0, slab_bytes, out.data(), nullptr, &read);
   transfer_events_.push_back(read);
-  for (cl::Event& e : batch_done_) e = cl::Event();
-  collect(filter_events_, timings_.filtering);
-  collect(backproject_events_, timings_.backprojection);
-  collect(transfer_events_, timings_.transfer);
-  collect(fills, timings_.transfer);
+  finish_timings();
+}
+
+void FdkDevice::reconstruct_tasks(const RowBand& band, const std::vector<FineTask>& fine,
+                                  const std::vector<CoarseTask>& coarse, std::vector<float>& out) {
+  if (band.rows() > max_band_rows_)
+    throw std::logic_error("FDK: brick slab needs " + std::to_string(band.rows()) + " detector rows, planned for " +
+                           std::to_string(max_band_rows_));
+  const std::size_t outputs = fine.size() * kDepth + coarse.size();
+  out.assign(outputs, 0.0F);
+  if (outputs == 0) return;
+  // Task lists and their sums, in one allocation each, kept between slabs.
+  auto ensure = [&](cl::Buffer& buffer, std::size_t bytes) {
+    if (!buffer() || buffer.getInfo<CL_MEM_SIZE>() < bytes) buffer = cl::Buffer(context_, CL_MEM_READ_WRITE, bytes);
+  };
+  ensure(task_sums_, outputs * sizeof(float));
+  ensure(fine_tasks_, std::max<std::size_t>(fine.size(), 1) * sizeof(FineTask));
+  ensure(coarse_tasks_, std::max<std::size_t>(coarse.size(), 1) * sizeof(CoarseTask));
+  std::vector<cl::Event> copies(3);
+  queue_.enqueueFillBuffer(task_sums_, 0.0F, 0, outputs * sizeof(float), nullptr, &copies[0]);
+  if (!fine.empty())
+    queue_.enqueueWriteBuffer(fine_tasks_, CL_FALSE, 0, fine.size() * sizeof(FineTask), fine.data(), nullptr,
+                              &copies[1]);
+  if (!coarse.empty())
+    queue_.enqueueWriteBuffer(coarse_tasks_, CL_FALSE, 0, coarse.size() * sizeof(CoarseTask), coarse.data(), nullptr,
+                              &copies[2]);
+  for (const cl::Event& e : copies)
+    if (e()) transfer_events_.push_back(e);
+  run_views(band, [&](cl::Buffer& filtered, int stride_rows, std::size_t first_view, cl::Event* done) {
+    auto launch = [&](cl::Kernel& kernel, cl::Buffer& tasks, std::size_t count, cl_uint out_offset, cl::Event* event) {
+      int arg = 0;
+      kernel.setArg(arg++, task_sums_);
+      kernel.setArg(arg++, out_offset);
+      kernel.setArg(arg++, tasks);
+      kernel.setArg(arg++, static_cast<cl_int>(count));
+      kernel.setArg(arg++, filtered);
+      kernel.setArg(arg++, static_cast<cl_int>(stride_cols_));
+      kernel.setArg(arg++, static_cast<cl_int>(stride_rows));
+      kernel.setArg(arg++, static_cast<cl_int>(band.first));
+      kernel.setArg(arg++, backproject_views_);
+      kernel.setArg(arg++, static_cast<cl_int>(first_view));
+      const std::size_t local = 64;
+      queue_.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange((count + local - 1) / local * local),
+                                  cl::NDRange(local), nullptr, event);
+    };
+    if (!fine.empty() && !coarse.empty()) {
+      cl::Event first;
+      launch(backproject_fine_, fine_tasks_, fine.size(), 0, &first);
+      backproject_events_.push_back(first);
+      launch(backproject_coarse_, coarse_tasks_, coarse.size(), static_cast<cl_uint>(fine.size() * kDepth), done);
+    } else if (!fine.empty()) {
+      launch(backproject_fine_, fine_tasks_, fine.size(), 0, done);
+    } else {
+      launch(backproject_coarse_, coarse_tasks_, coarse.size(), 0, done);
+    }
+  });
+  cl::Event read;
+  queue_.enqueueReadBuffer(task_sums_, CL_TRUE, 0, outputs * sizeof(float), out.data(), nullptr, &read);
+  transfer_events_.push_back(read);
+  finish_timings();
 }
 
 }  // namespace ivol::recon::detail

@@ -49,13 +49,25 @@ class FdkDevice {
   void configure(std::uint32_t max_slices, int max_band_rows);
   // Reconstructs slices [k_begin, k_end) into `out` (x fastest).
   void reconstruct_slab(std::uint32_t k_begin, std::uint32_t k_end, std::vector<float>& out);
+  // Backprojects the tasks' voxels, whose rays meet the detector within
+  // `band`: `out` gets IVOL_BACKPROJECT_DEPTH sums per fine task, then one
+  // per coarse task.
+  void reconstruct_tasks(const RowBand& band, const std::vector<FineTask>& fine, const std::vector<CoarseTask>& coarse,
+                         std::vector<float>& out);
   const DeviceTimings& timings() const { return timings_; }
   const std::string& name() const { return name_; }
   bool fft_in_global() const { return fft_in_global_; }
 
  private:
-  void run_batch(int parity, std::size_t first_view, int view_count, const RowBand& band, std::uint32_t k_begin,
-                 std::uint32_t slices);
+  // Reads, weights and filters one batch of views into filtered_[parity].
+  void filter_batch(int parity, std::size_t first_view, int view_count, const RowBand& band);
+  // Enqueues the backprojection of one filtered batch; `done` gets its last event.
+  using Backprojector =
+      std::function<void(cl::Buffer& filtered, int stride_rows, std::size_t first_view, cl::Event* done)>;
+  // Every batch of views through the filter and `backproject`, two batches
+  // in flight so that reading the next overlaps the device's work.
+  void run_views(const RowBand& band, const Backprojector& backproject);
+  void finish_timings();
   double event_seconds(const cl::Event& event) const;
   void collect(std::vector<cl::Event>& events, double& into);
 
@@ -68,6 +80,11 @@ class FdkDevice {
   cl::Program program_;
   cl::Kernel filter_;
   cl::Kernel backproject_;
+  cl::Kernel backproject_fine_;
+  cl::Kernel backproject_coarse_;
+  cl::Buffer task_sums_;
+  cl::Buffer fine_tasks_;
+  cl::Buffer coarse_tasks_;
   cl::Buffer slab_;
   cl::Buffer filter_views_;
   cl::Buffer backproject_views_;

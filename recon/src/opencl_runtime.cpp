@@ -145,7 +145,7 @@ std::vector<int> probe_device_layout(const DeviceHandle& handle) {
   cl::CommandQueue queue(context, handle.device);
   cl::Program program = build_recon_program(context, handle.device, "");
   cl::Kernel kernel(program, "layout_probe");
-  std::vector<int> values(21, -1);
+  std::vector<int> values(28, -1);
   cl::Buffer out(context, CL_MEM_WRITE_ONLY, values.size() * sizeof(int));
   kernel.setArg(0, out);
   queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(1), cl::NullRange);

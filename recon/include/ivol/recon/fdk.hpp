@@ -18,6 +18,7 @@
 
 #include "ivol/recon/geometry.hpp"
 #include "ivol/recon/projections.hpp"
+#include "ivol/structures.hpp"
 
 namespace ivol::recon {
 
@@ -65,7 +66,8 @@ struct FdkReport {
   bool short_scan = false;
   std::vector<std::string> devices;   // names of the devices used
   std::vector<std::string> warnings;  // e.g. an arc too short for Parker
-  // Voxel updates per second of backprojection (voxels × views / time).
+  // Voxel updates per second of backprojection (voxels × views / time; a
+  // coarse voxel's eight samples count as eight).
   double gups() const;
   std::uint64_t voxel_updates = 0;
 };
@@ -88,6 +90,14 @@ class FdkReconstructor {
   // reconstruction of the whole grid.
   FdkReport reconstruct(const VolumeGrid& grid, const SlabSink& sink, std::uint32_t k_begin = 0,
                         std::uint32_t k_end = UINT32_MAX);
+  // Backprojects into the voxels of `structure` (its full-resolution voxel
+  // (x, y, z) is voxel (i, j, k) of `grid`) and sets structure.values().
+  // Full-resolution voxels get the bits a dense reconstruction gives them;
+  // a coarse voxel is the mean over the centres of its eight octants, so it
+  // averages the object instead of aliasing it. Work is in proportion to the
+  // structure's voxels, not the grid's.
+  FdkReport reconstruct_structure(const VolumeGrid& grid, VoxelStructure& structure);
+
   std::vector<std::string> device_names() const;
   // Warnings about the scan (e.g. a short arc), known before reconstructing.
   const std::vector<std::string>& warnings() const;

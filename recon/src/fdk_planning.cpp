@@ -1,0 +1,209 @@
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <stdexcept>
+#include <thread>
+
+#include "fdk_session.hpp"
+
+namespace ivol::recon::detail {
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+void check_inputs(ProjectionSource& projections, const ScanGeometry& geometry) {
+  geometry.validate();
+  if (projections.columns() != geometry.detector.columns || projections.rows() != geometry.detector.rows)
+    throw std::invalid_argument("FDK: the projections are " + std::to_string(projections.columns()) + "x" +
+                                std::to_string(projections.rows()) + " pixels but the geometry's detector is " +
+                                std::to_string(geometry.detector.columns) + "x" +
+                                std::to_string(geometry.detector.rows));
+  if (projections.view_count() != geometry.view_count())
+    throw std::invalid_argument("FDK: there are " + std::to_string(projections.view_count()) +
+                                " projections but the geometry has " + std::to_string(geometry.view_count()) +
+                                " views");
+}
+
+FdkProblem make_problem(ProjectionSource& projections, const ScanGeometry& geometry, const FdkOptions& options,
+                        const detail::ScanShape& shape) {
+  FdkProblem problem;
+  problem.geometry = &geometry;
+  problem.projections = &projections;
+  problem.fft_in_global_memory = options.fft_in_global_memory;
+  for (std::size_t v = 0; v < geometry.view_count(); ++v)
+    problem.filter_views.push_back(detail::filter_view(geometry, shape, v));
+  problem.log2n = detail::ramp_log2_length(geometry.detector.columns);
+  for (double r : detail::ramp_response(problem.log2n, options.window, options.cutoff))
+    problem.response.push_back(static_cast<float>(r));
+  const int n = 1 << problem.log2n;
+  for (int m = 0; m < n / 2; ++m) {
+    problem.twiddles.push_back(static_cast<float>(std::cos(-2.0 * M_PI * m / n)));
+    problem.twiddles.push_back(static_cast<float>(std::sin(-2.0 * M_PI * m / n)));
+  }
+  return problem;
+}
+
+void set_grid(FdkProblem& problem, const VolumeGrid& grid) {
+  problem.grid = &grid;
+  problem.backproject_views.clear();
+  for (std::size_t v = 0; v < problem.geometry->view_count(); ++v)
+    problem.backproject_views.push_back(detail::backproject_view(*problem.geometry, grid, v));
+  BackprojectView miss{};
+  miss.depth[3] = 1.0F;
+  miss.column[3] = -1e6F;  // clamped into the zero border
+  problem.backproject_views.insert(problem.backproject_views.end(), IVOL_BACKPROJECT_BATCH, miss);
+}
+
+// The widest band of detector rows among slabs of `slices` slices cutting
+// `range`. Estimated from the outer slabs, which see the cone's divergence
+// most, and a middle one (plus the rounding of band ends to even rows);
+// exact when `every`.
+namespace {
+
+int widest_band(const FdkProblem& problem, SlabRange range, std::uint32_t slices, bool every) {
+  int widest = 0;
+  auto consider = [&](std::uint32_t begin) {
+    const std::uint32_t end = std::min(range.end, begin + slices);
+    widest = std::max(widest, detail::rows_for_slab(*problem.geometry, *problem.grid, begin, end).rows());
+  };
+  const std::uint32_t count = range.end - range.first;
+  if (every) {
+    for (std::uint32_t begin = range.first; begin < range.end; begin += slices) consider(begin);
+    return widest;
+  }
+  for (std::uint32_t offset : {0U, (count / 2) / slices * slices, (count - 1) / slices * slices})
+    consider(range.first + offset);
+  return std::min(widest + 2, problem.geometry->detector.rows + 1);
+}
+
+}  // namespace
+
+SlabPlan plan_slabs(const FdkProblem& problem, const std::vector<detail::DeviceHandle>& devices,
+                    const FdkOptions& options, SlabRange range) {
+  std::uint64_t budget = ~std::uint64_t{0};
+  std::uint64_t max_allocation = ~std::uint64_t{0};
+  const int n = 1 << problem.log2n;
+  bool any_global_fft = problem.fft_in_global_memory;
+  for (const detail::DeviceHandle& d : devices) {
+    const std::uint64_t limit =
+        options.device_memory_limit > 0 ? options.device_memory_limit : d.info.global_memory / 10 * 8;
+    budget = std::min(budget, limit);
+    max_allocation = std::min(max_allocation, d.info.max_allocation);
+    any_global_fft = any_global_fft || d.info.local_memory < static_cast<std::uint64_t>(2 * n) * 8 + 1024;
+  }
+  const std::uint64_t slice_bytes = std::uint64_t{problem.grid->size[0]} * problem.grid->size[1] * sizeof(float);
+  auto fits = [&](std::uint32_t slices, SlabPlan& plan, bool exact = false) {
+    plan.slices = slices;
+    plan.band_rows = widest_band(problem, range, slices, exact);
+    plan.bytes = detail::slab_device_bytes(problem, slices, plan.band_rows, any_global_fft);
+    return plan.bytes <= budget && slice_bytes * detail::padded_slices(slices) <= max_allocation;
+  };
+  std::uint32_t high = range.end - range.first;
+  if (options.max_slab_slices > 0) high = std::min(high, options.max_slab_slices);
+  SlabPlan plan;
+  if (fits(high, plan, true)) return plan;
+  std::uint32_t low = 1;
+  if (!fits(low, plan, true))
+    throw std::runtime_error("FDK: even one slice of " + std::to_string(problem.grid->size[0]) + "x" +
+                             std::to_string(problem.grid->size[1]) + " voxels needs " + std::to_string(plan.bytes) +
+                             " bytes of device memory, more than the " + std::to_string(budget) + " allowed");
+  while (high - low > 1) {  // largest slab that fits
+    const std::uint32_t mid = low + (high - low) / 2;
+    SlabPlan candidate;
+    if (fits(mid, candidate))
+      low = mid;
+    else
+      high = mid;
+  }
+  // The search used estimated bands; settle on a slab size whose exact
+  // widest band fits.
+  while (!fits(low, plan, true)) --low;
+  return plan;
+}
+
+namespace {
+
+// Finished slabs, handed to the sink in z order; workers wait when too many
+// are ahead of the one the sink needs next, which bounds host memory.
+class SlabQueue {
+ public:
+  explicit SlabQueue(std::size_t capacity) : capacity_(capacity) {}
+  void put(std::size_t index, std::vector<float> data) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    space_.wait(lock, [&] { return index < next_ + capacity_ || failed_; });
+    ready_.emplace(index, std::move(data));
+    arrived_.notify_all();
+  }
+  bool take(std::size_t index, std::vector<float>& data) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    arrived_.wait(lock, [&] { return ready_.count(index) > 0 || failed_; });
+    if (failed_) return false;
+    data = std::move(ready_[index]);
+    ready_.erase(index);
+    next_ = index + 1;
+    space_.notify_all();
+    return true;
+  }
+  void fail(std::exception_ptr error) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!error_) error_ = error;
+    failed_ = true;
+    arrived_.notify_all();
+    space_.notify_all();
+  }
+  std::exception_ptr error() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return error_;
+  }
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable arrived_, space_;
+  std::map<std::size_t, std::vector<float>> ready_;
+  std::size_t next_ = 0;
+  std::size_t capacity_;
+  bool failed_ = false;
+  std::exception_ptr error_;
+};
+
+}  // namespace
+
+void for_each_slab(const std::vector<FdkDevice*>& devices, std::size_t count,
+                   const std::function<void(FdkDevice&, std::size_t, std::vector<float>&)>& produce,
+                   const std::function<void(std::size_t, std::vector<float>&)>& consume) {
+  SlabQueue queue(devices.size() + 1);
+  std::atomic<std::size_t> next_slab{0};
+  std::vector<std::thread> workers;
+  for (FdkDevice* device : devices) {
+    workers.emplace_back([&, device] {
+      try {
+        for (std::size_t s = next_slab++; s < count; s = next_slab++) {
+          std::vector<float> data;
+          produce(*device, s, data);
+          queue.put(s, std::move(data));
+        }
+      } catch (const cl::Error& error) {
+        queue.fail(std::make_exception_ptr(std::runtime_error("FDK on " + device->name() + ": " + describe(error))));
+      } catch (...) {
+        queue.fail(std::current_exception());
+      }
+    });
+  }
+  std::exception_ptr failure;
+  try {
+    std::vector<float> data;
+    for (std::size_t s = 0; s < count; ++s) {
+      if (!queue.take(s, data)) break;
+      consume(s, data);
+    }
+  } catch (...) {
+    failure = std::current_exception();
+    queue.fail(failure);
+  }
+  for (std::thread& t : workers) t.join();
+  if (failure) std::rethrow_exception(failure);
+  if (std::exception_ptr error = queue.error()) std::rethrow_exception(error);
+}
+
+}  // namespace ivol::recon::detail

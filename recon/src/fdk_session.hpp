@@ -1,0 +1,68 @@
+// What the dense and the structure reconstructions share: the scan's
+// per-view setup, the plan that cuts a range of slices into slabs that fit
+// the devices, and the delivery of finished slabs in order.
+#pragma once
+
+#include <chrono>
+#include <condition_variable>
+#include <exception>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <vector>
+
+#include "fdk_device.hpp"
+#include "ivol/recon/fdk.hpp"
+
+namespace ivol::recon::detail {
+
+double seconds_since(std::chrono::steady_clock::time_point start);
+void check_inputs(ProjectionSource& projections, const ScanGeometry& geometry);
+FdkProblem make_problem(ProjectionSource& projections, const ScanGeometry& geometry, const FdkOptions& options,
+                        const ScanShape& shape);
+// Points the problem at `grid` and computes the grid's view matrices.
+void set_grid(FdkProblem& problem, const VolumeGrid& grid);
+
+struct SlabRange {
+  std::uint32_t first = 0;
+  std::uint32_t end = 0;
+};
+
+struct SlabPlan {
+  std::uint32_t slices = 0;
+  int band_rows = 0;
+  std::uint64_t bytes = 0;
+};
+
+// The thickest slab cutting `range` whose buffers fit every device.
+SlabPlan plan_slabs(const FdkProblem& problem, const std::vector<DeviceHandle>& devices, const FdkOptions& options,
+                    SlabRange range);
+
+// Runs produce(device, s, data) for s = 0 .. count − 1 on all devices at
+// once, and consume(s, data) on the calling thread in increasing s; at most
+// one slab per device waits to be consumed, which bounds host memory.
+void for_each_slab(const std::vector<FdkDevice*>& devices, std::size_t count,
+                   const std::function<void(FdkDevice&, std::size_t, std::vector<float>&)>& produce,
+                   const std::function<void(std::size_t, std::vector<float>&)>& consume);
+
+}  // namespace ivol::recon::detail
+
+namespace ivol::recon {
+
+struct FdkReconstructor::Impl {
+  ProjectionSource& projections;
+  ScanGeometry geometry;
+  FdkOptions options;
+  detail::ScanShape shape;
+  std::mutex projections_mutex;
+  detail::FdkProblem problem;
+  std::vector<detail::DeviceHandle> handles;
+  std::vector<std::unique_ptr<detail::FdkDevice>> devices;
+  std::vector<detail::FdkDevice*> device_pointers() const;
+  double setup_seconds = 0;
+
+  Impl(ProjectionSource& p, const ScanGeometry& g, const FdkOptions& o) : projections(p), geometry(g), options(o) {}
+};
+
+}  // namespace ivol::recon
