@@ -86,17 +86,20 @@ static float sample_view(BackprojectView m, float fi, float fj, float fk, __glob
   return inv_w * inv_w * (top + row_frac * (bottom - top));
 }
 
-/* The dense kernel's arithmetic on a list of stacks (the full-resolution
- * bricks of a structure): sums[out_offset + 8·t + d] for stack t, voxel d. */
+/* The dense kernel's arithmetic on a list of blocks (the full-resolution
+ * bricks of a structure). Global size (IVOL_FINE_RUN, tasks): work-item
+ * (x, t) sums voxel (i + x, j, k + d) of block t into
+ * sums[out_offset + (t·DEPTH + d)·IVOL_FINE_RUN + x]. */
 __kernel void fdk_backproject_fine(__global float* restrict sums, uint out_offset, __global const FineTask* restrict tasks,
                                    int task_count, __global const float* restrict filtered, int stride_cols,
                                    int stride_rows, int band_first_row, __global const BackprojectView* restrict views,
                                    int view_offset) {
-  const int t = get_global_id(0);
+  const int x = get_global_id(0);
+  const int t = get_global_id(1);
   if (t >= task_count) return;
   const FineTask task = tasks[t];
-  const float fi = task.i;
-  const float fj = task.j;
+  const float fi = task.i + (float)(x & (int)(task.run_i - 1)) * task.step_i;
+  const float fj = task.j + (float)(x / (int)task.run_i) * task.step_j;
   const float column_limit = (float)(stride_cols - IVOL_BAND_BORDER_BEFORE - IVOL_BAND_BORDER_AFTER);
   const float row_limit = (float)(stride_rows - IVOL_BAND_BORDER_BEFORE - IVOL_BAND_BORDER_AFTER);
   const float band_first = (float)band_first_row;
@@ -119,7 +122,7 @@ __kernel void fdk_backproject_fine(__global float* restrict sums, uint out_offse
     const int column_index = (int)column_floor + IVOL_BAND_BORDER_BEFORE;
 #pragma unroll
     for (int d = 0; d < IVOL_BACKPROJECT_DEPTH; ++d) {
-      const float fk = task.k + (float)d;
+      const float fk = task.k + (float)d * task.step_k;
       const float row = clamp((row_at_zero + fk * row_step) - band_first, -1.0f, row_limit);
       const float row_floor = floor(row);
       const float row_frac = row - row_floor;
@@ -129,39 +132,40 @@ __kernel void fdk_backproject_fine(__global float* restrict sums, uint out_offse
       sum[d] += weight * (top + row_frac * (bottom - top));
     }
   }
-  __global float* out = sums + out_offset + (size_t)t * IVOL_BACKPROJECT_DEPTH;
+  __global float* out = sums + out_offset + (size_t)t * (IVOL_BACKPROJECT_DEPTH * IVOL_FINE_RUN) + x;
 #pragma unroll
-  for (int d = 0; d < IVOL_BACKPROJECT_DEPTH; ++d) out[d] += sum[d];
+  for (int d = 0; d < IVOL_BACKPROJECT_DEPTH; ++d) out[d * IVOL_FINE_RUN] += sum[d];
 }
 
-/* Coarse voxels: the mean over the centres of their eight octants. */
-__kernel void fdk_backproject_coarse(__global float* restrict sums, uint out_offset,
-                                     __global const CoarseTask* restrict tasks, int task_count,
-                                     __global const float* restrict filtered, int stride_cols, int stride_rows,
-                                     int band_first_row, __global const BackprojectView* restrict views,
-                                     int view_offset) {
-  const int t = get_global_id(0);
-  if (t >= task_count) return;
-  const CoarseTask task = tasks[t];
-  const float column_limit = (float)(stride_cols - IVOL_BAND_BORDER_BEFORE - IVOL_BAND_BORDER_AFTER);
-  const float row_limit = (float)(stride_rows - IVOL_BAND_BORDER_BEFORE - IVOL_BAND_BORDER_AFTER);
-  const float band_first = (float)band_first_row;
-  const size_t plane = (size_t)stride_cols * (size_t)stride_rows;
-  float sum = 0.0f;
-#pragma unroll
-  for (int v = 0; v < IVOL_BACKPROJECT_BATCH; ++v) {
-    const BackprojectView m = views[view_offset + v];
-    __global const float* image = filtered + (size_t)v * plane;
-#pragma unroll
-    for (int octant = 0; octant < 8; ++octant) {
-      const float fi = task.i + ((octant & 1) ? task.quarter_i : -task.quarter_i);
-      const float fj = task.j + ((octant & 2) ? task.quarter_j : -task.quarter_j);
-      const float fk = task.k + ((octant & 4) ? task.quarter_k : -task.quarter_k);
-      sum += sample_view(m, fi, fj, fk, image, column_limit, row_limit, band_first, stride_cols);
-    }
+/* Lone coarse voxels: the value at the centre, or the mean over the centres
+ * of the eight octants. One work-item per voxel, sums[out_offset + t]. */
+#define COARSE_KERNEL(name, OCTANTS)                                                                              \
+  __kernel void name(__global float* restrict sums, uint out_offset, __global const CoarseTask* restrict tasks,    \
+                     int task_count, __global const float* restrict filtered, int stride_cols, int stride_rows,     \
+                     int band_first_row, __global const BackprojectView* restrict views, int view_offset) {        \
+    const int t = get_global_id(0);                                                                                \
+    if (t >= task_count) return;                                                                                   \
+    const CoarseTask task = tasks[t];                                                                              \
+    const float column_limit = (float)(stride_cols - IVOL_BAND_BORDER_BEFORE - IVOL_BAND_BORDER_AFTER);            \
+    const float row_limit = (float)(stride_rows - IVOL_BAND_BORDER_BEFORE - IVOL_BAND_BORDER_AFTER);               \
+    const float band_first = (float)band_first_row;                                                                \
+    const size_t plane = (size_t)stride_cols * (size_t)stride_rows;                                                \
+    float sum = 0.0f;                                                                                              \
+    _Pragma("unroll") for (int v = 0; v < IVOL_BACKPROJECT_BATCH; ++v) {                                          \
+      const BackprojectView m = views[view_offset + v];                                                            \
+      __global const float* image = filtered + (size_t)v * plane;                                                  \
+      _Pragma("unroll") for (int octant = 0; octant < OCTANTS; ++octant) {                                        \
+        const float fi = task.i + (OCTANTS == 1 ? 0.0f : (octant & 1) ? task.quarter_i : -task.quarter_i);        \
+        const float fj = task.j + (OCTANTS == 1 ? 0.0f : (octant & 2) ? task.quarter_j : -task.quarter_j);        \
+        const float fk = task.k + (OCTANTS == 1 ? 0.0f : (octant & 4) ? task.quarter_k : -task.quarter_k);        \
+        sum += sample_view(m, fi, fj, fk, image, column_limit, row_limit, band_first, stride_cols);               \
+      }                                                                                                            \
+    }                                                                                                              \
+    sums[out_offset + t] += sum / (float)OCTANTS;                                                                  \
   }
-  sums[out_offset + t] += 0.125f * sum;
-}
+
+COARSE_KERNEL(fdk_backproject_centre, 1)
+COARSE_KERNEL(fdk_backproject_octants, 8)
 
 #ifndef offsetof
 #define offsetof(type, member) __builtin_offsetof(type, member)
@@ -192,7 +196,7 @@ __kernel void layout_probe(__global int* out) {
   out[19] = IVOL_BACKPROJECT_BATCH;
   out[20] = IVOL_BACKPROJECT_DEPTH;
   out[21] = (int)sizeof(FineTask);
-  out[22] = (int)offsetof(FineTask, k);
+  out[22] = (int)offsetof(FineTask, run_i);
   out[23] = (int)offsetof(FineTask, count);
   out[24] = (int)sizeof(CoarseTask);
   out[25] = (int)offsetof(CoarseTask, quarter_i);

@@ -45,20 +45,29 @@ typedef struct BackprojectView {
   float depth[4];       /* 32: row 2: w */
 } BackprojectView;      /* 48 bytes */
 
-/* Backprojection into the bricks of an inhomogeneous structure. A fine
- * task is a stack of up to IVOL_BACKPROJECT_DEPTH full-resolution voxels
- * along k; (i, j, k) is its first voxel's centre as a grid index, so that a
- * fine voxel gets exactly the bits the dense kernel gives it. */
+/* Backprojection into the bricks of an inhomogeneous structure. A block
+ * task holds IVOL_FINE_RUN lanes by IVOL_BACKPROJECT_DEPTH points along k:
+ * lane x is the point (i + (x mod run_i)·step_i, j + (x div run_i)·step_j,
+ * k + d·step_k) as grid indices, so that small bricks fill a block with
+ * several rows. Full-resolution bricks use steps of 1 from integer indices,
+ * so their voxels get exactly the bits the dense kernel gives them; coarse
+ * bricks use the lattice of their voxels' octant centres. */
+#define IVOL_FINE_RUN 16
 typedef struct FineTask {
   float i;              /*  0 */
   float j;              /*  4 */
   float k;              /*  8 */
-  ivol_u32 count;       /* 12: voxels in the stack, 1..IVOL_BACKPROJECT_DEPTH */
-} FineTask;             /* 16 bytes */
+  float step_i;         /* 12 */
+  float step_j;         /* 16 */
+  float step_k;         /* 20 */
+  ivol_u32 run_i;       /* 24: lanes per row along i, a power of two dividing IVOL_FINE_RUN */
+  ivol_u32 count;       /* 28: points along i, j, k (bits 0-7, 8-15, 16-23); host bookkeeping */
+} FineTask;             /* 32 bytes */
 
-/* A coarse voxel, sampled at the centres of its eight octants (so that it
- * averages what it covers instead of aliasing): (i, j, k) is its centre as a
- * fractional grid index, quarter its edge / 4 along each axis. */
+/* A coarse voxel on its own (an octree leaf), sampled at its centre or, when
+ * it is wider than two voxels, at the centres of its eight octants (so that
+ * it averages what it covers instead of aliasing): (i, j, k) is its centre as
+ * a fractional grid index, quarter its edge / 4 along each axis. */
 typedef struct CoarseTask {
   float i;              /*  0 */
   float j;              /*  4 */

@@ -70,7 +70,7 @@ TEST(Fdk, LayoutAgrees) {
     EXPECT_EQ(v[19], IVOL_BACKPROJECT_BATCH);
     EXPECT_EQ(v[20], IVOL_BACKPROJECT_DEPTH);
     EXPECT_EQ(v[21], static_cast<int>(sizeof(FineTask)));
-    EXPECT_EQ(v[22], static_cast<int>(offsetof(FineTask, k)));
+    EXPECT_EQ(v[22], static_cast<int>(offsetof(FineTask, run_i)));
     EXPECT_EQ(v[23], static_cast<int>(offsetof(FineTask, count)));
     EXPECT_EQ(v[24], static_cast<int>(sizeof(CoarseTask)));
     EXPECT_EQ(v[25], static_cast<int>(offsetof(CoarseTask, quarter_i)));

@@ -50,7 +50,8 @@ FdkDevice::FdkDevice(const DeviceHandle& handle, const FdkProblem& problem)
   filter_ = cl::Kernel(program_, "fdk_filter_rows");
   backproject_ = cl::Kernel(program_, "fdk_backproject");
   backproject_fine_ = cl::Kernel(program_, "fdk_backproject_fine");
-  backproject_coarse_ = cl::Kernel(program_, "fdk_backproject_coarse");
+  backproject_centre_ = cl::Kernel(program_, "fdk_backproject_centre");
+  backproject_octants_ = cl::Kernel(program_, "fdk_backproject_octants");
   const std::size_t max_group =
       std::min<std::size_t>(handle.device.getInfo<CL_DEVICE_MAX_WORK_GROUP_SIZE>(),
                             filter_.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(handle.device));
@@ -213,57 +214,74 @@ void FdkDevice::reconstruct_slab(std::uint32_t k_begin, std::uint32_t k_end, std
   finish_timings();
 }
 
-void FdkDevice::reconstruct_tasks(const RowBand& band, const std::vector<FineTask>& fine,
-                                  const std::vector<CoarseTask>& coarse, std::vector<float>& out) {
+void FdkDevice::reconstruct_tasks(const RowBand& band, const std::vector<FineTask>& blocks,
+                                  const std::array<const std::vector<CoarseTask>*, 2>& lone, std::vector<float>& out) {
   if (band.rows() > max_band_rows_)
     throw std::logic_error("FDK: brick slab needs " + std::to_string(band.rows()) + " detector rows, planned for " +
                            std::to_string(max_band_rows_));
-  const std::size_t outputs = fine.size() * kDepth + coarse.size();
+  const std::size_t block_outputs = blocks.size() * kDepth * IVOL_FINE_RUN;
+  const std::size_t outputs = block_outputs + lone[0]->size() + lone[1]->size();
   out.assign(outputs, 0.0F);
   if (outputs == 0) return;
   // Task lists and their sums, in one allocation each, kept between slabs.
-  auto ensure = [&](cl::Buffer& buffer, std::size_t bytes) {
-    if (!buffer() || buffer.getInfo<CL_MEM_SIZE>() < bytes) buffer = cl::Buffer(context_, CL_MEM_READ_WRITE, bytes);
+  auto upload = [&](cl::Buffer& buffer, const void* data, std::size_t bytes) {
+    if (!buffer() || buffer.getInfo<CL_MEM_SIZE>() < std::max<std::size_t>(bytes, 1))
+      buffer = cl::Buffer(context_, CL_MEM_READ_WRITE, std::max<std::size_t>(bytes, 1));
+    if (bytes == 0) return;
+    cl::Event copy;
+    queue_.enqueueWriteBuffer(buffer, CL_FALSE, 0, bytes, data, nullptr, &copy);
+    transfer_events_.push_back(copy);
   };
-  ensure(task_sums_, outputs * sizeof(float));
-  ensure(fine_tasks_, std::max<std::size_t>(fine.size(), 1) * sizeof(FineTask));
-  ensure(coarse_tasks_, std::max<std::size_t>(coarse.size(), 1) * sizeof(CoarseTask));
-  std::vector<cl::Event> copies(3);
-  queue_.enqueueFillBuffer(task_sums_, 0.0F, 0, outputs * sizeof(float), nullptr, &copies[0]);
-  if (!fine.empty())
-    queue_.enqueueWriteBuffer(fine_tasks_, CL_FALSE, 0, fine.size() * sizeof(FineTask), fine.data(), nullptr,
-                              &copies[1]);
-  if (!coarse.empty())
-    queue_.enqueueWriteBuffer(coarse_tasks_, CL_FALSE, 0, coarse.size() * sizeof(CoarseTask), coarse.data(), nullptr,
-                              &copies[2]);
-  for (const cl::Event& e : copies)
-    if (e()) transfer_events_.push_back(e);
+  upload(task_sums_, nullptr, 0);
+  if (task_sums_.getInfo<CL_MEM_SIZE>() < outputs * sizeof(float))
+    task_sums_ = cl::Buffer(context_, CL_MEM_READ_WRITE, outputs * sizeof(float));
+  cl::Event fill;
+  queue_.enqueueFillBuffer(task_sums_, 0.0F, 0, outputs * sizeof(float), nullptr, &fill);
+  transfer_events_.push_back(fill);
+  upload(fine_tasks_, blocks.data(), blocks.size() * sizeof(FineTask));
+  upload(centre_tasks_, lone[0]->data(), lone[0]->size() * sizeof(CoarseTask));
+  upload(octant_tasks_, lone[1]->data(), lone[1]->size() * sizeof(CoarseTask));
+
+  struct Launch {
+    cl::Kernel* kernel;
+    cl::Buffer* tasks;
+    std::size_t count;
+    std::size_t offset;
+    bool blocks;
+  };
+  std::vector<Launch> launches;
+  if (!blocks.empty()) launches.push_back({&backproject_fine_, &fine_tasks_, blocks.size(), 0, true});
+  if (!lone[0]->empty())
+    launches.push_back({&backproject_centre_, &centre_tasks_, lone[0]->size(), block_outputs, false});
+  if (!lone[1]->empty())
+    launches.push_back(
+        {&backproject_octants_, &octant_tasks_, lone[1]->size(), block_outputs + lone[0]->size(), false});
   run_views(band, [&](cl::Buffer& filtered, int stride_rows, std::size_t first_view, cl::Event* done) {
-    auto launch = [&](cl::Kernel& kernel, cl::Buffer& tasks, std::size_t count, cl_uint out_offset, cl::Event* event) {
+    for (std::size_t l = 0; l < launches.size(); ++l) {
+      const Launch& launch = launches[l];
+      cl::Kernel& kernel = *launch.kernel;
       int arg = 0;
       kernel.setArg(arg++, task_sums_);
-      kernel.setArg(arg++, out_offset);
-      kernel.setArg(arg++, tasks);
-      kernel.setArg(arg++, static_cast<cl_int>(count));
+      kernel.setArg(arg++, static_cast<cl_uint>(launch.offset));
+      kernel.setArg(arg++, *launch.tasks);
+      kernel.setArg(arg++, static_cast<cl_int>(launch.count));
       kernel.setArg(arg++, filtered);
       kernel.setArg(arg++, static_cast<cl_int>(stride_cols_));
       kernel.setArg(arg++, static_cast<cl_int>(stride_rows));
       kernel.setArg(arg++, static_cast<cl_int>(band.first));
       kernel.setArg(arg++, backproject_views_);
       kernel.setArg(arg++, static_cast<cl_int>(first_view));
-      const std::size_t local = 64;
-      queue_.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange((count + local - 1) / local * local),
-                                  cl::NDRange(local), nullptr, event);
-    };
-    if (!fine.empty() && !coarse.empty()) {
-      cl::Event first;
-      launch(backproject_fine_, fine_tasks_, fine.size(), 0, &first);
-      backproject_events_.push_back(first);
-      launch(backproject_coarse_, coarse_tasks_, coarse.size(), static_cast<cl_uint>(fine.size() * kDepth), done);
-    } else if (!fine.empty()) {
-      launch(backproject_fine_, fine_tasks_, fine.size(), 0, done);
-    } else {
-      launch(backproject_coarse_, coarse_tasks_, coarse.size(), 0, done);
+      cl::Event event;
+      cl::Event* target = l + 1 == launches.size() ? done : &event;
+      if (launch.blocks) {
+        queue_.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(IVOL_FINE_RUN, launch.count),
+                                    cl::NDRange(IVOL_FINE_RUN, 1), nullptr, target);
+      } else {
+        const std::size_t local = 64;
+        queue_.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange((launch.count + local - 1) / local * local),
+                                    cl::NDRange(local), nullptr, target);
+      }
+      if (target == &event) backproject_events_.push_back(event);
     }
   });
   cl::Event read;

@@ -2,6 +2,7 @@
 // buffers, sized once for the largest slab of the plan.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <mutex>
@@ -50,10 +51,10 @@ class FdkDevice {
   // Reconstructs slices [k_begin, k_end) into `out` (x fastest).
   void reconstruct_slab(std::uint32_t k_begin, std::uint32_t k_end, std::vector<float>& out);
   // Backprojects the tasks' voxels, whose rays meet the detector within
-  // `band`: `out` gets IVOL_BACKPROJECT_DEPTH sums per fine task, then one
-  // per coarse task.
-  void reconstruct_tasks(const RowBand& band, const std::vector<FineTask>& fine, const std::vector<CoarseTask>& coarse,
-                         std::vector<float>& out);
+  // `band`: `out` gets DEPTH × IVOL_FINE_RUN sums per block ([d][x]), then
+  // one per lone voxel, sampled at its centre (lone[0]) or octants (lone[1]).
+  void reconstruct_tasks(const RowBand& band, const std::vector<FineTask>& blocks,
+                         const std::array<const std::vector<CoarseTask>*, 2>& lone, std::vector<float>& out);
   const DeviceTimings& timings() const { return timings_; }
   const std::string& name() const { return name_; }
   bool fft_in_global() const { return fft_in_global_; }
@@ -81,10 +82,12 @@ class FdkDevice {
   cl::Kernel filter_;
   cl::Kernel backproject_;
   cl::Kernel backproject_fine_;
-  cl::Kernel backproject_coarse_;
+  cl::Kernel backproject_centre_;
+  cl::Kernel backproject_octants_;
   cl::Buffer task_sums_;
   cl::Buffer fine_tasks_;
-  cl::Buffer coarse_tasks_;
+  cl::Buffer centre_tasks_;
+  cl::Buffer octant_tasks_;
   cl::Buffer slab_;
   cl::Buffer filter_views_;
   cl::Buffer backproject_views_;
