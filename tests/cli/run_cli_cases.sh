@@ -39,9 +39,10 @@ case_ demo-help          0 "--size"                  -- "$IVOL" demo --help
 case_ demo-size-range    1 "--size"                  -- "$IVOL" demo --size 4
 case_ demo-bad-object    1 "teapot"                  -- "$IVOL" demo --object teapot
 case_ info-missing       2 "cannot open"             -- "$IVOL" info "$work/missing.ivol"
-case_ demo               0 "octree"                  -- "$IVOL" demo --size 32 --object board -o "$work/demo"
-case_ demo-quiet         0 ""                        -- "$IVOL" -q demo --size 16 -o "$work/quiet"
-case_ verify-ok          0 "OK"                      -- "$IVOL" verify "$work/demo/demo-octree.ivol" "$work/demo/demo-lossless.ivol"
+case_ demo               0 "octree"                  -- "$IVOL" demo --size 32 --views 48 --object connector-board -o "$work/demo"
+case_ demo-quiet         0 ""                        -- "$IVOL" -q demo --size 16 --views 24 -o "$work/quiet"
+case_ demo-slice         0 "PNG image data, 32 x 32" -- file "$work/demo/demo-octree-slice.png"
+case_ verify-ok          0 "OK"                      -- "$IVOL" verify "$work/demo/demo-octree.ivol" "$work/demo/demo-dense.ivol"
 case_ info-text          0 "32 x 32 x 32 voxels"     -- "$IVOL" info "$work/demo/demo-octree.ivol"
 case_ info-json          0 '"dimensions": ['         -- "$IVOL" info --json "$work/demo/demo-octree.ivol"
 "$IVOL" info --json "$work/demo/demo-octree.ivol" > "$work/info.json"
@@ -134,6 +135,24 @@ case_ phantom-no-partial 0 ""                        -- bash -c "test ! -e '$wor
 case_ devices            0 "compute units"           -- "$IVOL" devices
 "$IVOL" devices --json > "$work/devices.json"
 case_ devices-json       0 "devices:"                -- /usr/bin/python3 -c "import json,sys; d=json.load(open('$work/devices.json'))['devices']; print('devices:', len(d), d[0]['name']); sys.exit(0 if d and d[0]['compute_units'] > 0 else 1)"
+
+# Reconstruction of the simulated scans (the pitch is what `ivol phantom` printed).
+recon_args=(--geometry "$work/p.xml" --pitch 1.835 --size 24 --voxel 1.6)
+case_ recon-help         0 "--structure"             -- "$IVOL" recon --help
+case_ recon-dense        0 "24x24x24 voxels from 24 views" -- "$IVOL" recon "$work/p.h5" "${recon_args[@]}" -o "$work/r.ivol"
+case_ recon-verify       0 "OK"                      -- "$IVOL" verify "$work/r.ivol"
+case_ recon-provenance   0 '"algorithm": "FDK"'      -- "$IVOL" info --json "$work/r.ivol"
+case_ recon-no-clobber   2 "r.ivol: exists"          -- "$IVOL" recon "$work/p.h5" "${recon_args[@]}" -o "$work/r.ivol"
+case_ recon-octree       0 '"structure": "octree"'   -- "$IVOL" recon "$work/p.h5" "${recon_args[@]}" -o "$work/r-octree.ivol" --structure octree --json
+case_ recon-octree-ok    0 "OK"                      -- "$IVOL" verify "$work/r-octree.ivol"
+case_ recon-nested       0 ""                        -- "$IVOL" -q recon "$work/p.h5" "${recon_args[@]}" -o "$work/r-nested.ivol" --structure nested --nested-cell 8
+case_ recon-raw          0 "24x24x24"                -- "$IVOL" recon "$work/p.raw" --geometry "$work/p-raw.xml" --pitch 1.835 --detector 48,48 --views 24 --size 24 --voxel 1.6 -o "$work/r-raw.ivol" --window hann
+case_ recon-no-pitch     1 "--pitch"                 -- "$IVOL" recon "$work/p.h5" --geometry "$work/p.xml" --size 24 --voxel 1.6 -o "$work/x.ivol"
+case_ recon-bad-kind     1 "--structure"             -- "$IVOL" recon "$work/p.h5" "${recon_args[@]}" -o "$work/x.ivol" --structure tree
+case_ recon-raw-no-dims  2 "--detector C,R"          -- "$IVOL" recon "$work/p.raw" --geometry "$work/p-raw.xml" --pitch 1.835 --size 24 --voxel 1.6 -o "$work/x.ivol"
+case_ recon-missing      2 "nothing.h5"              -- "$IVOL" recon "$work/nothing.h5" "${recon_args[@]}" -o "$work/x.ivol"
+case_ recon-bad-device   2 "device 99"               -- "$IVOL" recon "$work/p.h5" "${recon_args[@]}" -o "$work/x.ivol" --device 99
+case_ recon-no-partial   0 ""                        -- bash -c "test ! -e '$work/x.ivol' && ! ls -A '$work' | grep -q 'tmp-'"
 
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]
