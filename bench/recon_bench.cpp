@@ -18,6 +18,7 @@
 #include "ivol/keep_mask.hpp"
 #include "ivol/recon/fdk.hpp"
 #include "ivol/recon/phantom.hpp"
+#include "ivol/recon/preview.hpp"
 #include "ivol/structures.hpp"
 
 using namespace ivol;
@@ -110,23 +111,16 @@ int main(int argc, char** argv) {
       StructureKind kind{};
       parse_structure(kind_name, kind);
       const auto start = std::chrono::steady_clock::now();
-      // Generation: low-resolution FDK, Otsu's threshold, need mask, structure.
-      VolumeGrid low;
-      for (int a = 0; a < 3; ++a) {
-        low.size[a] = (grid.size[a] + factor - 1) / factor;
-        low.voxel_size[a] = grid.voxel_size[a] * factor;
-        low.origin[a] = grid.origin[a] + 0.5 * (factor - 1) * grid.voxel_size[a];
-      }
-      std::vector<float> preview(low.voxel_count());
-      const std::size_t low_slice = std::size_t{low.size[0]} * low.size[1];
-      reconstructor.reconstruct(low, [&](std::uint32_t k0, std::uint32_t k1, const float* d) {
-        std::copy(d, d + low_slice * (k1 - k0), preview.begin() + static_cast<std::ptrdiff_t>(low_slice * k0));
-      });
+      // Generation: low-resolution FDK (a thinned scan), Otsu's threshold,
+      // need mask, structure.
+      const Preview preview_result = reconstruct_preview(projections, geometry, options, grid, factor);
+      const VolumeGrid& low = preview_result.grid;
+      const std::vector<float>& preview = preview_result.values;
       const double preview_seconds = since(start);
       const auto generation_start = std::chrono::steady_clock::now();
       // Otsu's threshold on the preview, scaled (recon's default 0.5): the
       // preview averages thin walls with the air around them.
-      const float otsu = otsu_threshold(preview.data(), preview.size());
+      const float otsu = preview_result.otsu_threshold;
       const float threshold = static_cast<float>(otsu * threshold_scale);
       const NeedMask mask = need_mask_from_low_resolution(preview.data(), Dims{low.size[0], low.size[1], low.size[2]},
                                                           factor, Dims{size, size, size}, threshold, margin);

@@ -10,6 +10,7 @@
 #include "ivol/reader.hpp"
 #include "ivol/recon/fdk.hpp"
 #include "ivol/recon/phantom.hpp"
+#include "ivol/recon/preview.hpp"
 #include "ivol_io.hpp"
 #include "recon_slabs.hpp"
 
@@ -58,7 +59,7 @@ TEST(ReconToIvol, KeptRegionEqualsDenseWithinBinary16) {
   Scan scan;
   const std::vector<float> dense = recon::reconstruct_fdk_dense(scan.projections, scan.geometry, scan.grid);
   recon::FdkReconstructor reconstructor(scan.projections, scan.geometry);
-  const convert::Preview preview = convert::reconstruct_preview(reconstructor, scan.grid, 4);
+  const recon::Preview preview = recon::reconstruct_preview(scan.projections, scan.geometry, {}, scan.grid, 4);
   // The cup's plastic (0.02/mm) against air: Otsu lands between them.
   EXPECT_GT(preview.otsu_threshold, 0.002F);
   EXPECT_LT(preview.otsu_threshold, 0.02F);

@@ -89,6 +89,24 @@ ScanGeometry circular_scan(const Detector& detector, std::size_t view_count, dou
   return g;
 }
 
+ScanGeometry reduce_scan(const ScanGeometry& geometry, unsigned view_step, unsigned bin) {
+  ScanGeometry reduced;
+  const Detector& d = geometry.detector;
+  reduced.detector = {d.columns / static_cast<int>(bin), d.rows / static_cast<int>(bin), d.pitch_u * bin,
+                      d.pitch_v * bin};
+  // Pixels left over at the high end are dropped, which moves the merged
+  // detector's centre by half of what was dropped.
+  const double shift_u = 0.5 * d.pitch_u * (static_cast<double>(bin) * reduced.detector.columns - d.columns);
+  const double shift_v = 0.5 * d.pitch_v * (static_cast<double>(bin) * reduced.detector.rows - d.rows);
+  for (std::size_t v = 0; v < geometry.view_count(); v += view_step) {
+    View view = geometry.views[v];
+    view.detector_offset_u += shift_u;
+    view.detector_offset_v += shift_v;
+    reduced.views.push_back(view);
+  }
+  return reduced;
+}
+
 VolumeGrid VolumeGrid::centred(std::array<std::uint32_t, 3> size, double voxel) {
   VolumeGrid g;
   g.size = size;

@@ -28,3 +28,32 @@ void InMemoryProjections::read_rows(std::size_t view, int row_begin, int row_end
 }
 
 }  // namespace ivol::recon
+
+namespace ivol::recon {
+
+ReducedProjections::ReducedProjections(ProjectionSource& source, unsigned view_step, unsigned bin)
+    : source_(source), view_step_(view_step), bin_(bin) {
+  if (view_step == 0 || bin == 0) throw std::invalid_argument("reduced projections: steps must be positive");
+  if (columns() == 0 || rows() == 0)
+    throw std::invalid_argument("reduced projections: binning by " + std::to_string(bin) + " leaves no pixels");
+}
+
+void ReducedProjections::read_rows(std::size_t view, int row_begin, int row_end, float* out) {
+  const int b = static_cast<int>(bin_);
+  const int source_columns = source_.columns();
+  const int columns_out = columns();
+  scratch_.resize(static_cast<std::size_t>(source_columns) * b);
+  const float scale = 1.0F / static_cast<float>(b * b);
+  for (int r = row_begin; r < row_end; ++r) {
+    source_.read_rows(view * view_step_, r * b, r * b + b, scratch_.data());
+    float* target = out + static_cast<std::size_t>(r - row_begin) * columns_out;
+    for (int c = 0; c < columns_out; ++c) {
+      float sum = 0.0F;
+      for (int y = 0; y < b; ++y)
+        for (int x = 0; x < b; ++x) sum += scratch_[static_cast<std::size_t>(y) * source_columns + c * b + x];
+      target[c] = sum * scale;
+    }
+  }
+}
+
+}  // namespace ivol::recon

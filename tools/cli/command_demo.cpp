@@ -15,6 +15,7 @@
 #include "ivol/reader.hpp"
 #include "ivol/recon/fdk.hpp"
 #include "ivol/recon/phantom.hpp"
+#include "ivol/recon/preview.hpp"
 #include "ivol/structures.hpp"
 #include "ivol_io.hpp"
 #include "recon_slabs.hpp"
@@ -127,7 +128,7 @@ Runner add_demo_command(CLI::App& app, const GlobalOptions& global) {
 
     // Octree: preview, structure, FDK into its voxels only, write.
     start = Clock::now();
-    const convert::Preview preview = convert::reconstruct_preview(reconstructor, grid, 4);
+    const recon::Preview preview = recon::reconstruct_preview(projections, geometry, {}, grid, 4);
     const float threshold = 0.5F * preview.otsu_threshold;
     const auto generation_start = Clock::now();
     const Dims low{preview.grid.size[0], preview.grid.size[1], preview.grid.size[2]};

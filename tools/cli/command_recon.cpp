@@ -9,6 +9,7 @@
 #include "ivol/error.hpp"
 #include "ivol/metadata.hpp"
 #include "ivol/recon/fdk.hpp"
+#include "ivol/recon/preview.hpp"
 #include "ivol/structures.hpp"
 #include "ivol_io.hpp"
 #include "option_parsing.hpp"
@@ -65,12 +66,13 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 // Peak host memory: the structure's values (4 bytes each) and its task lists
 // (about 4 bytes per full-resolution voxel, 40 per coarse one), the preview,
 // and the writer's slab.
-int run_structure(const ReconSettings& s, const GlobalOptions& global, const recon::VolumeGrid& grid, OpenedScan& scan,
-                  recon::FdkReconstructor& reconstructor, Metadata metadata,
-                  std::chrono::steady_clock::time_point start) {
+int run_structure(const ReconSettings& s, const GlobalOptions& global, const recon::VolumeGrid& grid,
+                  const recon::FdkOptions& fdk_options, OpenedScan& scan, recon::FdkReconstructor& reconstructor,
+                  Metadata metadata, std::chrono::steady_clock::time_point start) {
   StructureKind kind{};
   parse_structure(s.structure, kind);
-  const convert::Preview preview = convert::reconstruct_preview(reconstructor, grid, s.preview_factor);
+  const recon::Preview preview =
+      recon::reconstruct_preview(*scan.projections, scan.geometry, fdk_options, grid, s.preview_factor);
   // Half of Otsu's threshold on the preview: a preview voxel averages a thin
   // wall with the air around it, and a wall filling half of it must still be
   // found (bench/RESULTS.md: 99.7 % of the object kept at full resolution,
@@ -224,7 +226,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       if (rule.otsu) {
         // The paper's way: a quick low-resolution reconstruction finds the
         // object; its Otsu threshold then marks the full-resolution region.
-        const convert::Preview preview = convert::reconstruct_preview(reconstructor, grid, s->preview_factor);
+        const recon::Preview preview =
+            recon::reconstruct_preview(*scan.projections, scan.geometry, options, grid, s->preview_factor);
         rule.otsu = false;
         rule.threshold = preview.otsu_threshold;
         preview_seconds = preview.seconds;
@@ -255,7 +258,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     if (!s->structure.empty()) {
       if (!s->keep.empty())
         throw Error(ErrorClass::InvalidArgument, "--keep and --structure: choose one (--structure uses --threshold)");
-      return run_structure(*s, global, grid, scan, reconstructor, import.metadata, start);
+      return run_structure(*s, global, grid, options, scan, reconstructor, import.metadata, start);
     }
     convert::ReconstructionSlabs slabs(reconstructor, grid);
     const convert::ImportReport written = convert::import_to_ivol(slabs, s->output, import);

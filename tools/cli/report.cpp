@@ -1,10 +1,10 @@
 #include "report.hpp"
 
-#include "ivol/structures.hpp"
-
 #include <unistd.h>
 
 #include <cstdio>
+
+#include "ivol/structures.hpp"
 
 namespace ivol::cli {
 

@@ -4,8 +4,6 @@
 #include <chrono>
 #include <cstring>
 
-#include "ivol/keep_mask.hpp"
-
 namespace ivol::convert {
 namespace {
 
@@ -61,26 +59,6 @@ void ReconstructionSlabs::read(std::uint32_t z0, std::uint32_t count, void* out)
 
 double ReconstructionSlabs::gups() const {
   return timings_.backprojection > 0 ? static_cast<double>(voxel_updates_) / timings_.backprojection * 1e-9 : 0.0;
-}
-
-Preview reconstruct_preview(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid, unsigned factor) {
-  const auto start = std::chrono::steady_clock::now();
-  Preview preview;
-  recon::VolumeGrid& coarse = preview.grid;
-  for (int a = 0; a < 3; ++a) {
-    coarse.size[a] = (grid.size[a] + factor - 1) / factor;
-    coarse.voxel_size[a] = grid.voxel_size[a] * factor;
-    // A coarse voxel's centre is the centre of the factor³ fine voxels it covers.
-    coarse.origin[a] = grid.origin[a] + 0.5 * (factor - 1) * grid.voxel_size[a];
-  }
-  preview.values.resize(coarse.voxel_count());
-  const std::size_t slice = std::size_t{coarse.size[0]} * coarse.size[1];
-  reconstructor.reconstruct(coarse, [&](std::uint32_t k0, std::uint32_t k1, const float* data) {
-    std::copy(data, data + (k1 - k0) * slice, preview.values.begin() + static_cast<std::ptrdiff_t>(k0 * slice));
-  });
-  preview.otsu_threshold = otsu_threshold(preview.values.data(), preview.values.size());
-  preview.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  return preview;
 }
 
 }  // namespace ivol::convert

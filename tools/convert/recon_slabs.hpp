@@ -38,15 +38,4 @@ class ReconstructionSlabs final : public SlabReader {
   std::vector<float> cache_;  // the last read's slices
 };
 
-// A low-resolution preview of `grid` (each voxel `factor` voxels a side), for
-// finding the object before the full reconstruction: Otsu's threshold over
-// its values.
-struct Preview {
-  recon::VolumeGrid grid;
-  std::vector<float> values;
-  float otsu_threshold = 0.0F;
-  double seconds = 0.0;
-};
-Preview reconstruct_preview(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid, unsigned factor);
-
 }  // namespace ivol::convert

@@ -83,6 +83,11 @@ ScanGeometry circular_scan(const Detector& detector, std::size_t view_count, dou
                            double source_to_detector, double arc, double first_angle = 0.0,
                            double detector_offset_u = 0.0, double detector_offset_v = 0.0);
 
+// The scan ReducedProjections(source, view_step, bin) sees: every
+// view_step-th view, bin × bin pixels merged into one whose centre is the
+// centre of the pixels it merges.
+ScanGeometry reduce_scan(const ScanGeometry& geometry, unsigned view_step, unsigned bin);
+
 // The reconstruction grid: voxel (i, j, k) has its centre at
 // origin + (i·voxel_size[0], j·voxel_size[1], k·voxel_size[2]), i fastest in
 // memory; k runs along the rotation axis.

@@ -46,3 +46,26 @@ class InMemoryProjections : public ProjectionSource {
 };
 
 }  // namespace ivol::recon
+
+namespace ivol::recon {
+
+// A coarser view of a scan, for quick low-resolution reconstructions (the
+// paper's preview): every `view_step`-th view, detector pixels averaged in
+// `bin` × `bin` blocks (a last partial block is dropped). Reads through the
+// source, a band of rows at a time.
+class ReducedProjections : public ProjectionSource {
+ public:
+  ReducedProjections(ProjectionSource& source, unsigned view_step, unsigned bin);
+  int columns() const override { return source_.columns() / static_cast<int>(bin_); }
+  int rows() const override { return source_.rows() / static_cast<int>(bin_); }
+  std::size_t view_count() const override { return (source_.view_count() + view_step_ - 1) / view_step_; }
+  void read_rows(std::size_t view, int row_begin, int row_end, float* out) override;
+
+ private:
+  ProjectionSource& source_;
+  unsigned view_step_;
+  unsigned bin_;
+  std::vector<float> scratch_;
+};
+
+}  // namespace ivol::recon
