@@ -131,6 +131,15 @@ TEST(Fdk, SlabsDoNotChangeBits) {
     ASSERT_EQ(cut.size(), whole.size());
     EXPECT_EQ(0, std::memcmp(cut.data(), whole.data(), whole.size() * sizeof(float))) << slices << " slices";
   }
+  // Two devices (here the same one twice, each with its own context and
+  // queue) take slabs in turn; the sink still gets them in order.
+  FdkOptions two;
+  two.devices = {0, 0};
+  two.max_slab_slices = 3;
+  FdkReport two_report;
+  const std::vector<float> shared = reconstruct_fdk_dense(p, c.geometry, c.grid, two, &two_report);
+  EXPECT_EQ(two_report.devices.size(), 2U);
+  EXPECT_EQ(0, std::memcmp(shared.data(), whole.data(), whole.size() * sizeof(float)));
   // A device memory limit too small for the whole volume cuts it too.
   FdkOptions tight;
   tight.device_memory_limit = whole_report.device_bytes_per_slab - c.grid.voxel_count() * sizeof(float) / 2;

@@ -177,8 +177,9 @@ Runner add_demo_command(CLI::App& app, const GlobalOptions& global) {
                 max_error, octree_errors.object_mae_vs_truth);
     std::printf(
         "\n  speedup: dense time over octree time (in brackets: the voxel reduction); memory: dense float32 "
-        "against the octree as the paper holds it (16-bit values, node words); errors over the %llu object "
-        "voxels (centres inside the phantom's material), in 1/mm.\n  octree time: preview %.2f s, structure generation "
+        "against the octree as the paper holds it (16-bit values, node words); = dense: object voxels "
+        "holding exactly the dense file's value; errors over the %llu object voxels (centres inside the "
+        "phantom's material), in 1/mm.\n  octree time: preview %.2f s, structure generation "
         "%.3f s, FDK into the octree and writing the rest.\n  slices: %s/demo-dense-slice.png, "
         "%s/demo-octree-slice.png (octree leaves in red)\n",
         static_cast<unsigned long long>(octree_errors.object_voxels), preview.seconds, generating,
