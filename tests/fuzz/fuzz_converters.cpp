@@ -1,7 +1,9 @@
 // libFuzzer harness for the converters' input parsers: the first byte picks
-// the format (raw with a size derived from the input, TIFF, HDF5, OpenVDB),
-// the rest is the file. Whatever the input, opening and reading it must
-// return or throw ivol::Error: no crash, no sanitizer report.
+// the format (volumes: raw with a size derived from the input, TIFF, HDF5,
+// OpenVDB; projections: raw, TIFF, HDF5 DXchange; RTK geometry XML), the
+// rest is the file. Whatever the input, opening and reading it must return
+// or throw (ivol::Error, or std::runtime_error from the projection readers):
+// no crash, no sanitizer report.
 #include <unistd.h>
 
 #include <cstdint>
@@ -10,6 +12,8 @@
 
 #include "hdf5_io.hpp"
 #include "ivol/error.hpp"
+#include "ivol/recon/rtk_geometry_xml.hpp"
+#include "projection_io.hpp"
 #include "raw_io.hpp"
 #include "slab_io.hpp"
 #include "tiff_io.hpp"
@@ -23,6 +27,37 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   std::fwrite(data + 1, 1, size - 1, f);
   std::fclose(f);
   try {
+    using namespace ivol::convert;
+    std::unique_ptr<ProjectionReader> projections;
+    switch (data[0] % 8) {
+      case 4: {
+        RawProjectionLayout layout;
+        layout.columns = 1 + static_cast<int>(size % 5);
+        layout.rows = 2;
+        layout.views = 1 + size % 3;
+        layout.sample = data[0] & 0x80 ? RawSampleType::UInt16 : RawSampleType::Float32;
+        layout.quantity = data[0] & 0x40 ? StoredQuantity::Intensities : StoredQuantity::LineIntegrals;
+        IntensityOptions intensity;
+        intensity.incident_intensity = 1000.0;
+        projections = open_raw_projections(path, layout, intensity);
+        break;
+      }
+      case 5: projections = open_tiff_projections(path, StoredQuantity::LineIntegrals); break;
+      case 6: projections = open_dxchange_projections(path, {true, 1e-3}).projections; break;
+      case 7:
+        (void)ivol::recon::read_rtk_geometry_xml(path, {8, 8, 1.0, 1.0}, -3.5, -3.5);
+        return 0;
+      default: break;
+    }
+    if (projections) {
+      const std::size_t image = static_cast<std::size_t>(projections->columns()) * projections->rows();
+      if (image * projections->view_count() <= (4u << 20)) {
+        std::vector<float> rows(image);
+        for (std::size_t v = 0; v < projections->view_count(); ++v)
+          projections->read_rows(v, 0, projections->rows(), rows.data());
+      }
+      return 0;
+    }
     std::unique_ptr<ivol::convert::SlabReader> reader;
     switch (data[0] % 4) {
       case 0: {
@@ -42,7 +77,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       std::vector<std::uint8_t> buffer(shape.voxel_count() * ivol::convert::sample_size(shape.type));
       reader->read(0, shape.dims[2], buffer.data());
     }
-  } catch (const ivol::Error&) {
+  } catch (const std::exception&) {
   }
   return 0;
 }
