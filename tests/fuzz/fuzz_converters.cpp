@@ -42,12 +42,17 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         projections = open_raw_projections(path, layout, intensity);
         break;
       }
-      case 5: projections = open_tiff_projections(path, StoredQuantity::LineIntegrals); break;
-      case 6: projections = open_dxchange_projections(path, {true, 1e-3}).projections; break;
+      case 5:
+        projections = open_tiff_projections(path, StoredQuantity::LineIntegrals);
+        break;
+      case 6:
+        projections = open_dxchange_projections(path, {true, 1e-3}).projections;
+        break;
       case 7:
         (void)ivol::recon::read_rtk_geometry_xml(path, {8, 8, 1.0, 1.0}, -3.5, -3.5);
         return 0;
-      default: break;
+      default:
+        break;
     }
     if (projections) {
       const std::size_t image = static_cast<std::size_t>(projections->columns()) * projections->rows();
@@ -68,9 +73,15 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         reader = ivol::convert::open_raw_slabs(path, layout);
         break;
       }
-      case 1: reader = ivol::convert::open_tiff_slabs(path); break;
-      case 2: reader = ivol::convert::open_hdf5_slabs(path); break;
-      case 3: (void)ivol::convert::read_vdb(path); return 0;
+      case 1:
+        reader = ivol::convert::open_tiff_slabs(path);
+        break;
+      case 2:
+        reader = ivol::convert::open_hdf5_slabs(path);
+        break;
+      case 3:
+        (void)ivol::convert::read_vdb(path);
+        return 0;
     }
     const ivol::convert::DenseVolume& shape = reader->shape();
     if (shape.voxel_count() * ivol::convert::sample_size(shape.type) <= (16u << 20)) {
