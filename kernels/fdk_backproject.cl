@@ -10,13 +10,14 @@
  * order of accumulation is fixed, so a voxel's bits do not depend on the slab
  * it was computed in. A batch short of views is padded with views whose
  * rays miss the detector. */
-__kernel void fdk_backproject(__global float* restrict slab, int nx, int ny, int k_first,
+__kernel void fdk_backproject(__global float* restrict slab, int row_stride, int ny, int k_first,
                               __global const float* restrict filtered, int stride_cols, int stride_rows,
                               int band_first_row, __global const BackprojectView* restrict views, int view_offset) {
   const int i = get_global_id(0);
   const int j = get_global_id(1);
   const int k_stack = get_global_id(2) * IVOL_BACKPROJECT_DEPTH;
-  if (i >= nx || j >= ny) return;
+  /* No bounds test: the host pads the slab's rows to whole work-groups and
+   * launches exactly ny rows, so the loop PoCL vectorises has no mask. */
   const float fi = (float)i;
   const float fj = (float)j;
   /* Positions outside the band are clamped into its zero border: one pixel
@@ -61,8 +62,8 @@ __kernel void fdk_backproject(__global float* restrict slab, int nx, int ny, int
     }
   }
 
-  __global float* voxel = slab + ((size_t)k_stack * (size_t)ny + (size_t)j) * (size_t)nx + (size_t)i;
-  const size_t slice = (size_t)nx * (size_t)ny;
+  __global float* voxel = slab + ((size_t)k_stack * (size_t)ny + (size_t)j) * (size_t)row_stride + (size_t)i;
+  const size_t slice = (size_t)row_stride * (size_t)ny;
 #pragma unroll
   for (int d = 0; d < IVOL_BACKPROJECT_DEPTH; ++d) voxel[(size_t)d * slice] += sum[d];
 }
@@ -95,8 +96,7 @@ __kernel void fdk_backproject_fine(__global float* restrict sums, uint out_offse
                                    int stride_rows, int band_first_row, __global const BackprojectView* restrict views,
                                    int view_offset) {
   const int x = get_global_id(0);
-  const int t = get_global_id(1);
-  if (t >= task_count) return;
+  const int t = get_global_id(1);  /* launched with exactly task_count rows */
   const FineTask task = tasks[t];
   const float fi = task.i + (float)(x & (int)(task.run_i - 1)) * task.step_i;
   const float fj = task.j + (float)(x / (int)task.run_i) * task.step_j;

@@ -10,6 +10,8 @@ namespace {
 
 constexpr int kBatch = IVOL_BACKPROJECT_BATCH;
 constexpr std::uint32_t kDepth = IVOL_BACKPROJECT_DEPTH;
+// Work-group width of the dense kernel; slab rows are padded to it.
+constexpr std::uint32_t kGroupWidth = 64;
 constexpr int kBorder = IVOL_BAND_BORDER_BEFORE + IVOL_BAND_BORDER_AFTER;
 
 double seconds_since(std::chrono::steady_clock::time_point start) {
@@ -26,10 +28,13 @@ std::uint64_t fft_scratch_bytes(const FdkProblem& problem, int band_rows) {
 
 std::uint32_t padded_slices(std::uint32_t slices) { return (slices + kDepth - 1) / kDepth * kDepth; }
 
+std::uint32_t padded_row(std::uint32_t nx) { return (nx + kGroupWidth - 1) / kGroupWidth * kGroupWidth; }
+
 std::uint64_t slab_device_bytes(const FdkProblem& problem, std::uint32_t slices, int band_rows, bool fft_in_global) {
   const VolumeGrid& grid = *problem.grid;
   const std::uint64_t columns = static_cast<std::uint64_t>(problem.geometry->detector.columns);
-  const std::uint64_t slab = std::uint64_t{grid.size[0]} * grid.size[1] * padded_slices(slices) * sizeof(float);
+  const std::uint64_t slab =
+      std::uint64_t{padded_row(grid.size[0])} * grid.size[1] * padded_slices(slices) * sizeof(float);
   const std::uint64_t raw = std::uint64_t{kBatch} * static_cast<std::uint64_t>(band_rows) * columns * sizeof(float);
   const std::uint64_t filtered =
       std::uint64_t{kBatch} * static_cast<std::uint64_t>(band_rows + kBorder) * (columns + kBorder) * sizeof(float);
@@ -69,7 +74,7 @@ FdkDevice::FdkDevice(const DeviceHandle& handle, const FdkProblem& problem)
 void FdkDevice::configure(std::uint32_t max_slices, int max_band_rows) {
   const VolumeGrid& grid = *problem_.grid;
   const int columns = problem_.geometry->detector.columns;
-  const std::size_t slice_bytes = std::size_t{grid.size[0]} * grid.size[1] * sizeof(float);
+  const std::size_t slice_bytes = std::size_t{padded_row(grid.size[0])} * grid.size[1] * sizeof(float);
   // Keep buffers that are large enough from an earlier grid of the same shape.
   if (max_slices > max_slices_ || !slab_() || slab_.getInfo<CL_MEM_SIZE>() < slice_bytes * padded_slices(max_slices)) {
     slab_ = cl::Buffer(context_, CL_MEM_READ_WRITE, slice_bytes * padded_slices(max_slices));
@@ -180,8 +185,8 @@ void FdkDevice::finish_timings() {
 void FdkDevice::reconstruct_slab(std::uint32_t k_begin, std::uint32_t k_end, std::vector<float>& out) {
   const VolumeGrid& grid = *problem_.grid;
   const std::uint32_t slices = k_end - k_begin;
-  const std::size_t slice_bytes = std::size_t{grid.size[0]} * grid.size[1] * sizeof(float);
-  const std::size_t slab_bytes = slice_bytes * slices;
+  const std::uint32_t row = padded_row(grid.size[0]);
+  const std::size_t slice_bytes = std::size_t{row} * grid.size[1] * sizeof(float);
   const RowBand band = rows_for_slab(*problem_.geometry, grid, k_begin, k_end);
   if (band.rows() > max_band_rows_)
     throw std::logic_error("FDK: slab needs " + std::to_string(band.rows()) + " detector rows, planned for " +
@@ -192,7 +197,7 @@ void FdkDevice::reconstruct_slab(std::uint32_t k_begin, std::uint32_t k_end, std
   run_views(band, [&](cl::Buffer& filtered, int stride_rows, std::size_t first_view, cl::Event* done) {
     int arg = 0;
     backproject_.setArg(arg++, slab_);
-    backproject_.setArg(arg++, static_cast<cl_int>(grid.size[0]));
+    backproject_.setArg(arg++, static_cast<cl_int>(row));
     backproject_.setArg(arg++, static_cast<cl_int>(grid.size[1]));
     backproject_.setArg(arg++, static_cast<cl_int>(k_begin));
     backproject_.setArg(arg++, filtered);
@@ -201,15 +206,18 @@ void FdkDevice::reconstruct_slab(std::uint32_t k_begin, std::uint32_t k_end, std
     backproject_.setArg(arg++, static_cast<cl_int>(band.first));
     backproject_.setArg(arg++, backproject_views_);
     backproject_.setArg(arg++, static_cast<cl_int>(first_view));
-    const std::size_t local_x = 64;
-    const std::size_t global_x = (grid.size[0] + local_x - 1) / local_x * local_x;
     queue_.enqueueNDRangeKernel(backproject_, cl::NullRange,
-                                cl::NDRange(global_x, grid.size[1], padded_slices(slices) / kDepth),
-                                cl::NDRange(local_x, 1, 1), nullptr, done);
+                                cl::NDRange(row, grid.size[1], padded_slices(slices) / kDepth),
+                                cl::NDRange(kGroupWidth, 1, 1), nullptr, done);
   });
-  out.resize(slab_bytes / sizeof(float));
+  // The voxels without the rows' padding.
+  out.resize(std::size_t{grid.size[0]} * grid.size[1] * slices);
   cl::Event read;
-  queue_.enqueueReadBuffer(slab_, CL_TRUE, 0, slab_bytes, out.data(), nullptr, &read);
+  const cl::array<cl::size_type, 3> origin{0, 0, 0};
+  const cl::array<cl::size_type, 3> region{grid.size[0] * sizeof(float), grid.size[1], slices};
+  queue_.enqueueReadBufferRect(slab_, CL_TRUE, origin, origin, region, std::size_t{row} * sizeof(float), slice_bytes,
+                               grid.size[0] * sizeof(float), std::size_t{grid.size[0]} * grid.size[1] * sizeof(float),
+                               out.data(), nullptr, &read);
   transfer_events_.push_back(read);
   finish_timings();
 }

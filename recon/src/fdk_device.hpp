@@ -33,8 +33,10 @@ struct DeviceTimings {
   double reading = 0, filtering = 0, backprojection = 0, transfer = 0;
 };
 
-// Slabs are computed in whole stacks of IVOL_BACKPROJECT_DEPTH slices.
+// Slabs are computed in whole stacks of IVOL_BACKPROJECT_DEPTH slices, with
+// rows padded to whole work-groups.
 std::uint32_t padded_slices(std::uint32_t slices);
+std::uint32_t padded_row(std::uint32_t nx);
 
 // Device memory a slab of `slices` slices needing `band_rows` detector rows
 // takes, all buffers included.

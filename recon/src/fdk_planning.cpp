@@ -92,7 +92,8 @@ SlabPlan plan_slabs(const FdkProblem& problem, const std::vector<detail::DeviceH
     max_allocation = std::min(max_allocation, d.info.max_allocation);
     any_global_fft = any_global_fft || d.info.local_memory < static_cast<std::uint64_t>(2 * n) * 8 + 1024;
   }
-  const std::uint64_t slice_bytes = std::uint64_t{problem.grid->size[0]} * problem.grid->size[1] * sizeof(float);
+  const std::uint64_t slice_bytes =
+      std::uint64_t{padded_row(problem.grid->size[0])} * problem.grid->size[1] * sizeof(float);
   auto fits = [&](std::uint32_t slices, SlabPlan& plan, bool exact = false) {
     plan.slices = slices;
     plan.band_rows = widest_band(problem, range, slices, exact);
