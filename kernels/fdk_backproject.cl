@@ -53,9 +53,9 @@ __kernel void fdk_backproject(__global float* restrict slab, int row_stride, int
     for (int d = 0; d < IVOL_BACKPROJECT_DEPTH; ++d) {
       const float fk = (float)(k_first + k_stack + d);
       const float row = clamp((row_at_zero + fk * row_step) - band_first, -1.0f, row_limit);
-      const float row_floor = floor(row);
-      const float row_frac = row - row_floor;
-      const int at = ((int)row_floor + IVOL_BAND_BORDER_BEFORE) * stride_cols + column_index;
+      const int row_index = convert_int_rtn(row); /* floor, exactly, in one conversion */
+      const float row_frac = row - (float)row_index;
+      const int at = (row_index + IVOL_BAND_BORDER_BEFORE) * stride_cols + column_index;
       const float top = image[at] + column_frac * (image[at + 1] - image[at]);
       const float bottom = image[at + stride_cols] + column_frac * (image[at + stride_cols + 1] - image[at + stride_cols]);
       sum[d] += weight * (top + row_frac * (bottom - top));
@@ -124,9 +124,9 @@ __kernel void fdk_backproject_fine(__global float* restrict sums, uint out_offse
     for (int d = 0; d < IVOL_BACKPROJECT_DEPTH; ++d) {
       const float fk = task.k + (float)d * task.step_k;
       const float row = clamp((row_at_zero + fk * row_step) - band_first, -1.0f, row_limit);
-      const float row_floor = floor(row);
-      const float row_frac = row - row_floor;
-      const int at = ((int)row_floor + IVOL_BAND_BORDER_BEFORE) * stride_cols + column_index;
+      const int row_index = convert_int_rtn(row); /* floor, exactly, in one conversion */
+      const float row_frac = row - (float)row_index;
+      const int at = (row_index + IVOL_BAND_BORDER_BEFORE) * stride_cols + column_index;
       const float top = image[at] + column_frac * (image[at + 1] - image[at]);
       const float bottom = image[at + stride_cols] + column_frac * (image[at + stride_cols + 1] - image[at + stride_cols]);
       sum[d] += weight * (top + row_frac * (bottom - top));
