@@ -8,6 +8,7 @@
 #include <limits>
 #include <utility>
 
+#include "hdf5_support.hpp"
 #include "ivol/error.hpp"
 #include "projection_io.hpp"
 #include "staged_file.hpp"
@@ -20,63 +21,9 @@ constexpr const char* kWhite = "/exchange/data_white";
 constexpr const char* kDark = "/exchange/data_dark";
 constexpr const char* kTheta = "/exchange/theta";
 
-// Owns an HDF5 identifier and closes it with the matching H5?close.
-class Handle {
- public:
-  Handle() = default;
-  Handle(hid_t id, herr_t (*close)(hid_t)) : id_(id), close_(close) {}
-  ~Handle() { reset(); }
-  Handle(Handle&& other) noexcept : id_(std::exchange(other.id_, -1)), close_(other.close_) {}
-  Handle& operator=(Handle&& other) noexcept {
-    if (this != &other) {
-      reset();
-      id_ = std::exchange(other.id_, -1);
-      close_ = other.close_;
-    }
-    return *this;
-  }
-  Handle(const Handle&) = delete;
-  Handle& operator=(const Handle&) = delete;
-  hid_t get() const { return id_; }
-  bool valid() const { return id_ >= 0; }
-  hid_t release() { return std::exchange(id_, -1); }
-  void reset() {
-    if (id_ >= 0 && close_) close_(id_);
-    id_ = -1;
-  }
-
- private:
-  hid_t id_ = -1;
-  herr_t (*close_)(hid_t) = nullptr;
-};
-
-// HDF5 prints its error stack to stderr unless told not to; we throw instead.
-class QuietHdf5Errors {
- public:
-  QuietHdf5Errors() {
-    H5Eget_auto2(H5E_DEFAULT, &old_function_, &old_data_);
-    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
-  }
-  ~QuietHdf5Errors() { H5Eset_auto2(H5E_DEFAULT, old_function_, old_data_); }
-  QuietHdf5Errors(const QuietHdf5Errors&) = delete;
-  QuietHdf5Errors& operator=(const QuietHdf5Errors&) = delete;
-
- private:
-  H5E_auto2_t old_function_ = nullptr;
-  void* old_data_ = nullptr;
-};
-
-std::string hdf5_reason() {
-  std::string reason;
-  H5Ewalk2(
-      H5E_DEFAULT, H5E_WALK_UPWARD,
-      [](unsigned depth, const H5E_error2_t* error, void* out) -> herr_t {
-        if (depth == 0 && error->desc) *static_cast<std::string*>(out) = error->desc;
-        return 0;
-      },
-      &reason);
-  return reason.empty() ? std::string() : " (HDF5: " + reason + ")";
-}
+using hdf5::Handle;
+using QuietHdf5Errors = hdf5::QuietErrors;
+std::string hdf5_reason() { return hdf5::reason(); }
 
 // True when every link of an absolute path exists (H5Lexists needs the
 // parents to exist).
