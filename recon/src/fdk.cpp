@@ -18,6 +18,23 @@ using detail::seconds_since;
 using detail::SlabPlan;
 using detail::SlabRange;
 
+std::vector<detail::DeviceTimings> FdkReconstructor::Impl::device_timings() const {
+  std::vector<detail::DeviceTimings> timings;
+  for (const auto& d : devices) timings.push_back(d->timings());
+  return timings;
+}
+
+void FdkReconstructor::Impl::add_timings_since(const std::vector<detail::DeviceTimings>& before,
+                                               FdkTimings& timings) const {
+  for (std::size_t d = 0; d < devices.size(); ++d) {
+    const detail::DeviceTimings& t = devices[d]->timings();
+    timings.reading += t.reading - before[d].reading;
+    timings.filtering += t.filtering - before[d].filtering;
+    timings.backprojection += t.backprojection - before[d].backprojection;
+    timings.transfer += t.transfer - before[d].transfer;
+  }
+}
+
 std::vector<detail::FdkDevice*> FdkReconstructor::Impl::device_pointers() const {
   std::vector<detail::FdkDevice*> pointers;
   for (const auto& d : devices) pointers.push_back(d.get());
@@ -108,8 +125,7 @@ FdkReport FdkReconstructor::reconstruct(const VolumeGrid& grid, const SlabSink& 
   report.slab_count = slab_count;
   report.slab_slices = plan.slices;
   report.device_bytes_per_slab = plan.bytes;
-  std::vector<detail::DeviceTimings> before;
-  for (const auto& device : m.devices) before.push_back(device->timings());
+  const std::vector<detail::DeviceTimings> before = m.device_timings();
   const double constructor_setup = m.setup_seconds;
   m.setup_seconds = 0;  // counted in the first reconstruction only
   report.timings.setup = constructor_setup + seconds_since(start);
@@ -137,13 +153,7 @@ FdkReport FdkReconstructor::reconstruct(const VolumeGrid& grid, const SlabSink& 
   }
   m.problem.grid = nullptr;
 
-  for (std::size_t d = 0; d < m.devices.size(); ++d) {
-    const detail::DeviceTimings& t = m.devices[d]->timings();
-    report.timings.reading += t.reading - before[d].reading;
-    report.timings.filtering += t.filtering - before[d].filtering;
-    report.timings.backprojection += t.backprojection - before[d].backprojection;
-    report.timings.transfer += t.transfer - before[d].transfer;
-  }
+  m.add_timings_since(before, report.timings);
   report.voxel_updates = std::uint64_t{grid.size[0]} * grid.size[1] * (k_end - k_begin) * m.geometry.view_count();
   report.timings.total = constructor_setup + seconds_since(start);
   return report;

@@ -193,8 +193,7 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, VoxelS
   report.slab_count = slab_count;
   report.slab_slices = plan.slices;
   report.device_bytes_per_slab = plan.bytes;
-  std::vector<detail::DeviceTimings> before;
-  for (const auto& device : m.devices) before.push_back(device->timings());
+  const std::vector<detail::DeviceTimings> before = m.device_timings();
   const double constructor_setup = m.setup_seconds;
   m.setup_seconds = 0;
   report.timings.setup = constructor_setup + detail::seconds_since(start);
@@ -219,13 +218,7 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, VoxelS
     throw;
   }
   m.problem.grid = nullptr;
-  for (std::size_t d = 0; d < m.devices.size(); ++d) {
-    const detail::DeviceTimings& t = m.devices[d]->timings();
-    report.timings.reading += t.reading - before[d].reading;
-    report.timings.filtering += t.filtering - before[d].filtering;
-    report.timings.backprojection += t.backprojection - before[d].backprojection;
-    report.timings.transfer += t.transfer - before[d].transfer;
-  }
+  m.add_timings_since(before, report.timings);
   report.voxel_updates = samples * m.geometry.view_count();
   report.timings.total = constructor_setup + detail::seconds_since(start);
   return report;
