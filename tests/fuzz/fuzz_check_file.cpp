@@ -74,7 +74,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   static const std::string path = "/dev/shm/ivol-fuzz-" + std::to_string(getpid()) + ".ivol";
   FILE* f = std::fopen(path.c_str(), "wb");
   if (!f) return 0;
-  std::fwrite(data, 1, size, f);
+  if (size > 0) std::fwrite(data, 1, size, f);  // an empty input may come with a null pointer
   std::fclose(f);
   (void)ivol::check_file(path);
   try {
