@@ -21,6 +21,14 @@ ProjectionReader::ProjectionReader(std::string path, int columns, int rows, std:
   if (columns <= 0 || rows <= 0 || views == 0)
     throw Error(ErrorClass::InvalidArgument, path_ + ": the scan is empty (" + std::to_string(views) + " views of " +
                                                  std::to_string(columns) + "x" + std::to_string(rows) + " pixels)");
+  // The per-pixel flat-field tables take 9 bytes a pixel before any data is
+  // read, so a few hundred bytes of hostile header must not be able to ask
+  // for gigabytes. 2^27 pixels (11585²) is above any CT detector made.
+  const std::uint64_t pixels = std::uint64_t(columns) * std::uint64_t(rows);
+  if (pixels > kMaxDetectorPixels)
+    throw Error(ErrorClass::LimitExceeded, path_ + ": a detector of " + std::to_string(columns) + "x" +
+                                               std::to_string(rows) + " pixels is larger than the " +
+                                               std::to_string(kMaxDetectorPixels) + " pixels ivol reads");
 }
 
 ProjectionReader::~ProjectionReader() = default;

@@ -41,6 +41,9 @@ struct IntensityOptions {
 
 // A projection file being read. Not thread-safe (the interface reads from
 // one thread at a time).
+// The largest detector the readers accept, in pixels.
+constexpr std::uint64_t kMaxDetectorPixels = std::uint64_t{1} << 27;
+
 class ProjectionReader : public ivol::recon::ProjectionSource {
  public:
   ~ProjectionReader() override;

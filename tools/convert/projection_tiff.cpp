@@ -194,6 +194,7 @@ std::vector<Page> list_pages(const std::vector<std::string>& files, PageFormat& 
 }
 
 std::vector<double> tiff_field(const std::vector<std::string>& sources, PageFormat format, const char* kind) {
+  if (sources.empty()) return {};  // no field of this kind
   const std::size_t pixels = std::size_t{format.width} * format.height;
   FieldAverage average(pixels);
   std::vector<double> image(pixels);
