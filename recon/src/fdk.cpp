@@ -35,6 +35,14 @@ void FdkReconstructor::Impl::add_timings_since(const std::vector<detail::DeviceT
   }
 }
 
+FdkReport FdkReconstructor::Impl::new_report() const {
+  FdkReport report;
+  report.short_scan = shape.short_scan;
+  report.warnings = shape.warnings;
+  for (const auto& h : handles) report.devices.push_back(h.info.name);
+  return report;
+}
+
 std::vector<detail::FdkDevice*> FdkReconstructor::Impl::device_pointers() const {
   std::vector<detail::FdkDevice*> pointers;
   for (const auto& d : devices) pointers.push_back(d.get());
@@ -108,10 +116,7 @@ FdkReport FdkReconstructor::reconstruct(const VolumeGrid& grid, const SlabSink& 
   if (k_begin >= k_end)
     throw std::invalid_argument("FDK: slices " + std::to_string(k_begin) + ".." + std::to_string(k_end) +
                                 " of a volume of " + std::to_string(grid.size[2]) + " are empty");
-  FdkReport report;
-  report.short_scan = m.shape.short_scan;
-  report.warnings = m.shape.warnings;
-  report.devices = device_names();
+  FdkReport report = m.new_report();
   const VolumeGrid grid_copy = grid;
   detail::set_grid(m.problem, grid_copy);
   const SlabRange range{k_begin, k_end};

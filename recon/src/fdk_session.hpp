@@ -60,6 +60,8 @@ struct FdkReconstructor::Impl {
   std::vector<detail::DeviceHandle> handles;
   std::vector<std::unique_ptr<detail::FdkDevice>> devices;
   std::vector<detail::FdkDevice*> device_pointers() const;
+  // A report that already says what the scan and the devices are.
+  FdkReport new_report() const;
   // The devices' timings now, and what they added since `before` into a report.
   std::vector<detail::DeviceTimings> device_timings() const;
   void add_timings_since(const std::vector<detail::DeviceTimings>& before, FdkTimings& timings) const;

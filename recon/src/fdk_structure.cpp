@@ -167,10 +167,7 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, VoxelS
     throw std::invalid_argument("FDK: the structure is " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) +
                                 "x" + std::to_string(dims[2]) + " voxels, the grid " + std::to_string(grid.size[0]) +
                                 "x" + std::to_string(grid.size[1]) + "x" + std::to_string(grid.size[2]));
-  FdkReport report;
-  report.short_scan = m.shape.short_scan;
-  report.warnings = m.shape.warnings;
-  report.devices = device_names();
+  FdkReport report = m.new_report();
   const VolumeGrid grid_copy = grid;
   detail::set_grid(m.problem, grid_copy);
   // Slabs as thick as a dense reconstruction would use: a slab's task sums
