@@ -222,6 +222,11 @@ class OctreeStructure final : public VoxelStructure {
       inner_nodes_ += inner[t];
       bricks_.insert(bricks_.end(), parts[t].begin(), parts[t].end());
     }
+    // Bricks (and so values) by their first slice, Morton order within one:
+    // a reconstruction finishing slabs along z then finds the values it can
+    // write and forget next to each other (StructureValueWindow).
+    std::stable_sort(bricks_.begin(), bricks_.end(),
+                     [](const Brick& a, const Brick& b) { return a.origin[2] < b.origin[2]; });
     finish_bricks();
   }
   StructureKind kind() const override { return StructureKind::Octree; }

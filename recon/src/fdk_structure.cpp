@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "fdk_session.hpp"
+#include "ivol/structure_stream.hpp"
 
 namespace ivol::recon {
 namespace {
@@ -22,100 +23,174 @@ struct BlockRef {
   std::uint32_t mi, mj, mk;  // the block's first sample on the brick's lattice
 };
 
-// The tasks of one slab and where their sums go in the structure's values.
-struct SlabTasks {
-  std::vector<FineTask> blocks;
-  std::vector<BlockRef> block_refs;
-  std::vector<CoarseTask> centres;  // lone voxels up to two wide: one sample
-  std::vector<CoarseTask> octants;  // wider lone voxels: eight
-  std::vector<std::uint64_t> centre_value;
-  std::vector<std::uint64_t> octant_value;
-  double k_low = 1e300;  // extent of the sample points along k
-  double k_high = -1e300;
-};
-
 // Sample points per voxel along an axis: the voxel's centre when it is one
 // voxel wide, else its two halves' centres (with the other axes: octants).
 std::uint32_t points_per_voxel(std::uint32_t edge) { return edge > 1 ? 2 : 1; }
 
-std::vector<SlabTasks> tasks_by_slab(const VoxelStructure& structure, std::uint32_t slices, std::size_t slab_count) {
-  std::vector<SlabTasks> slabs(slab_count);
-  auto slab_of = [&](double k) {
-    return std::min<std::size_t>(static_cast<std::size_t>(std::max(k, 0.0)) / slices, slab_count - 1);
-  };
-  const std::vector<Brick>& bricks = structure.bricks();
-  for (std::uint32_t index = 0; index < bricks.size(); ++index) {
-    const Brick& b = bricks[index];
-    const bool lone = b.count[0] == 1 && b.count[1] == 1 && b.count[2] == 1;
-    const bool fine = b.voxel[0] == 1 && b.voxel[1] == 1 && b.voxel[2] == 1;
-    // Lone voxels, coarse ones and the single full-resolution voxels an
-    // octree leaves at the object's edge, take a work-item each: in a block
-    // they would fill one of its 128 lanes. (A fine one's centre sample goes
-    // through the dense kernel's arithmetic, so it keeps its bits.)
-    if (lone) {
-      CoarseTask t{};
-      t.i = static_cast<float>(b.origin[0] + 0.5 * b.voxel[0] - 0.5);
-      t.j = static_cast<float>(b.origin[1] + 0.5 * b.voxel[1] - 0.5);
-      t.k = static_cast<float>(b.origin[2] + 0.5 * b.voxel[2] - 0.5);
-      t.quarter_i = 0.25F * static_cast<float>(b.voxel[0]);
-      t.quarter_j = 0.25F * static_cast<float>(b.voxel[1]);
-      t.quarter_k = 0.25F * static_cast<float>(b.voxel[2]);
-      SlabTasks& s = slabs[slab_of(t.k)];
-      if (std::max({b.voxel[0], b.voxel[1], b.voxel[2]}) <= 2) {
-        s.centres.push_back(t);
-        s.centre_value.push_back(b.first_value);
-      } else {
-        s.octants.push_back(t);
-        s.octant_value.push_back(b.first_value);
-      }
-      s.k_low = std::min(s.k_low, static_cast<double>(t.k - t.quarter_k));
-      s.k_high = std::max(s.k_high, static_cast<double>(t.k + t.quarter_k));
-      continue;
-    }
-    // A lattice of sample points: voxel centres, or octant centres of voxels
-    // wider than one along an axis; blocks of kRun × kDepth points.
-    std::array<std::uint32_t, 3> points{};
-    std::array<double, 3> step{}, first{};
+bool is_lone(const Brick& b) { return b.count[0] == 1 && b.count[1] == 1 && b.count[2] == 1; }
+
+// A brick's sample points as blocks of kRun × kDepth points: voxel centres,
+// or octant centres of voxels wider than one along an axis. Lanes per row are
+// the points along i, rounded up to a power of two; the rest of a block's
+// lanes take the next rows along j. A coarse voxel's points along k (two)
+// always fall in one block, since kDepth is even: a voxel's value is final
+// once its block's slab is delivered.
+struct BrickLattice {
+  std::array<std::uint32_t, 3> points{};
+  std::array<double, 3> step{}, first{};
+  std::uint32_t run_i = 1, rows = kRun;
+  explicit BrickLattice(const Brick& b) {
     for (int a = 0; a < 3; ++a) {
       points[a] = b.count[a] * points_per_voxel(b.voxel[a]);
       step[a] = static_cast<double>(b.voxel[a]) / points_per_voxel(b.voxel[a]);
       first[a] = b.origin[a] + 0.5 * step[a] - 0.5;
     }
-    // Lanes per row: the points along i, rounded up to a power of two; the
-    // rest of a block's lanes take the next rows along j.
-    std::uint32_t run_i = 1;
     while (run_i < std::min(points[0], kRun)) run_i *= 2;
-    const std::uint32_t rows = kRun / run_i;
-    for (std::uint32_t mk = 0; mk < points[2]; mk += kDepth)
-      for (std::uint32_t mj = 0; mj < points[1]; mj += rows)
-        for (std::uint32_t mi = 0; mi < points[0]; mi += run_i) {
-          const double k = first[2] + mk * step[2];
-          SlabTasks& s = slabs[slab_of(k)];
-          const std::uint32_t along_i = std::min(run_i, points[0] - mi);
-          const std::uint32_t along_j = std::min(rows, points[1] - mj);
-          const std::uint32_t along_k = std::min(kDepth, points[2] - mk);
-          FineTask t{};
-          t.i = static_cast<float>(first[0] + mi * step[0]);
-          t.j = static_cast<float>(first[1] + mj * step[1]);
-          t.k = static_cast<float>(k);
-          t.step_i = static_cast<float>(step[0]);
-          t.step_j = static_cast<float>(step[1]);
-          t.step_k = static_cast<float>(step[2]);
-          t.run_i = run_i;
-          t.count = along_i | (along_j << 8) | (along_k << 16);
-          s.blocks.push_back(t);
-          s.block_refs.push_back(BlockRef{index, mi, mj, mk});
-          s.k_low = std::min(s.k_low, k);
-          s.k_high = std::max(s.k_high, k + (kDepth - 1) * step[2]);
-        }
+    rows = kRun / run_i;
   }
-  return slabs;
+  double k_of_layer(std::uint32_t mk) const { return first[2] + mk * step[2]; }
+  // The first slice of the voxels a block layer starting at point mk samples.
+  std::uint32_t z_of_layer(const Brick& b, std::uint32_t mk) const {
+    return b.origin[2] + mk / points_per_voxel(b.voxel[2]) * b.voxel[2];
+  }
+};
+
+// A lone voxel's task: its centre, and the quarter of its edges where its
+// octants' centres lie.
+CoarseTask lone_task(const Brick& b) {
+  CoarseTask t{};
+  t.i = static_cast<float>(b.origin[0] + 0.5 * b.voxel[0] - 0.5);
+  t.j = static_cast<float>(b.origin[1] + 0.5 * b.voxel[1] - 0.5);
+  t.k = static_cast<float>(b.origin[2] + 0.5 * b.voxel[2] - 0.5);
+  t.quarter_i = 0.25F * static_cast<float>(b.voxel[0]);
+  t.quarter_j = 0.25F * static_cast<float>(b.voxel[1]);
+  t.quarter_k = 0.25F * static_cast<float>(b.voxel[2]);
+  return t;
 }
 
-// Adds a slab's sums into the structure's values: a full-resolution voxel
+// Which slab a task belongs to: the one holding its first sample along k.
+struct SlabOf {
+  std::uint32_t slices;
+  std::size_t count;
+  std::size_t operator()(double k) const {
+    return std::min<std::size_t>(static_cast<std::size_t>(std::max(k, 0.0)) / slices, count - 1);
+  }
+};
+
+// What is known of each slab before any task is made: the bricks with tasks
+// in it, how far along k its samples reach, and the lowest first slice of
+// its voxels (a voxel's value is final once its slab is delivered).
+struct SlabIndex {
+  std::vector<std::vector<std::uint32_t>> bricks;
+  std::vector<double> k_low, k_high;
+  std::vector<std::uint32_t> z_low;
+  // After slab s is delivered, every voxel starting below complete_below[s]
+  // is final.
+  std::vector<std::uint32_t> complete_below;
+};
+
+SlabIndex index_slabs(const VoxelStructure& structure, const SlabOf& slab_of) {
+  SlabIndex x;
+  const std::size_t count = slab_of.count;
+  x.bricks.resize(count);
+  x.k_low.assign(count, 1e300);
+  x.k_high.assign(count, -1e300);
+  x.z_low.assign(count, UINT32_MAX);
+  const std::vector<Brick>& bricks = structure.bricks();
+  for (std::uint32_t index = 0; index < bricks.size(); ++index) {
+    const Brick& b = bricks[index];
+    auto note = [&](std::size_t s, double k_low, double k_high, std::uint32_t z) {
+      if (x.bricks[s].empty() || x.bricks[s].back() != index) x.bricks[s].push_back(index);
+      x.k_low[s] = std::min(x.k_low[s], k_low);
+      x.k_high[s] = std::max(x.k_high[s], k_high);
+      x.z_low[s] = std::min(x.z_low[s], z);
+    };
+    if (is_lone(b)) {
+      const CoarseTask t = lone_task(b);
+      note(slab_of(t.k), t.k - t.quarter_k, t.k + t.quarter_k, b.origin[2]);
+      continue;
+    }
+    const BrickLattice lattice(b);
+    for (std::uint32_t mk = 0; mk < lattice.points[2]; mk += kDepth) {
+      const double k = lattice.k_of_layer(mk);
+      note(slab_of(k), k, k + (kDepth - 1) * lattice.step[2], lattice.z_of_layer(b, mk));
+    }
+  }
+  x.complete_below.assign(count, structure.dims()[2]);
+  std::uint32_t lowest_later = structure.dims()[2];
+  for (std::size_t s = count; s-- > 0;) {
+    x.complete_below[s] = lowest_later;
+    lowest_later = std::min(lowest_later, x.z_low[s]);
+  }
+  return x;
+}
+
+// A slab's tasks and where their sums go.
+struct SlabTasks {
+  std::vector<FineTask> blocks;
+  std::vector<BlockRef> block_refs;
+  std::vector<CoarseTask> centres;  // lone voxels up to two wide: one sample
+  std::vector<CoarseTask> octants;  // wider lone voxels: eight
+  std::vector<std::uint32_t> centre_brick;
+  std::vector<std::uint32_t> octant_brick;
+  std::uint64_t samples() const {
+    std::uint64_t n = centres.size() + 8 * octants.size();
+    for (const FineTask& f : blocks) n += std::uint64_t{f.count & 0xFF} * ((f.count >> 8) & 0xFF) * (f.count >> 16);
+    return n;
+  }
+};
+
+SlabTasks tasks_of_slab(const VoxelStructure& structure, const SlabIndex& index, const SlabOf& slab_of,
+                        std::size_t slab) {
+  SlabTasks s;
+  const std::vector<Brick>& bricks = structure.bricks();
+  for (std::uint32_t n : index.bricks[slab]) {
+    const Brick& b = bricks[n];
+    // Lone voxels, coarse ones and the single full-resolution voxels an
+    // octree leaves at the object's edge, take a work-item each: in a block
+    // they would fill one of its 128 lanes. (A fine one's centre sample goes
+    // through the dense kernel's arithmetic, so it keeps its bits.)
+    if (is_lone(b)) {
+      const CoarseTask t = lone_task(b);
+      if (std::max({b.voxel[0], b.voxel[1], b.voxel[2]}) <= 2) {
+        s.centres.push_back(t);
+        s.centre_brick.push_back(n);
+      } else {
+        s.octants.push_back(t);
+        s.octant_brick.push_back(n);
+      }
+      continue;
+    }
+    const BrickLattice lattice(b);
+    for (std::uint32_t mk = 0; mk < lattice.points[2]; mk += kDepth) {
+      const double k = lattice.k_of_layer(mk);
+      if (slab_of(k) != slab) continue;
+      for (std::uint32_t mj = 0; mj < lattice.points[1]; mj += lattice.rows)
+        for (std::uint32_t mi = 0; mi < lattice.points[0]; mi += lattice.run_i) {
+          const std::uint32_t along_i = std::min(lattice.run_i, lattice.points[0] - mi);
+          const std::uint32_t along_j = std::min(lattice.rows, lattice.points[1] - mj);
+          const std::uint32_t along_k = std::min(kDepth, lattice.points[2] - mk);
+          FineTask t{};
+          t.i = static_cast<float>(lattice.first[0] + mi * lattice.step[0]);
+          t.j = static_cast<float>(lattice.first[1] + mj * lattice.step[1]);
+          t.k = static_cast<float>(k);
+          t.step_i = static_cast<float>(lattice.step[0]);
+          t.step_j = static_cast<float>(lattice.step[1]);
+          t.step_k = static_cast<float>(lattice.step[2]);
+          t.run_i = lattice.run_i;
+          t.count = along_i | (along_j << 8) | (along_k << 16);
+          s.blocks.push_back(t);
+          s.block_refs.push_back(BlockRef{n, mi, mj, mk});
+        }
+    }
+  }
+  return s;
+}
+
+// Puts a slab's sums into the structure's values: a full-resolution voxel
 // takes its one sum as it is, a coarse one the mean of its points.
 void deliver(const VoxelStructure& structure, const SlabTasks& t, const std::vector<float>& sums,
-             std::vector<float>& values) {
+             StructureValueWindow& values) {
   const std::vector<Brick>& bricks = structure.bricks();
   for (std::size_t n = 0; n < t.blocks.size(); ++n) {
     const BlockRef& ref = t.block_refs[n];
@@ -136,7 +211,7 @@ void deliver(const VoxelStructure& structure, const SlabTasks& t, const std::vec
       for (std::uint32_t y = 0; y < along_j; ++y) {
         const std::uint64_t base = b.first_value + (ref.mk + d) / per_k * plane + (ref.mj + y) / per_j * row;
         for (std::uint32_t x = 0; x < along_i; ++x) {
-          float& value = values[base + (ref.mi + x) / per_i];
+          float& value = values.at(ref.brick, base + (ref.mi + x) / per_i);
           const float sum = from[y * task.run_i + x];
           value = fine ? sum : value + weight * sum;
         }
@@ -144,21 +219,22 @@ void deliver(const VoxelStructure& structure, const SlabTasks& t, const std::vec
     }
   }
   std::size_t next = t.blocks.size() * kDepth * kRun;
-  for (std::size_t c = 0; c < t.centres.size(); ++c) values[t.centre_value[c]] = sums[next++];
-  for (std::size_t c = 0; c < t.octants.size(); ++c) values[t.octant_value[c]] = sums[next++];
+  for (std::uint32_t brick : t.centre_brick) values.at(brick, bricks[brick].first_value) = sums[next++];
+  for (std::uint32_t brick : t.octant_brick) values.at(brick, bricks[brick].first_value) = sums[next++];
 }
 
-detail::RowBand band_for(const ScanGeometry& geometry, const VolumeGrid& grid, const SlabTasks& s) {
-  if (s.blocks.empty() && s.centres.empty() && s.octants.empty()) return {};
+detail::RowBand band_for(const ScanGeometry& geometry, const VolumeGrid& grid, const SlabIndex& index, std::size_t s) {
+  if (index.bricks[s].empty()) return {};
   const double nz = grid.size[2];
-  const auto k0 = static_cast<std::uint32_t>(std::clamp(std::floor(s.k_low), 0.0, nz - 1));
-  const auto k1 = static_cast<std::uint32_t>(std::clamp(std::ceil(s.k_high) + 1.0, 1.0, nz));
+  const auto k0 = static_cast<std::uint32_t>(std::clamp(std::floor(index.k_low[s]), 0.0, nz - 1));
+  const auto k1 = static_cast<std::uint32_t>(std::clamp(std::ceil(index.k_high[s]) + 1.0, 1.0, nz));
   return detail::rows_for_slab(geometry, grid, k0, std::max(k1, k0 + 1));
 }
 
 }  // namespace
 
-FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, VoxelStructure& structure) {
+FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const VoxelStructure& structure,
+                                                  StructureValueWindow& values, const StructureProgress& progress) {
   const auto start = std::chrono::steady_clock::now();
   Impl& m = *impl_;
   grid.validate();
@@ -173,12 +249,13 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, VoxelS
   // Slabs as thick as a dense reconstruction would use: a slab's task sums
   // never outnumber its voxels by more than the padding of the stacks.
   const detail::SlabPlan plan = detail::plan_slabs(m.problem, m.handles, m.options, {0, grid.size[2]});
-  const std::size_t slab_count = (grid.size[2] + plan.slices - 1) / plan.slices;
-  const std::vector<SlabTasks> slabs = tasks_by_slab(structure, plan.slices, slab_count);
+  const SlabOf slab_of{plan.slices, (grid.size[2] + plan.slices - 1) / plan.slices};
+  const std::size_t slab_count = slab_of.count;
+  const SlabIndex index = index_slabs(structure, slab_of);
   std::vector<detail::RowBand> bands;
   int widest = 0;
-  for (const SlabTasks& s : slabs) {
-    bands.push_back(band_for(m.geometry, grid, s));
+  for (std::size_t s = 0; s < slab_count; ++s) {
+    bands.push_back(band_for(m.geometry, grid, index, s));
     widest = std::max(widest, bands.back().rows());
   }
   try {
@@ -195,20 +272,28 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, VoxelS
   m.setup_seconds = 0;
   report.timings.setup = constructor_setup + detail::seconds_since(start);
 
-  std::vector<float>& values = structure.values();
-  std::fill(values.begin(), values.end(), 0.0F);
+  // A slab's tasks are made by the thread that computes it and kept until the
+  // slab is delivered, so only the slabs in flight hold task lists.
+  std::vector<std::unique_ptr<SlabTasks>> tasks(slab_count);
   std::uint64_t samples = 0;
+  double delivering = 0;
   try {
     detail::for_each_slab(
         m.device_pointers(), slab_count,
         [&](detail::FdkDevice& device, std::size_t s, std::vector<float>& sums) {
-          device.reconstruct_tasks(bands[s], slabs[s].blocks, {&slabs[s].centres, &slabs[s].octants}, sums);
+          auto made = std::make_unique<SlabTasks>(tasks_of_slab(structure, index, slab_of, s));
+          device.reconstruct_tasks(bands[s], made->blocks, {&made->centres, &made->octants}, sums);
+          tasks[s] = std::move(made);  // read by the delivering thread after the slab's hand-over
         },
         [&](std::size_t s, std::vector<float>& sums) {
-          const SlabTasks& t = slabs[s];
-          deliver(structure, t, sums, values);
-          for (const FineTask& f : t.blocks) samples += (f.count & 0xFF) * ((f.count >> 8) & 0xFF) * (f.count >> 16);
-          samples += t.centres.size() + 8 * t.octants.size();
+          const auto delivery_start = std::chrono::steady_clock::now();
+          std::unique_ptr<SlabTasks> t = std::move(tasks[s]);
+          if (!t) t = std::make_unique<SlabTasks>(tasks_of_slab(structure, index, slab_of, s));
+          deliver(structure, *t, sums, values);
+          samples += t->samples();
+          t.reset();
+          if (progress) progress(index.complete_below[s]);
+          delivering += detail::seconds_since(delivery_start);
         });
   } catch (...) {
     m.problem.grid = nullptr;
@@ -216,8 +301,20 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, VoxelS
   }
   m.problem.grid = nullptr;
   m.add_timings_since(before, report.timings);
+  report.timings.delivery += delivering;
   report.voxel_updates = samples * m.geometry.view_count();
   report.timings.total = constructor_setup + detail::seconds_since(start);
+  return report;
+}
+
+FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, VoxelStructure& structure) {
+  StructureValueWindow window(structure, true);
+  const FdkReport report = reconstruct_structure(grid, structure, window, {});
+  std::vector<float>& values = structure.values();
+  const std::vector<Brick>& bricks = structure.bricks();
+  for (std::uint32_t n = 0; n < bricks.size(); ++n)
+    for (std::uint64_t v = bricks[n].first_value; v < bricks[n].first_value + bricks[n].voxel_count(); ++v)
+      values[v] = window.value(n, v);
   return report;
 }
 

@@ -10,6 +10,7 @@
 #include "ivol/metadata.hpp"
 #include "ivol/recon/fdk.hpp"
 #include "ivol/recon/preview.hpp"
+#include "ivol/structure_stream.hpp"
 #include "ivol/structures.hpp"
 #include "ivol_io.hpp"
 #include "option_parsing.hpp"
@@ -62,10 +63,12 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 
 // The paper's pipeline: a low-resolution preview finds the object, the
 // structure is generated from it, the FDK backprojects into the structure's
-// voxels only, and the structure is written as an .ivol file of its kind.
-// Peak host memory: the structure's values (4 bytes each) and its task lists
-// (about 4 bytes per full-resolution voxel, 40 per coarse one), the preview,
-// and the writer's slab.
+// voxels only, and the structure is written as an .ivol file of its kind
+// while the slabs finish. Peak host memory: the preview (1/factor³ of the
+// dense volume), the structure's bricks (40 bytes each), the values of the
+// voxels between the writer's slab and the slabs in flight
+// (StructureValueWindow), the writer's slab (--memory / 4) and the task
+// lists of the slabs in flight; never the dense volume nor all the values.
 int run_structure(const ReconSettings& s, const GlobalOptions& global, const recon::VolumeGrid& grid,
                   const recon::FdkOptions& fdk_options, OpenedScan& scan, recon::FdkReconstructor& reconstructor,
                   Metadata metadata, std::chrono::steady_clock::time_point start) {
@@ -97,9 +100,6 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   std::unique_ptr<VoxelStructure> structure = generate_structure(kind, mask, generation);
   const double generating = seconds_since(generation_start);
 
-  const recon::FdkReport fdk = reconstructor.reconstruct_structure(grid, *structure);
-
-  const auto writing_start = std::chrono::steady_clock::now();
   metadata.provenance["reconstruction"]["structure"] = {
       {"kind", s.structure},
       {"threshold", threshold},
@@ -113,8 +113,17 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   StreamingOptions options;
   options.build.encoding = parse_encoding(s.encoding);
   options.slab_budget_bytes = (s.memory_mib << 20) / 4;
-  const StreamingResult written = write_structure(*structure, s.output, metadata, options);
-  const double writing = seconds_since(writing_start);
+  StructureStreamWriter writer(*structure, s.output, options);
+  StructureValueWindow values(*structure);
+  double writing_during_fdk = 0;  // the writer works inside the FDK's slab hand-over
+  const recon::FdkReport fdk =
+      reconstructor.reconstruct_structure(grid, *structure, values, [&](std::uint32_t z_complete) {
+        const auto began = std::chrono::steady_clock::now();
+        writer.write_ready(z_complete, values);
+        writing_during_fdk += seconds_since(began);
+      });
+  const StreamingResult written = writer.finish(metadata, values);
+  const double writing = written.write.seconds;
   const double total = seconds_since(start);
   const StructureMemory memory = structure->memory();
   nlohmann::json report = {
@@ -130,6 +139,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
       {"structure_bytes", memory.total()},
       {"dense_float32_bytes", grid.voxel_count() * 4},
       {"file_bytes", written.write.file_bytes},
+      {"peak_value_bytes", values.peak_bytes()},
       {"gups", fdk.gups()},
       {"seconds",
        {{"total", total},
@@ -138,7 +148,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
         {"reading", fdk.timings.reading},
         {"filtering", fdk.timings.filtering},
         {"backprojection", fdk.timings.backprojection},
-        {"reconstruction", fdk.timings.total},
+        {"reconstruction", fdk.timings.total - writing_during_fdk},
         {"writing", writing}}}};
   if (s.json) {
     std::cout << report.dump(2) << "\n";
@@ -147,9 +157,9 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
               << structure->voxel_count() << " voxels ("
               << static_cast<double>(grid.voxel_count()) / static_cast<double>(structure->voxel_count())
               << "x fewer than " << grid.size[0] << "x" << grid.size[1] << "x" << grid.size[2] << ") in " << total
-              << " s (preview " << preview.seconds << " s, generation " << generating << " s, FDK " << fdk.timings.total
-              << " s, writing " << writing << " s); " << s.output << ": " << human_bytes(written.write.file_bytes)
-              << "\n";
+              << " s (preview " << preview.seconds << " s, generation " << generating << " s, FDK "
+              << fdk.timings.total - writing_during_fdk << " s, writing " << writing << " s); " << s.output << ": "
+              << human_bytes(written.write.file_bytes) << "\n";
   }
   return kExitOk;
 }

@@ -18,6 +18,7 @@
 
 #include "ivol/recon/geometry.hpp"
 #include "ivol/recon/projections.hpp"
+#include "ivol/structure_stream.hpp"
 #include "ivol/structures.hpp"
 
 namespace ivol::recon {
@@ -97,6 +98,18 @@ class FdkReconstructor {
   // averages the object instead of aliasing it. Work is in proportion to the
   // structure's voxels, not the grid's.
   FdkReport reconstruct_structure(const VolumeGrid& grid, VoxelStructure& structure);
+  // The same, streaming: each voxel's value goes into `values` when the slab
+  // computing it is done, and then progress(z_complete) says that every voxel
+  // starting below slice z_complete is final (z_complete never decreases;
+  // the last call gives the grid's depth). A StructureStreamWriter can write
+  // those voxels and let `values` forget them, so neither the dense volume
+  // nor the structure's values are ever held whole. Host memory: the values
+  // of the voxels between the writer's slab and the slabs in flight, the
+  // task lists of the slabs in flight (32 bytes per 128 full-resolution
+  // voxels, 36 per lone voxel), and 4 to 8 bytes per brick.
+  using StructureProgress = std::function<void(std::uint32_t z_complete)>;
+  FdkReport reconstruct_structure(const VolumeGrid& grid, const VoxelStructure& structure,
+                                  StructureValueWindow& values, const StructureProgress& progress);
 
   std::vector<std::string> device_names() const;
   // Warnings about the scan (e.g. a short arc), known before reconstructing.

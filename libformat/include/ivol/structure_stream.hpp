@@ -1,0 +1,109 @@
+// Writing a structure while it is being reconstructed, without ever holding
+// all of its values: a producer (the FDK) fills a StructureValueWindow as
+// its slabs finish, and a StructureStreamWriter writes every part of the file
+// whose voxels are final, then lets the window forget them.
+//
+// The contract between them is one number, z_complete: every voxel of the
+// structure whose first slice lies below z_complete has its final value.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "ivol/structures.hpp"
+
+namespace ivol {
+
+// Where a writer reads a structure's values from. `brick` is the index of the
+// brick holding value `index` (an index into the structure's values).
+class StructureValueSource {
+ public:
+  virtual ~StructureValueSource() = default;
+  virtual float value(std::uint32_t brick, std::uint64_t index) const = 0;
+  // Every voxel ending at or below slice z has been written: forget it.
+  virtual void release_below(std::uint32_t z) = 0;
+};
+
+// The values of a structure that are in flight. A multi-voxel brick's values
+// live in pages of consecutive value indices (bricks are ordered by their
+// first slice, so a page covers a thin range of z); a lone voxel (one-voxel
+// brick, as most octree leaves are) lives on its own, so that a leaf 128
+// slices tall does not keep a page of other voxels alive. Memory: the values
+// of the voxels that meet the slices between the writer's position and the
+// producer's, rounded up to whole pages at both ends, plus ~40 bytes per lone
+// voxel held. Not thread-safe: one thread fills and reads it.
+class StructureValueWindow final : public StructureValueSource {
+ public:
+  // keep_all: never forget anything (to copy all values out at the end).
+  explicit StructureValueWindow(const VoxelStructure& structure, bool keep_all = false);
+  ~StructureValueWindow() override;
+
+  // The slot of value `index` of brick `brick`, zero until first written.
+  // Throws std::logic_error if that value was already released.
+  float& at(std::uint32_t brick, std::uint64_t index);
+  float value(std::uint32_t brick, std::uint64_t index) const override;
+  void release_below(std::uint32_t z) override;
+
+  std::uint64_t held_bytes() const { return held_bytes_; }
+  std::uint64_t peak_bytes() const { return peak_bytes_; }
+
+  static constexpr std::uint64_t kPageValues = 16384;
+
+ private:
+  bool lone(std::uint32_t brick) const;
+  void note_held(std::int64_t bytes);
+
+  const VoxelStructure& structure_;
+  bool keep_all_;
+  std::vector<std::unique_ptr<float[]>> pages_;
+  std::vector<std::uint32_t> page_end_;  // last slice (exclusive) any value of the page covers
+  std::vector<std::uint8_t> released_;   // 1 once a page has been freed
+  std::vector<std::uint32_t> live_pages_;
+  std::unordered_map<std::uint64_t, float> lone_values_;
+  std::vector<std::vector<std::uint64_t>> lone_by_end_;  // lone values by the slice they end at
+  std::uint32_t released_below_ = 0;
+  std::uint64_t held_bytes_ = 0;
+  std::uint64_t peak_bytes_ = 0;
+};
+
+// All of a structure's values, as VoxelStructure::values() holds them.
+class WholeStructureValues final : public StructureValueSource {
+ public:
+  explicit WholeStructureValues(const VoxelStructure& structure) : values_(structure.values()) {}
+  float value(std::uint32_t, std::uint64_t index) const override { return values_[index]; }
+  void release_below(std::uint32_t) override {}
+
+ private:
+  const std::vector<float>& values_;
+};
+
+// Writes a structure as an .ivol file of its own kind (as write_structure
+// does, and the same bytes) part by part: the octree slab by slab through
+// StreamingOctreeWriter, the grids' values in file order. Borders and cell
+// words, which do not depend on values, are written at construction.
+// Peak memory besides the source: the octree writer's slab (its budget in
+// `options`) or one block of values, and 8 bytes per brick.
+class StructureStreamWriter {
+ public:
+  StructureStreamWriter(const VoxelStructure& structure, const std::string& path, const StreamingOptions& options);
+  ~StructureStreamWriter();  // an unfinished writer leaves nothing behind
+  StructureStreamWriter(const StructureStreamWriter&) = delete;
+  StructureStreamWriter& operator=(const StructureStreamWriter&) = delete;
+
+  // Writes what depends only on voxels starting below slice z_complete (all
+  // final in `values`) and releases from `values` what no later part needs.
+  void write_ready(std::uint32_t z_complete, StructureValueSource& values);
+  // Writes the rest (every value must now be final) and renames the file
+  // into place.
+  StreamingResult finish(const Metadata& metadata, StructureValueSource& values);
+
+  struct Impl;
+
+ private:
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace ivol
