@@ -14,6 +14,7 @@
 #include "ivol/build.hpp"
 #include "ivol/check.hpp"
 #include "ivol/reader.hpp"
+#include "ivol/temporary_file.hpp"
 #include "ivol/writer.hpp"
 #include "test_support.hpp"
 
@@ -67,10 +68,39 @@ TEST(CrashSafety, KilledWritersLeaveOnlyCompleteFiles) {
   EXPECT_GT(complete_seen, 50) << "most trials should find a complete file";
   // Killed writers leave their temporary files behind (named .volume.ivol.tmp-*),
   // never anything at the target path.
+  std::size_t left = 0;
   for (const auto& entry : std::filesystem::directory_iterator(dir)) {
     const std::string name = entry.path().filename();
     EXPECT_TRUE(name == "volume.ivol" || name.rfind(".volume.ivol.tmp-", 0) == 0) << name;
+    left += name != "volume.ivol";
   }
+  EXPECT_GT(left, 0U) << "killed writers should have left temporary files";
+  // The next writer of the file removes them all, as nobody holds them.
+  const Dims dims{8, 8, 8};
+  std::vector<float> volume(512, 1.0F);
+  write_octree(build_octree(volume.data(), dims, BuildOptions{}).octree, Metadata{}, path, WriteOptions{});
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) EXPECT_EQ(entry.path().filename(), "volume.ivol");
+  std::filesystem::remove_all(dir);
+}
+
+// A temporary file that a live writer holds is never taken for an abandoned one.
+TEST(CrashSafety, LiveWritersKeepTheirTemporaryFiles) {
+  const std::string dir = test::temp_path("live_temporary");
+  std::filesystem::create_directories(dir);
+  const std::string path = dir + "/volume.ivol";
+  std::string held;
+  const int fd = create_locked_temporary(path, held);
+  ASSERT_GE(fd, 0);
+  std::string abandoned;
+  const int other = create_locked_temporary(path, abandoned);
+  ::close(other);  // as a killed writer's lock goes with it
+  EXPECT_EQ(remove_abandoned_temporaries(path), 1U);
+  EXPECT_TRUE(std::filesystem::exists(held));
+  EXPECT_FALSE(std::filesystem::exists(abandoned));
+  ::close(fd);
+  EXPECT_EQ(remove_abandoned_temporaries(path), 1U);
+  EXPECT_FALSE(std::filesystem::exists(held));
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

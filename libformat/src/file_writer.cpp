@@ -9,6 +9,7 @@
 
 #include "ivol/crc32c.hpp"
 #include "ivol/error.hpp"
+#include "ivol/temporary_file.hpp"
 #include "ivol/writer.hpp"
 #include "layout.hpp"
 
@@ -65,13 +66,8 @@ EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_ele
 }
 
 FileWriter::FileWriter(const std::string& path, const VolumeLayout& layout) : path_(path), layout_(layout) {
-  temp_path_ = directory_of(path) + "/." + path.substr(path.find_last_of('/') + 1) + ".tmp-XXXXXX";
-  std::vector<char> name(temp_path_.begin(), temp_path_.end());
-  name.push_back('\0');
-  fd_ = mkstemp(name.data());
-  if (fd_ < 0) io_error(path, "cannot create a temporary file in " + directory_of(path));
-  temp_path_.assign(name.data());
-  fchmod(fd_, 0644);
+  remove_abandoned_temporaries(path);  // left by writers of this file that were killed
+  fd_ = create_locked_temporary(path, temp_path_);
 
   unsigned char header[layout::kHeaderSize] = {};
   std::memcpy(header, layout::kSignature.data(), 8);
@@ -160,13 +156,13 @@ void FileWriter::finish(const Metadata& metadata, const std::vector<std::uint64_
   write_all(footer, sizeof footer, "footer");
 
   if (::fsync(fd_) != 0) io_error(path_, "cannot flush the file to disk");
-  if (::close(fd_) != 0) {
-    fd_ = -1;
-    io_error(path_, "cannot close the file");
-  }
-  fd_ = -1;
+  // Renamed while still open, so still locked: a cleaner never takes a
+  // finished file for an abandoned one. Its bytes are on disk (fsync), so
+  // closing can lose nothing.
   if (::rename(temp_path_.c_str(), path_.c_str()) != 0) io_error(path_, "cannot rename the finished file into place");
   finished_ = true;
+  ::close(fd_);
+  fd_ = -1;
   // Make the rename itself durable.
   const int dir = ::open(directory_of(path_).c_str(), O_RDONLY | O_DIRECTORY);
   if (dir >= 0) {

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "ivol/error.hpp"
+#include "ivol/temporary_file.hpp"
 
 namespace ivol::convert {
 namespace {
@@ -27,31 +28,19 @@ std::string directory_of(const std::string& path) {
 }  // namespace
 
 StagedFile::StagedFile(const std::string& final_path) : final_path_(final_path) {
-  if (final_path.empty()) throw Error(ErrorClass::InvalidArgument, "output path is empty");
-  const std::size_t slash = final_path.find_last_of('/');
-  const std::string base = slash == std::string::npos ? final_path : final_path.substr(slash + 1);
-  if (base.empty()) throw Error(ErrorClass::InvalidArgument, final_path + ": output path names a directory");
-  std::string pattern = directory_of(final_path) + "/." + base + ".tmp-XXXXXX";
-  std::vector<char> name(pattern.begin(), pattern.end());
-  name.push_back('\0');
-  const int fd = ::mkstemp(name.data());
-  if (fd < 0) io_error(final_path, "cannot create a temporary file in " + directory_of(final_path));
-  // mkstemp makes the file private (0600); an output file should be as readable as any other.
-  ::fchmod(fd, 0644);
-  ::close(fd);
-  temp_path_.assign(name.data());
+  remove_abandoned_temporaries(final_path);  // left by writers of this file that were killed
+  // Kept open, and so locked, until the file is renamed into place.
+  fd_ = create_locked_temporary(final_path, temp_path_);
 }
 
 StagedFile::~StagedFile() {
   if (!committed_) ::unlink(temp_path_.c_str());
+  if (fd_ >= 0) ::close(fd_);
 }
 
 void StagedFile::commit() {
-  const int fd = ::open(temp_path_.c_str(), O_RDONLY);
-  if (fd < 0) io_error(final_path_, "cannot reopen the finished temporary file " + temp_path_);
-  const bool synced = ::fsync(fd) == 0;
-  ::close(fd);
-  if (!synced) io_error(final_path_, "cannot flush the file to disk");
+  // fsync flushes the file, whichever descriptor the foreign library wrote through.
+  if (::fsync(fd_) != 0) io_error(final_path_, "cannot flush the file to disk");
   if (::rename(temp_path_.c_str(), final_path_.c_str()) != 0)
     io_error(final_path_, "cannot rename the finished file into place");
   committed_ = true;

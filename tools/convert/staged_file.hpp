@@ -1,6 +1,7 @@
 // A file written under a temporary name in its final directory and renamed
 // into place only when complete, so that a reader never sees a partial file
-// and a failed write leaves nothing behind. For converters whose output goes
+// and a failed write leaves nothing behind; a killed one leaves an unlocked
+// temporary that the next write of the same file removes. For converters whose output goes
 // through a foreign library (HDF5, OpenVDB) that opens files by name.
 #pragma once
 
@@ -26,6 +27,7 @@ class StagedFile {
  private:
   std::string final_path_;
   std::string temp_path_;
+  int fd_ = -1;  // holds the temporary file's lock (ivol/temporary_file.hpp)
   bool committed_ = false;
 };
 

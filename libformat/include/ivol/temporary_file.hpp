@@ -1,0 +1,28 @@
+// Temporary files next to an output. Every writer of ivol writes its output
+// under a temporary name in the output's directory, ".NAME.tmp-XXXXXX", and
+// renames it into place when complete. While it writes, it holds an
+// exclusive flock(2) on the file; the kernel drops the lock when the process
+// ends, however it ends. A writer killed outright (SIGKILL, the OOM killer)
+// cannot remove its temporary file, so the next writer of the same output
+// removes every such file that nobody holds locked.
+#pragma once
+
+#include <cstddef>
+#include <string>
+
+namespace ivol {
+
+// Creates and locks a new temporary file for `final_path` (mode 0644) and
+// returns its descriptor; `temp_path` receives its name. The file is locked
+// before it has a name where supported (O_TMPFILE), so a concurrent
+// remove_abandoned_temporaries never sees it unlocked. Throws ivol::Error
+// naming final_path on failure. Closing the descriptor releases the lock:
+// rename the file into place before closing it.
+int create_locked_temporary(const std::string& final_path, std::string& temp_path);
+
+// Removes the temporary files of `final_path` that no live writer holds.
+// Returns how many it removed. Never touches final_path itself, nor files
+// it cannot open.
+std::size_t remove_abandoned_temporaries(const std::string& final_path);
+
+}  // namespace ivol
