@@ -9,7 +9,7 @@ namespace ivol {
 namespace {
 
 constexpr std::uint64_t kPage = StructureValueWindow::kPageValues;
-constexpr std::int64_t kLoneEntryBytes = 40;  // a hash-map node and its bucket, about
+constexpr std::int64_t kTallEntryBytes = 40;  // a hash-map node and its bucket, about
 
 std::uint32_t brick_end(const Brick& b, const Dims& dims) {
   return static_cast<std::uint32_t>(
@@ -24,12 +24,12 @@ StructureValueWindow::StructureValueWindow(const VoxelStructure& structure, bool
   pages_.resize(page_count);
   page_end_.assign(page_count, 0);
   released_.assign(page_count, 0);
-  lone_by_end_.resize(std::uint64_t{structure.dims()[2]} + 1);
+  tall_by_end_.resize(std::uint64_t{structure.dims()[2]} + 1);
   // The last slice each page's values reach: a brick's values are z-major,
   // so the part of a brick in one page ends at the slice of its last value.
   const Dims& dims = structure.dims();
   for (std::uint32_t n = 0; n < structure.bricks().size(); ++n) {
-    if (lone(n)) continue;
+    if (tall(n)) continue;
     const Brick& b = structure.bricks()[n];
     const std::uint64_t plane = std::uint64_t{b.count[0]} * b.count[1];
     const std::uint64_t end = b.first_value + b.voxel_count();
@@ -45,9 +45,9 @@ StructureValueWindow::StructureValueWindow(const VoxelStructure& structure, bool
 
 StructureValueWindow::~StructureValueWindow() = default;
 
-bool StructureValueWindow::lone(std::uint32_t brick) const {
+bool StructureValueWindow::tall(std::uint32_t brick) const {
   const Brick& b = structure_.bricks()[brick];
-  return b.count[0] == 1 && b.count[1] == 1 && b.count[2] == 1;
+  return b.count[0] == 1 && b.count[1] == 1 && b.count[2] == 1 && b.voxel[2] > kTallVoxel;
 }
 
 void StructureValueWindow::note_held(std::int64_t bytes) {
@@ -56,14 +56,14 @@ void StructureValueWindow::note_held(std::int64_t bytes) {
 }
 
 float& StructureValueWindow::at(std::uint32_t brick, std::uint64_t index) {
-  if (lone(brick)) {
-    auto [it, inserted] = lone_values_.try_emplace(index, 0.0F);
+  if (tall(brick)) {
+    auto [it, inserted] = tall_values_.try_emplace(index, 0.0F);
     if (inserted) {
       const std::uint32_t end = brick_end(structure_.bricks()[brick], structure_.dims());
       if (end <= released_below_ && !keep_all_)
         throw std::logic_error("structure values: voxel " + std::to_string(index) + " written after its release");
-      lone_by_end_[end].push_back(index);
-      note_held(kLoneEntryBytes);
+      tall_by_end_[end].push_back(index);
+      note_held(kTallEntryBytes);
     }
     return it->second;
   }
@@ -79,9 +79,9 @@ float& StructureValueWindow::at(std::uint32_t brick, std::uint64_t index) {
 }
 
 float StructureValueWindow::value(std::uint32_t brick, std::uint64_t index) const {
-  if (lone(brick)) {
-    const auto it = lone_values_.find(index);
-    if (it != lone_values_.end()) return it->second;
+  if (tall(brick)) {
+    const auto it = tall_values_.find(index);
+    if (it != tall_values_.end()) return it->second;
     if (released_below_ >= brick_end(structure_.bricks()[brick], structure_.dims()))
       throw std::logic_error("structure values: voxel " + std::to_string(index) + " read after its release");
     return 0.0F;
@@ -97,11 +97,11 @@ void StructureValueWindow::release_below(std::uint32_t z) {
   if (keep_all_ || z <= released_below_) return;
   z = std::min<std::uint32_t>(z, structure_.dims()[2]);
   for (std::uint32_t end = released_below_; end <= z; ++end) {
-    for (std::uint64_t index : lone_by_end_[end]) {
-      lone_values_.erase(index);
-      note_held(-kLoneEntryBytes);
+    for (std::uint64_t index : tall_by_end_[end]) {
+      tall_values_.erase(index);
+      note_held(-kTallEntryBytes);
     }
-    std::vector<std::uint64_t>().swap(lone_by_end_[end]);
+    std::vector<std::uint64_t>().swap(tall_by_end_[end]);
   }
   released_below_ = z;
   for (std::size_t n = 0; n < live_pages_.size();) {

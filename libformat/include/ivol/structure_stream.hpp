@@ -27,14 +27,16 @@ class StructureValueSource {
   virtual void release_below(std::uint32_t z) = 0;
 };
 
-// The values of a structure that are in flight. A multi-voxel brick's values
-// live in pages of consecutive value indices (bricks are ordered by their
-// first slice, so a page covers a thin range of z); a lone voxel (one-voxel
-// brick, as most octree leaves are) lives on its own, so that a leaf 128
-// slices tall does not keep a page of other voxels alive. Memory: the values
-// of the voxels that meet the slices between the writer's position and the
-// producer's, rounded up to whole pages at both ends, plus ~40 bytes per lone
-// voxel held. Not thread-safe: one thread fills and reads it.
+// The values of a structure that are in flight. Values live in pages of
+// consecutive value indices (bricks are ordered by their first slice, so a
+// page covers a thin range of z), except those of tall lone voxels (a brick
+// of one voxel more than kTallVoxel slices tall, as the octree's large
+// leaves are): each of those lives on its own, so that a leaf 128 slices
+// tall does not keep a page of other voxels alive. Memory: the values of the
+// voxels that meet the slices between the writer's position and the
+// producer's, rounded up to whole pages at both ends (a page's voxels span
+// at most kTallVoxel slices more), plus ~40 bytes per tall voxel held. Not
+// thread-safe: one thread fills and reads it.
 class StructureValueWindow final : public StructureValueSource {
  public:
   // keep_all: never forget anything (to copy all values out at the end).
@@ -51,9 +53,10 @@ class StructureValueWindow final : public StructureValueSource {
   std::uint64_t peak_bytes() const { return peak_bytes_; }
 
   static constexpr std::uint64_t kPageValues = 16384;
+  static constexpr std::uint32_t kTallVoxel = 16;
 
  private:
-  bool lone(std::uint32_t brick) const;
+  bool tall(std::uint32_t brick) const;  // a tall lone voxel, kept outside the pages
   void note_held(std::int64_t bytes);
 
   const VoxelStructure& structure_;
@@ -62,8 +65,8 @@ class StructureValueWindow final : public StructureValueSource {
   std::vector<std::uint32_t> page_end_;  // last slice (exclusive) any value of the page covers
   std::vector<std::uint8_t> released_;   // 1 once a page has been freed
   std::vector<std::uint32_t> live_pages_;
-  std::unordered_map<std::uint64_t, float> lone_values_;
-  std::vector<std::vector<std::uint64_t>> lone_by_end_;  // lone values by the slice they end at
+  std::unordered_map<std::uint64_t, float> tall_values_;
+  std::vector<std::vector<std::uint64_t>> tall_by_end_;  // lone values by the slice they end at
   std::uint32_t released_below_ = 0;
   std::uint64_t held_bytes_ = 0;
   std::uint64_t peak_bytes_ = 0;
