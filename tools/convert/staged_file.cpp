@@ -39,8 +39,14 @@ StagedFile::~StagedFile() {
 }
 
 void StagedFile::commit() {
-  // fsync flushes the file, whichever descriptor the foreign library wrote through.
-  if (::fsync(fd_) != 0) io_error(final_path_, "cannot flush the file to disk");
+  // Reopened by name: a caller may have renamed another finished file onto
+  // the temporary name (outputs staged together, each written through its
+  // own staged file), and that is the file to flush.
+  const int fd = ::open(temp_path_.c_str(), O_RDONLY);
+  if (fd < 0) io_error(final_path_, "cannot reopen the finished temporary file " + temp_path_);
+  const bool synced = ::fsync(fd) == 0;
+  ::close(fd);
+  if (!synced) io_error(final_path_, "cannot flush the file to disk");
   if (::rename(temp_path_.c_str(), final_path_.c_str()) != 0)
     io_error(final_path_, "cannot rename the finished file into place");
   committed_ = true;
