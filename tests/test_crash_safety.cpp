@@ -66,15 +66,17 @@ TEST(CrashSafety, KilledWritersLeaveOnlyCompleteFiles) {
     EXPECT_GE(last_generation, 1.0);
   }
   EXPECT_GT(complete_seen, 50) << "most trials should find a complete file";
-  // Killed writers leave their temporary files behind (named .volume.ivol.tmp-*),
-  // never anything at the target path.
+  // Killed writers leave their temporary files behind (named
+  // .volume.ivol.tmp-*), never anything at the target path.
   std::size_t left = 0;
   for (const auto& entry : std::filesystem::directory_iterator(dir)) {
     const std::string name = entry.path().filename();
     EXPECT_TRUE(name == "volume.ivol" || name.rfind(".volume.ivol.tmp-", 0) == 0) << name;
     left += name != "volume.ivol";
   }
-  EXPECT_GT(left, 0U) << "killed writers should have left temporary files";
+  // Each writer removed what the writers killed before it left: at most the
+  // last one's temporary file remains.
+  EXPECT_LE(left, 1U);
   // The next writer of the file removes them all, as nobody holds them.
   const Dims dims{8, 8, 8};
   std::vector<float> volume(512, 1.0F);

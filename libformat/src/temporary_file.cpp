@@ -3,7 +3,6 @@
 
 #include <dirent.h>
 #include <fcntl.h>
-#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -35,6 +34,17 @@ std::string temporary_prefix(const std::string& final_path) { return "." + base_
   throw Error(ErrorClass::Io, path + ": " + what + ": " + std::strerror(errno));
 }
 
+// Open-file-description locks (Linux fcntl F_OFD_SETLK): held by this
+// descriptor alone, not dropped when the process closes another descriptor
+// of the file, and independent of flock(2), which libraries writing into
+// the file by name (HDF5) take themselves.
+bool lock_whole_file(int fd, short type) {
+  struct flock lock {};
+  lock.l_type = type;
+  lock.l_whence = SEEK_SET;
+  return ::fcntl(fd, F_OFD_SETLK, &lock) == 0;
+}
+
 std::string random_suffix(std::mt19937_64& rng) {
   static const char kLetters[] = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789";
   std::string s(6, 'x');
@@ -48,7 +58,7 @@ int create_unnamed_then_link(const std::string& final_path, std::string& temp_pa
   const std::string directory = directory_of(final_path);
   const int fd = ::open(directory.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0644);
   if (fd < 0) return -1;  // not supported here: the caller falls back
-  if (::flock(fd, LOCK_EX) != 0) {
+  if (!lock_whole_file(fd, F_WRLCK)) {
     ::close(fd);
     io_error(final_path, "cannot lock a temporary file in " + directory);
   }
@@ -87,7 +97,7 @@ int create_locked_temporary(const std::string& final_path, std::string& temp_pat
   name.push_back('\0');
   const int fd = ::mkstemp(name.data());
   if (fd < 0) io_error(final_path, "cannot create a temporary file in " + directory_of(final_path));
-  if (::flock(fd, LOCK_EX) != 0) {
+  if (!lock_whole_file(fd, F_WRLCK)) {
     ::unlink(name.data());
     ::close(fd);
     io_error(final_path, "cannot lock a temporary file in " + directory_of(final_path));
@@ -115,8 +125,8 @@ std::size_t remove_abandoned_temporaries(const std::string& final_path) {
     const int fd = ::open(path.c_str(), O_RDONLY | O_NOFOLLOW | O_CLOEXEC | O_NONBLOCK);
     if (fd < 0) continue;
     struct stat st {};
-    // Holding the lock while unlinking: a live writer could not have it.
-    if (::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && ::flock(fd, LOCK_EX | LOCK_NB) == 0 &&
+    // Holding a read lock while unlinking: no live writer holds its write lock.
+    if (::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && lock_whole_file(fd, F_RDLCK) &&
         ::unlink(path.c_str()) == 0)
       ++removed;
     ::close(fd);

@@ -1,8 +1,9 @@
 // Temporary files next to an output. Every writer of ivol writes its output
 // under a temporary name in the output's directory, ".NAME.tmp-XXXXXX", and
-// renames it into place when complete. While it writes, it holds an
-// exclusive flock(2) on the file; the kernel drops the lock when the process
-// ends, however it ends. A writer killed outright (SIGKILL, the OOM killer)
+// renames it into place when complete. While it writes, it holds a write
+// lock on the file (an open-file-description lock, fcntl F_OFD_SETLK, which
+// leaves flock(2) free for libraries such as HDF5 that lock the file they
+// write); the kernel drops the lock when the process ends, however it ends. A writer killed outright (SIGKILL, the OOM killer)
 // cannot remove its temporary file, so the next writer of the same output
 // removes every such file that nobody holds locked.
 #pragma once
