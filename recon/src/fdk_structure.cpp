@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <stdexcept>
+#include <unordered_map>
 
 #include "fdk_session.hpp"
 #include "ivol/structure_stream.hpp"
@@ -17,10 +18,14 @@ static_assert(sizeof(CoarseTask) == 32, "CoarseTask must match kernels/recon_lay
 constexpr std::uint32_t kDepth = IVOL_BACKPROJECT_DEPTH;
 constexpr std::uint32_t kRun = IVOL_FINE_RUN;
 
-// Where a block task's sample points lie in its brick.
+constexpr std::uint32_t kNone = UINT32_MAX;
+
+// Where a block task's sample points lie in its brick, or in a stack of two.
 struct BlockRef {
   std::uint32_t brick;
-  std::uint32_t mi, mj, mk;  // the block's first sample on the brick's lattice
+  std::uint32_t mi, mj, mk;     // the block's first sample on the brick's lattice
+  std::uint32_t upper = kNone;  // the brick stacked on top, whose points follow along k
+  std::uint32_t split = 0;      // the lower brick's points along k
 };
 
 // Sample points per voxel along an axis: the voxel's centre when it is one
@@ -28,6 +33,17 @@ struct BlockRef {
 std::uint32_t points_per_voxel(std::uint32_t edge) { return edge > 1 ? 2 : 1; }
 
 bool is_lone(const Brick& b) { return b.count[0] == 1 && b.count[1] == 1 && b.count[2] == 1; }
+bool is_fine(const Brick& b) { return b.voxel[0] == 1 && b.voxel[1] == 1 && b.voxel[2] == 1; }
+
+// Two full-resolution bricks of the same footprint, one on top of the other,
+// both thinner than a block's depth: backprojected as one brick, they fill a
+// block's lanes instead of half of them (the octree's 4³ bricks along a
+// surface, as a 1/4 preview's need mask makes them).
+Brick stacked(const Brick& lower, const Brick& upper) {
+  Brick both = lower;
+  both.count[2] += upper.count[2];
+  return both;
+}
 
 // A brick's sample points as blocks of kRun × kDepth points: voxel centres,
 // or octant centres of voxels wider than one along an axis. Lanes per row are
@@ -82,12 +98,39 @@ struct SlabOf {
 // its voxels (a voxel's value is final once its slab is delivered).
 struct SlabIndex {
   std::vector<std::vector<std::uint32_t>> bricks;
+  std::vector<std::uint32_t> upper;    // per brick: the brick stacked on it, or kNone
+  std::vector<std::uint8_t> is_upper;  // per brick: 1 if stacked on another (its tasks are that one's)
   std::vector<double> k_low, k_high;
   std::vector<std::uint32_t> z_low;
   // After slab s is delivered, every voxel starting below complete_below[s]
   // is final.
   std::vector<std::uint32_t> complete_below;
 };
+
+// Pairs thin full-resolution bricks with the one on top of them (bricks are
+// visited bottom first in every structure's order, by their first slice).
+void stack_thin_bricks(const std::vector<Brick>& bricks, SlabIndex& x) {
+  x.upper.assign(bricks.size(), kNone);
+  x.is_upper.assign(bricks.size(), 0);
+  auto key = [](std::uint64_t i, std::uint64_t j, std::uint64_t k) { return (k << 42) | (j << 21) | i; };
+  auto thin = [](const Brick& b) { return is_fine(b) && b.count[2] < kDepth; };
+  std::unordered_map<std::uint64_t, std::uint32_t> thin_at;
+  for (std::uint32_t n = 0; n < bricks.size(); ++n)
+    if (thin(bricks[n])) thin_at.emplace(key(bricks[n].origin[0], bricks[n].origin[1], bricks[n].origin[2]), n);
+  for (std::uint32_t n = 0; n < bricks.size(); ++n) {
+    const Brick& b = bricks[n];
+    if (!thin(b) || x.is_upper[n] || x.upper[n] != kNone) continue;
+    const auto found = thin_at.find(key(b.origin[0], b.origin[1], std::uint64_t{b.origin[2]} + b.count[2]));
+    if (found == thin_at.end()) continue;
+    const std::uint32_t u = found->second;
+    const Brick& top = bricks[u];
+    if (x.is_upper[u] || x.upper[u] != kNone || top.count[0] != b.count[0] || top.count[1] != b.count[1] ||
+        b.count[2] + top.count[2] > kDepth)
+      continue;
+    x.upper[n] = u;
+    x.is_upper[u] = 1;
+  }
+}
 
 SlabIndex index_slabs(const VoxelStructure& structure, const SlabOf& slab_of) {
   SlabIndex x;
@@ -97,8 +140,10 @@ SlabIndex index_slabs(const VoxelStructure& structure, const SlabOf& slab_of) {
   x.k_high.assign(count, -1e300);
   x.z_low.assign(count, UINT32_MAX);
   const std::vector<Brick>& bricks = structure.bricks();
+  stack_thin_bricks(bricks, x);
   for (std::uint32_t index = 0; index < bricks.size(); ++index) {
-    const Brick& b = bricks[index];
+    if (x.is_upper[index]) continue;
+    const Brick b = x.upper[index] == kNone ? bricks[index] : stacked(bricks[index], bricks[x.upper[index]]);
     auto note = [&](std::size_t s, double k_low, double k_high, std::uint32_t z) {
       if (x.bricks[s].empty() || x.bricks[s].back() != index) x.bricks[s].push_back(index);
       x.k_low[s] = std::min(x.k_low[s], k_low);
@@ -145,7 +190,8 @@ SlabTasks tasks_of_slab(const VoxelStructure& structure, const SlabIndex& index,
   SlabTasks s;
   const std::vector<Brick>& bricks = structure.bricks();
   for (std::uint32_t n : index.bricks[slab]) {
-    const Brick& b = bricks[n];
+    const std::uint32_t upper = index.upper[n];
+    const Brick b = upper == kNone ? bricks[n] : stacked(bricks[n], bricks[upper]);
     // Lone voxels, coarse ones and the single full-resolution voxels an
     // octree leaves at the object's edge, take a work-item each: in a block
     // they would fill one of its 128 lanes. (A fine one's centre sample goes
@@ -180,7 +226,7 @@ SlabTasks tasks_of_slab(const VoxelStructure& structure, const SlabIndex& index,
           t.run_i = lattice.run_i;
           t.count = along_i | (along_j << 8) | (along_k << 16);
           s.blocks.push_back(t);
-          s.block_refs.push_back(BlockRef{n, mi, mj, mk});
+          s.block_refs.push_back(BlockRef{n, mi, mj, mk, upper, bricks[n].count[2]});
         }
     }
   }
@@ -208,10 +254,15 @@ void deliver(const VoxelStructure& structure, const SlabTasks& t, const std::vec
     const std::uint64_t plane = row * b.count[1];
     for (std::uint32_t d = 0; d < along_k; ++d) {
       const float* from = &sums[(n * kDepth + d) * kRun];
+      // A stack's upper points go to the upper brick (same footprint, fine).
+      const bool up = ref.upper != kNone && ref.mk + d >= ref.split;
+      const std::uint32_t brick = up ? ref.upper : ref.brick;
+      const std::uint64_t first = up ? bricks[ref.upper].first_value : b.first_value;
+      const std::uint32_t mk = up ? ref.mk + d - ref.split : ref.mk + d;
       for (std::uint32_t y = 0; y < along_j; ++y) {
-        const std::uint64_t base = b.first_value + (ref.mk + d) / per_k * plane + (ref.mj + y) / per_j * row;
+        const std::uint64_t base = first + mk / per_k * plane + (ref.mj + y) / per_j * row;
         for (std::uint32_t x = 0; x < along_i; ++x) {
-          float& value = values.at(ref.brick, base + (ref.mi + x) / per_i);
+          float& value = values.at(brick, base + (ref.mi + x) / per_i);
           const float sum = from[y * task.run_i + x];
           value = fine ? sum : value + weight * sum;
         }
