@@ -11,6 +11,10 @@ packages=(
   hdf5-tools python3-h5py libopenvdb-tools libtiff-tools
   python3 python3-numpy python3-zstandard python3-tifffile
   ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers pocl-opencl-icd clinfo libpugixml-dev
+  # mpirun ivol recon: distributed reconstruction (docs/distributed.md)
+  libopenmpi-dev openmpi-bin
+  # bench/run_peers.sh: HDF5's blosc filter, the zstd CLI, plots
+  hdf5-filter-plugin-blosc-serial zstd python3-matplotlib
 )
 
 missing=()

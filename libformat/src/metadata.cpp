@@ -1,6 +1,7 @@
 #include "ivol/metadata.hpp"
 
 #include <cmath>
+#include <cstdlib>
 #include <ctime>
 #include <set>
 #include <vector>
@@ -50,7 +51,12 @@ const char* library_version() { return IVOL_VERSION_STRING; }
 
 json default_provenance() {
   char created[32];
-  const std::time_t now = std::time(nullptr);
+  std::time_t now = std::time(nullptr);
+  if (const char* epoch = std::getenv("SOURCE_DATE_EPOCH")) {
+    char* end = nullptr;
+    const long long seconds = std::strtoll(epoch, &end, 10);
+    if (end != epoch && *end == '\0' && seconds >= 0) now = static_cast<std::time_t>(seconds);
+  }
   std::tm utc{};
   gmtime_r(&now, &utc);
   std::strftime(created, sizeof created, "%Y-%m-%dT%H:%M:%SZ", &utc);

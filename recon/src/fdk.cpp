@@ -151,7 +151,8 @@ FdkReport FdkReconstructor::reconstruct(const VolumeGrid& grid, const SlabSink& 
           const SlabRange bounds = slab_bounds(s);
           sink(bounds.first, bounds.end, data.data());
           report.timings.delivery += seconds_since(delivered);
-        });
+        },
+        m.options.exchange.get(), plan.slices);
   } catch (...) {
     m.problem.grid = nullptr;
     throw;
@@ -159,7 +160,15 @@ FdkReport FdkReconstructor::reconstruct(const VolumeGrid& grid, const SlabSink& 
   m.problem.grid = nullptr;
 
   m.add_timings_since(before, report.timings);
-  report.voxel_updates = std::uint64_t{grid.size[0]} * grid.size[1] * (k_end - k_begin) * m.geometry.view_count();
+  // What this process backprojected: all slices, or its own slabs' when distributed.
+  std::uint64_t slices = k_end - k_begin;
+  if (m.options.exchange && m.options.exchange->size() > 1) {
+    slices = 0;
+    for (std::size_t s = 0; s < slab_count; ++s)
+      if (m.options.exchange->owner(s, slab_count) == m.options.exchange->rank())
+        slices += slab_bounds(s).end - slab_bounds(s).first;
+  }
+  report.voxel_updates = std::uint64_t{grid.size[0]} * grid.size[1] * slices * m.geometry.view_count();
   report.timings.total = constructor_setup + seconds_since(start);
   return report;
 }

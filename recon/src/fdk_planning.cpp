@@ -2,6 +2,7 @@
 #include <atomic>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 #include <thread>
 
 #include "fdk_session.hpp"
@@ -102,6 +103,11 @@ SlabPlan plan_slabs(const FdkProblem& problem, const std::vector<detail::DeviceH
   };
   std::uint32_t high = range.end - range.first;
   if (options.max_slab_slices > 0) high = std::min(high, options.max_slab_slices);
+  // Distributed: at least one slab per rank, or some ranks would idle.
+  if (options.exchange && options.exchange->size() > 1) {
+    const auto ranks = static_cast<std::uint32_t>(options.exchange->size());
+    high = std::min(high, std::max(1U, (range.end - range.first + ranks - 1) / ranks));
+  }
   SlabPlan plan;
   if (fits(high, plan, true)) return plan;
   std::uint32_t low = 1;
@@ -168,21 +174,45 @@ class SlabQueue {
   std::exception_ptr error_;
 };
 
+std::string message_of(const std::exception_ptr& error) {
+  try {
+    std::rethrow_exception(error);
+  } catch (const std::exception& e) {
+    return e.what();
+  } catch (...) {
+    return "an unknown error";
+  }
+}
+
 }  // namespace
 
 void for_each_slab(const std::vector<FdkDevice*>& devices, std::size_t count,
                    const std::function<void(FdkDevice&, std::size_t, std::vector<float>&)>& produce,
-                   const std::function<void(std::size_t, std::vector<float>&)>& consume) {
+                   const std::function<void(std::size_t, std::vector<float>&)>& consume, SlabExchange* exchange,
+                   std::uint32_t slab_slices) {
+  const bool distributed = exchange != nullptr && exchange->size() > 1;
+  const int rank = distributed ? exchange->rank() : 0;
+  // The slabs this process produces, in increasing order; the queue holds
+  // them by their position in this list, so that a rank's memory stays
+  // bounded whatever the other ranks own.
+  std::vector<std::size_t> mine;
+  if (distributed) {
+    exchange->agree(slab_slices, "the slab thickness in slices");
+    exchange->agree(count, "the number of slabs");
+  }
+  for (std::size_t s = 0; s < count; ++s)
+    if (!distributed || exchange->owner(s, count) == rank) mine.push_back(s);
+
   SlabQueue queue(devices.size() + 1);
-  std::atomic<std::size_t> next_slab{0};
+  std::atomic<std::size_t> next_position{0};
   std::vector<std::thread> workers;
   for (FdkDevice* device : devices) {
     workers.emplace_back([&, device] {
       try {
-        for (std::size_t s = next_slab++; s < count; s = next_slab++) {
+        for (std::size_t n = next_position++; n < mine.size(); n = next_position++) {
           std::vector<float> data;
-          produce(*device, s, data);
-          queue.put(s, std::move(data));
+          produce(*device, mine[n], data);
+          queue.put(n, std::move(data));
         }
       } catch (const cl::Error& error) {
         queue.fail(std::make_exception_ptr(std::runtime_error("FDK on " + device->name() + ": " + describe(error))));
@@ -194,17 +224,38 @@ void for_each_slab(const std::vector<FdkDevice*>& devices, std::size_t count,
   std::exception_ptr failure;
   try {
     std::vector<float> data;
-    for (std::size_t s = 0; s < count; ++s) {
-      if (!queue.take(s, data)) break;
-      consume(s, data);
+    if (!distributed) {
+      for (std::size_t s = 0; s < count; ++s) {
+        if (!queue.take(s, data)) break;
+        consume(s, data);
+      }
+    } else if (rank == 0) {
+      std::size_t position = 0;
+      for (std::size_t s = 0; s < count; ++s) {
+        const int from = exchange->owner(s, count);
+        if (from == 0) {
+          if (!queue.take(position++, data)) break;
+        } else {
+          exchange->receive(s, from, data);
+        }
+        consume(s, data);
+      }
+    } else {
+      for (std::size_t n = 0; n < mine.size(); ++n) {
+        if (!queue.take(n, data)) break;
+        exchange->send(mine[n], data);
+      }
     }
   } catch (...) {
     failure = std::current_exception();
     queue.fail(failure);
   }
   for (std::thread& t : workers) t.join();
-  if (failure) std::rethrow_exception(failure);
-  if (std::exception_ptr error = queue.error()) std::rethrow_exception(error);
+  if (!failure) failure = queue.error();
+  if (!failure) return;
+  // Rank 0 waits for this rank's slabs: tell it why none will come.
+  if (distributed && rank != 0) exchange->report_failure(message_of(failure));
+  std::rethrow_exception(failure);
 }
 
 }  // namespace ivol::recon::detail

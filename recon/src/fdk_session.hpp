@@ -42,9 +42,14 @@ SlabPlan plan_slabs(const FdkProblem& problem, const std::vector<DeviceHandle>& 
 // Runs produce(device, s, data) for s = 0 .. count − 1 on all devices at
 // once, and consume(s, data) on the calling thread in increasing s; at most
 // one slab per device waits to be consumed, which bounds host memory.
+// With an exchange, the ranks first agree on `slab_slices` and `count`; this
+// rank produces only the slabs it owns, rank 0 consumes all of them (the
+// others' through the exchange) and the other ranks consume none: they send
+// theirs. The exchange is used from the calling thread only.
 void for_each_slab(const std::vector<FdkDevice*>& devices, std::size_t count,
                    const std::function<void(FdkDevice&, std::size_t, std::vector<float>&)>& produce,
-                   const std::function<void(std::size_t, std::vector<float>&)>& consume);
+                   const std::function<void(std::size_t, std::vector<float>&)>& consume,
+                   SlabExchange* exchange = nullptr, std::uint32_t slab_slices = 0);
 
 }  // namespace ivol::recon::detail
 

@@ -334,7 +334,9 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
         [&](detail::FdkDevice& device, std::size_t s, std::vector<float>& sums) {
           auto made = std::make_unique<SlabTasks>(tasks_of_slab(structure, index, slab_of, s));
           device.reconstruct_tasks(bands[s], made->blocks, {&made->centres, &made->octants}, sums);
-          tasks[s] = std::move(made);  // read by the delivering thread after the slab's hand-over
+          // Read by the delivering thread after the slab's hand-over (with an
+          // exchange, only rank 0 delivers; the others send the sums).
+          if (!m.options.exchange || m.options.exchange->rank() == 0) tasks[s] = std::move(made);
         },
         [&](std::size_t s, std::vector<float>& sums) {
           const auto delivery_start = std::chrono::steady_clock::now();
@@ -345,7 +347,8 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
           t.reset();
           if (progress) progress(index.complete_below[s]);
           delivering += detail::seconds_since(delivery_start);
-        });
+        },
+        m.options.exchange.get(), plan.slices);
   } catch (...) {
     m.problem.grid = nullptr;
     throw;

@@ -36,6 +36,9 @@ Preview reconstruct_preview(ProjectionSource& projections, const ScanGeometry& g
   reconstructor.reconstruct(coarse, [&](std::uint32_t k0, std::uint32_t k1, const float* data) {
     std::copy(data, data + (k1 - k0) * slice, preview.values.begin() + static_cast<std::ptrdiff_t>(k0 * slice));
   });
+  // Distributed, only rank 0 received the preview; every rank needs it to
+  // generate the same structure.
+  if (options.exchange && options.exchange->size() > 1) options.exchange->broadcast(preview.values);
   preview.otsu_threshold = otsu_threshold(preview.values.data(), preview.values.size());
   preview.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return preview;

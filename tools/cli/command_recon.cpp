@@ -13,6 +13,7 @@
 #include "ivol/structure_stream.hpp"
 #include "ivol/structures.hpp"
 #include "ivol_io.hpp"
+#include "mpi_exchange.hpp"
 #include "option_parsing.hpp"
 #include "recon_slabs.hpp"
 #include "report.hpp"
@@ -31,6 +32,7 @@ struct ReconSettings {
   double cutoff = 1.0;
   std::vector<int> devices;
   std::uint64_t device_memory_mib = 0;
+  std::uint32_t slab_slices = 0;
   std::string encoding = "binary16";
   std::string keep;
   std::string structure;
@@ -110,6 +112,12 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   metadata.voxel_size = grid.voxel_size;
   metadata.origin = grid.origin;
   metadata.unit = "mm";
+  if (fdk_options.exchange && fdk_options.exchange->rank() != 0) {
+    // A rank of a distributed run other than 0: its slabs go to rank 0, which writes and reports.
+    StructureValueWindow unused(*structure);
+    reconstructor.reconstruct_structure(grid, *structure, unused, {});
+    return kExitOk;
+  }
   StreamingOptions options;
   options.build.encoding = parse_encoding(s.encoding);
   options.slab_budget_bytes = (s.memory_mib << 20) / 4;
@@ -164,6 +172,31 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   return kExitOk;
 }
 
+// Each rank's share of a distributed run (docs/distributed.md).
+nlohmann::json ranks_json(const std::vector<RankStats>& ranks) {
+  nlohmann::json list = nlohmann::json::array();
+  for (std::size_t r = 0; r < ranks.size(); ++r) {
+    const RankStats& k = ranks[r];
+    const double gups = k.backprojection > 0 ? static_cast<double>(k.voxel_updates) / k.backprojection * 1e-9 : 0.0;
+    list.push_back({{"rank", r},
+                    {"seconds", k.seconds},
+                    {"backprojection_seconds", k.backprojection},
+                    {"gups", gups},
+                    {"slabs_sent", k.slabs_sent},
+                    {"bytes_sent", k.bytes_sent},
+                    {"bytes_received", k.bytes_received}});
+  }
+  return list;
+}
+
+void print_ranks(const std::vector<RankStats>& ranks) {
+  std::cerr << std::fixed << std::setprecision(2) << "ivol recon: " << ranks.size() << " ranks:";
+  for (std::size_t r = 0; r < ranks.size(); ++r)
+    std::cerr << (r ? ";" : "") << " rank " << r << " " << ranks[r].seconds << " s, sent "
+              << human_bytes(ranks[r].bytes_sent) << " (" << ranks[r].slabs_sent << " slabs)";
+  std::cerr << "\n";
+}
+
 }  // namespace
 
 Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
@@ -185,6 +218,9 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       ->capture_default_str();
   fdk->add_option("--device", s->devices, "OpenCL device index (see ivol devices); repeat for several");
   fdk->add_option("--device-memory", s->device_memory_mib, "MiB of device memory to use (default: 80 % of it)");
+  fdk->add_option("--slab-slices", s->slab_slices,
+                  "Most slices per slab (default: as many as fit the device; under mpirun, at most the volume's "
+                  "depth over the ranks)");
   auto* out = cmd->add_option_group("output");
   out->add_option("--encoding", s->encoding, "binary16 or float32")
       ->check(CLI::IsMember({"binary16", "float32"}))
@@ -212,7 +248,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
   out->add_option("--memory", s->memory_mib, "About how many MiB the writer may hold")->capture_default_str();
   cmd->add_flag("--json", s->json, "Print the report as JSON on stdout");
 
-  return [s, &global]() {
+  // mpi: this process is one rank of a distributed run (mpirun), or null.
+  auto run = [s, &global](MpiRun* mpi) {
     const auto start = std::chrono::steady_clock::now();
     if (std::filesystem::exists(s->output) && !s->force)
       throw Error(ErrorClass::InvalidArgument, s->output + ": exists (use --force to replace it)");
@@ -223,9 +260,14 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     options.cutoff = s->cutoff;
     options.devices = s->devices;
     options.device_memory_limit = s->device_memory_mib << 20;
+    options.max_slab_slices = s->slab_slices;
+    if (mpi) options.exchange = mpi->exchange();
+    // Distributed, rank 0 writes the file and reports; the others only reconstruct.
+    const bool root = !mpi || mpi->rank() == 0;
+    const bool quiet = global.quiet || !root;
     recon::FdkReconstructor reconstructor(*scan.projections, scan.geometry, options);
     for (const std::string& w : reconstructor.warnings())
-      if (!global.quiet) std::cerr << "ivol recon: warning: " << w << "\n";
+      if (!quiet) std::cerr << "ivol recon: warning: " << w << "\n";
 
     convert::ImportOptions import;
     import.encoding = parse_encoding(s->encoding);
@@ -263,18 +305,54 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     }
     m.quantity = "linear_attenuation";
     m.value_unit = "1/mm";
-    import.progress = progress_bar("ivol recon", global.quiet || s->json);
+    import.progress = progress_bar("ivol recon", quiet || s->json);
 
     if (!s->structure.empty()) {
       if (!s->keep.empty())
         throw Error(ErrorClass::InvalidArgument, "--keep and --structure: choose one (--structure uses --threshold)");
-      return run_structure(*s, global, grid, options, scan, reconstructor, import.metadata, start);
+      if (mpi && root) mpi->remove_temporaries_on_signal(s->output);
+      const int status = run_structure(*s, global, grid, options, scan, reconstructor, import.metadata, start);
+      if (mpi) {
+        RankStats mine;
+        mine.seconds = seconds_since(start);
+        const std::vector<RankStats> ranks = mpi->gather(mine);
+        if (root && !global.quiet && !s->json) print_ranks(ranks);
+      }
+      return status;
     }
-    convert::ReconstructionSlabs slabs(reconstructor, grid);
-    const convert::ImportReport written = convert::import_to_ivol(slabs, s->output, import);
-    const recon::FdkTimings& t = slabs.timings();
+    convert::ImportReport written;
+    recon::FdkTimings t;
+    double gups = 0.0;
+    double reconstruction = 0.0;
+    double writing = 0.0;
+    std::vector<RankStats> ranks;
+    if (!mpi) {
+      convert::ReconstructionSlabs slabs(reconstructor, grid);
+      written = convert::import_to_ivol(slabs, s->output, import);
+      t = slabs.timings();
+      gups = slabs.gups();
+      reconstruction = slabs.read_seconds();
+      writing = written.seconds - slabs.read_seconds();
+    } else {
+      // Distributed: one reconstruction of the whole grid, cut the same way
+      // on every rank; rank 0 writes while its slabs and the others' arrive.
+      if (root) mpi->remove_temporaries_on_signal(s->output);
+      const convert::StreamedReconstruction streamed =
+          convert::reconstruct_to_ivol(reconstructor, grid, s->output, import, root);
+      RankStats mine;
+      mine.seconds = seconds_since(start);
+      mine.backprojection = streamed.fdk.timings.backprojection;
+      mine.voxel_updates = streamed.fdk.voxel_updates;
+      ranks = mpi->gather(mine);
+      if (!root) return kExitOk;
+      written = streamed.written;
+      t = streamed.fdk.timings;
+      for (const RankStats& k : ranks)
+        if (k.backprojection > 0) gups += static_cast<double>(k.voxel_updates) / k.backprojection * 1e-9;
+      reconstruction = t.total;
+      writing = written.seconds - streamed.writer_waiting;
+    }
     const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    const double writing = written.seconds - slabs.read_seconds();
     nlohmann::json report = {{"output", s->output},
                              {"size", {grid.size[0], grid.size[1], grid.size[2]}},
                              {"voxel_mm", s->voxel},
@@ -282,7 +360,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
                              {"devices", reconstructor.device_names()},
                              {"file_bytes", written.file_bytes},
                              {"kept_voxels", written.kept_voxels},
-                             {"gups", slabs.gups()},
+                             {"gups", gups},
                              {"seconds",
                               {{"total", total},
                                {"preview", preview_seconds},
@@ -290,19 +368,30 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
                                {"filtering", t.filtering},
                                {"backprojection", t.backprojection},
                                {"transfer", t.transfer},
-                               {"reconstruction", slabs.read_seconds()},
+                               {"reconstruction", reconstruction},
                                {"writing", writing}}}};
     if (import.keep) report["threshold"] = import.keep->threshold;
+    if (mpi) report["ranks"] = ranks_json(ranks);
     if (s->json) {
       std::cout << report.dump(2) << "\n";
     } else if (!global.quiet) {
       std::cerr << std::fixed << std::setprecision(2) << "ivol recon: " << grid.size[0] << "x" << grid.size[1] << "x"
                 << grid.size[2] << " voxels from " << scan.geometry.view_count() << " views on "
                 << reconstructor.device_names().front() << " in " << total << " s (filtering " << t.filtering
-                << " s, backprojection " << t.backprojection << " s = " << slabs.gups() << " GUPS, writing " << writing
+                << " s, backprojection " << t.backprojection << " s = " << gups << " GUPS, writing " << writing
                 << " s); " << s->output << ": " << human_bytes(written.file_bytes) << "\n";
+      if (mpi) print_ranks(ranks);
     }
     return kExitOk;
+  };
+  return [run]() {
+    if (!MpiRun::launched()) return run(nullptr);
+    MpiRun mpi;
+    try {
+      return run(&mpi);
+    } catch (const std::exception& e) {
+      mpi.fail(e);  // ends every rank; rank 0's temporary file went as the error unwound
+    }
   };
 }
 

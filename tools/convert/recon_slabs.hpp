@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "ivol/recon/fdk.hpp"
+#include "ivol_io.hpp"
 #include "slab_io.hpp"
 
 namespace ivol::convert {
@@ -37,5 +38,23 @@ class ReconstructionSlabs final : public SlabReader {
   std::uint32_t cache_first_ = 0;
   std::vector<float> cache_;  // the last read's slices
 };
+
+struct StreamedReconstruction {
+  recon::FdkReport fdk;
+  ImportReport written;  // when written
+  // Seconds the writer waited for slices; the rest of written.seconds is
+  // the writer's own work.
+  double writer_waiting = 0.0;
+};
+
+// The whole grid in one reconstruction on the calling thread, written by
+// import_to_ivol on a second thread as the slabs arrive (in z order; the
+// writer holds its slab and margin, the FDK at most one slab ahead of it).
+// For a distributed reconstruction: every rank's slabs are cut from one
+// plan, and the exchange's messages stay on the calling thread. With
+// `write` false (the ranks other than 0), nothing is written and the sink
+// must never be called.
+StreamedReconstruction reconstruct_to_ivol(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid,
+                                           const std::string& path, const ImportOptions& options, bool write);
 
 }  // namespace ivol::convert

@@ -27,7 +27,9 @@ struct Metadata {
 };
 
 // The provenance entries ivol writes by default: software name and version,
-// creation time (RFC 3339, UTC).
+// creation time (RFC 3339, UTC): now, or SOURCE_DATE_EPOCH's seconds when
+// that is set (reproducible-builds.org), so that a file can be made again
+// byte for byte.
 nlohmann::json default_provenance();
 const char* library_version();
 

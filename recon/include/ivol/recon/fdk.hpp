@@ -18,6 +18,7 @@
 
 #include "ivol/recon/geometry.hpp"
 #include "ivol/recon/projections.hpp"
+#include "ivol/recon/slab_exchange.hpp"
 #include "ivol/structure_stream.hpp"
 #include "ivol/structures.hpp"
 
@@ -45,6 +46,11 @@ struct FdkOptions {
   // Keep the FFT scratch in global memory even where local memory would do
   // (for testing the path long detectors take on GPUs).
   bool fft_in_global_memory = false;
+  // With an exchange, this process is one rank of a distributed
+  // reconstruction (slab_exchange.hpp): it reconstructs only the slabs it
+  // owns, and only rank 0's sink (or structure) receives the volume. Slabs
+  // are cut thin enough that every rank gets at least one.
+  std::shared_ptr<SlabExchange> exchange;
 };
 
 // Where the time went, in seconds of wall clock (phases overlap between

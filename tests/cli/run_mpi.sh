@@ -1,0 +1,133 @@
+#!/usr/bin/env bash
+# ivol recon under mpirun (docs/distributed.md): 2 and 4 ranks on this one
+# machine must give the single process's file byte for byte (dense, --keep
+# otsu with its distributed preview, --structure octree and nested), and a
+# rank that fails must end the whole run with its message, a non-zero exit
+# and nothing left behind. $IVOL is the binary under test, $MPIEXEC mpirun.
+set -u
+: "${IVOL:?set IVOL to the ivol binary}"
+: "${MPIEXEC:?set MPIEXEC to mpirun}"
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1  # CI runs as root
+export OMPI_MCA_btl=self,vader                                   # one machine: shared memory only
+export SOURCE_DATE_EPOCH=1700000000                              # the same "created" in every file
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+passed=0
+failed=0
+ok() { echo "ok   $1"; passed=$((passed + 1)); }
+fail() {
+  echo "FAIL $1"
+  [ -f "$work/log" ] && sed 's/^/    /' "$work/log" | head -20
+  failed=$((failed + 1))
+}
+# No output file and no temporary of it.
+nothing_left() { ! ls -A "$work" | grep -q -e "^$1\$" -e "^\.$1\.tmp-"; }
+
+"$IVOL" -q phantom shepp-logan --views 24 --detector 48 --radius 20 -o "$work/p.h5" || {
+  echo "FAIL phantom"
+  exit 1
+}
+recon=("$IVOL" -q recon p.h5 --geometry "$work/p.xml" --pitch 1.835 --size 24 --voxel 1.6)
+cd "$work" || exit 1
+modes=(dense keep octree nested)
+declare -A mode_args=([dense]="" [keep]="--keep threshold=otsu,margin=2" [octree]="--structure octree"
+  [nested]="--structure nested --nested-cell 8")
+for mode in "${modes[@]}"; do
+  # shellcheck disable=SC2086
+  "${recon[@]}" ${mode_args[$mode]} -o "one-$mode.ivol" || fail "single-$mode"
+done
+# Thin slabs (several per rank) on the ranks; the single process cuts its own.
+for ranks in 2 4; do
+  for mode in "${modes[@]}"; do
+    name="mpi$ranks-$mode"
+    # shellcheck disable=SC2086
+    if "$MPIEXEC" --oversubscribe -np "$ranks" "${recon[@]}" ${mode_args[$mode]} --slab-slices 3 -o "$name.ivol" \
+      >"$work/log" 2>&1 && cmp "one-$mode.ivol" "$name.ivol" >>"$work/log" 2>&1; then
+      ok "$name same bytes as one process"
+    else
+      fail "$name same bytes as one process"
+    fi
+  done
+done
+
+# The JSON report of a distributed run names every rank and what it sent.
+"$MPIEXEC" --oversubscribe -np 2 "${recon[@]}" --slab-slices 3 --json -o json.ivol >"$work/report.json" 2>"$work/log"
+if /usr/bin/python3 -c "
+import json, sys
+r = json.load(open('$work/report.json'))['ranks']
+sys.exit(0 if len(r) == 2 and r[1]['bytes_sent'] > 0 and r[0]['bytes_received'] == r[1]['bytes_sent'] else 1)"; then
+  ok "json-ranks"
+else
+  fail "json-ranks"
+fi
+
+# Rank 1 reads a copy of the scan whose compressed chunks are damaged: it
+# fails while reconstructing its slabs, tells rank 0, which removes its
+# temporary file and ends the run with rank 1's message.
+mkdir -p a b c
+h5repack -l /exchange/data:CHUNK=1x48x48 -f /exchange/data:GZIP=1 p.h5 a/p.h5
+cp a/p.h5 b/p.h5
+/usr/bin/python3 - <<'EOF'
+import h5py
+with h5py.File('b/p.h5', 'r') as f:
+    d = f['/exchange/data']
+    chunks = [d.id.get_chunk_info(i) for i in range(d.id.get_num_chunks())]
+with open('b/p.h5', 'r+b') as g:
+    for c in chunks:
+        g.seek(c.byte_offset + c.size // 2)
+        g.write(b'\xff' * 16)
+EOF
+recon_in=("$IVOL" recon p.h5 --geometry "$work/p.xml" --pitch 1.835 --size 24 --voxel 1.6 --slab-slices 3)
+for mode in dense octree; do
+  extra=()
+  [ "$mode" = octree ] && extra=(--structure octree)
+  "$MPIEXEC" --oversubscribe -np 1 --wdir "$work/a" "${recon_in[@]}" "${extra[@]}" -o "$work/bad-$mode.ivol" : \
+    -np 1 --wdir "$work/b" "${recon_in[@]}" "${extra[@]}" -o "$work/bad-$mode.ivol" >"$work/log" 2>&1
+  status=$?
+  if [ "$status" -eq 2 ] && grep -q "ivol recon: error: rank 1: p.h5: .*cannot read" "$work/log" &&
+    nothing_left "bad-$mode.ivol"; then
+    ok "rank-1-read-fails-$mode"
+  else
+    fail "rank-1-read-fails-$mode (exit $status)"
+  fi
+done
+
+# Rank 1 cannot open its scan at all (before any slab): it ends the run.
+"$MPIEXEC" --oversubscribe -np 1 --wdir "$work/a" "${recon_in[@]}" -o "$work/missing.ivol" : \
+  -np 1 --wdir "$work/c" "${recon_in[@]}" -o "$work/missing.ivol" >"$work/log" 2>&1
+status=$?
+if [ "$status" -eq 2 ] && grep -q "ivol recon: rank 1: error (io): p.h5: cannot open" "$work/log" &&
+  nothing_left missing.ivol; then
+  ok "rank-1-open-fails"
+else
+  fail "rank-1-open-fails (exit $status)"
+fi
+
+# Rank 1 killed outright: mpirun ends the others, nothing is left behind.
+# A larger grid in slabs of one slice, so that the run lasts long enough.
+recon_long=("$IVOL" -q recon p.h5 --geometry "$work/p.xml" --pitch 1.835 --size 64 --voxel 0.6 --slab-slices 1)
+"$MPIEXEC" --oversubscribe -np 2 "${recon_long[@]}" -o killed.ivol >"$work/log" 2>&1 &
+launcher=$!
+victim=""
+for _ in $(seq 100); do
+  for p in $(pgrep -P "$launcher"); do
+    tr '\0' '\n' <"/proc/$p/environ" 2>/dev/null | grep -q '^OMPI_COMM_WORLD_RANK=1$' && victim=$p
+  done
+  [ -n "$victim" ] && break
+  sleep 0.05
+done
+[ -n "$victim" ] && sleep 0.3 && kill -9 "$victim" 2>/dev/null
+wait "$launcher"
+status=$?
+if [ -z "$victim" ]; then
+  fail "rank-1-killed: rank 1 never started"
+elif [ "$status" -eq 0 ]; then
+  echo "note rank-1-killed: the run ended before rank 1 could be killed; not checked"
+elif nothing_left killed.ivol; then
+  ok "rank-1-killed (exit $status)"
+else
+  fail "rank-1-killed (exit $status)"
+fi
+
+echo "$passed passed, $failed failed"
+[ "$failed" -eq 0 ]

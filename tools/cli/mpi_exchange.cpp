@@ -1,0 +1,284 @@
+#include "mpi_exchange.hpp"
+
+#include <dirent.h>
+#include <pthread.h>
+#include <signal.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdlib>
+#include <ctime>
+#include <iostream>
+#include <mutex>
+#include <stdexcept>
+#include <thread>
+
+#include "commands.hpp"
+#include "ivol/error.hpp"
+
+#ifdef IVOL_WITH_MPI
+#include <mpi.h>
+#endif
+
+namespace ivol::cli {
+namespace {
+
+int environment_size(const char* name) {
+  const char* value = std::getenv(name);
+  return value != nullptr ? std::atoi(value) : 0;
+}
+
+// The temporary files of one output, removed when a signal ends the run.
+// Written by the main thread, read by the signal thread.
+struct TemporaryOutput {
+  std::mutex mutex;
+  std::string directory;
+  std::string prefix;  // ".<name>.tmp-"
+  std::time_t since = 0;
+
+  void remove() {
+    std::lock_guard<std::mutex> lock(mutex);
+    if (prefix.empty()) return;
+    DIR* dir = ::opendir(directory.c_str());
+    if (dir == nullptr) return;
+    while (const dirent* entry = ::readdir(dir)) {
+      const std::string name = entry->d_name;
+      if (name.compare(0, prefix.size(), prefix) != 0) continue;
+      const std::string path = directory + "/" + name;
+      struct stat st {};
+      // Only ours: made since this run started (another run's may be older).
+      if (::stat(path.c_str(), &st) == 0 && st.st_mtime >= since) ::unlink(path.c_str());
+    }
+    ::closedir(dir);
+  }
+};
+
+TemporaryOutput& temporary_output() {
+  static TemporaryOutput output;
+  return output;
+}
+
+// SIGTERM and SIGINT, blocked in every thread, arrive here instead, where
+// removing files is safe (no async-signal restrictions).
+[[maybe_unused]] void start_signal_thread() {
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  std::thread([signals] {
+    int received = 0;
+    if (sigwait(&signals, &received) != 0) return;
+    temporary_output().remove();
+    ::_exit(128 + received);
+  }).detach();
+}
+
+// How many processes the launcher started, as it says in the environment:
+// Open MPI's mpirun, a PMI launcher (MPICH, srun --mpi=pmi2), else srun's
+// task count; 0 when none says.
+int launched_size() {
+  for (const char* name : {"OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "SLURM_STEP_NUM_TASKS"})
+    if (const int size = environment_size(name); size > 0) return size;
+  return 0;
+}
+
+}  // namespace
+
+bool MpiRun::launched() { return launched_size() > 1; }
+
+#ifdef IVOL_WITH_MPI
+
+bool MpiRun::available() { return true; }
+
+namespace {
+
+// Tags: a slab's data carries its index (modulo the range every MPI has), a
+// failure its own tag.
+constexpr int kFailureTag = 32000;
+int slab_tag(std::size_t slab) { return 1 + static_cast<int>(slab % 30000); }
+// MPI counts are ints: larger slabs go in pieces.
+constexpr std::size_t kPieceFloats = std::size_t{1} << 28;
+
+class MpiExchange final : public recon::SlabExchange {
+ public:
+  MpiExchange() {
+    MPI_Comm_rank(MPI_COMM_WORLD, &rank_);
+    MPI_Comm_size(MPI_COMM_WORLD, &size_);
+  }
+  int rank() const override { return rank_; }
+  int size() const override { return size_; }
+
+  std::uint64_t agree(std::uint64_t value, const std::string& what) override {
+    std::vector<std::uint64_t> values(static_cast<std::size_t>(size_));
+    MPI_Allgather(&value, 1, MPI_UINT64_T, values.data(), 1, MPI_UINT64_T, MPI_COMM_WORLD);
+    for (int r = 1; r < size_; ++r)
+      if (values[r] != values[0])
+        throw std::runtime_error("the ranks disagree on " + what + ": rank 0 has " + std::to_string(values[0]) +
+                                 ", rank " + std::to_string(r) + " has " + std::to_string(values[r]) +
+                                 " (give every rank the same devices, --device-memory and scan)");
+    return values[0];
+  }
+
+  void broadcast(std::vector<float>& values) override {
+    std::uint64_t count = values.size();
+    MPI_Bcast(&count, 1, MPI_UINT64_T, 0, MPI_COMM_WORLD);
+    values.resize(count);
+    for (std::size_t done = 0; done < count; done += kPieceFloats) {
+      const int piece = static_cast<int>(std::min<std::size_t>(kPieceFloats, count - done));
+      MPI_Bcast(values.data() + done, piece, MPI_FLOAT, 0, MPI_COMM_WORLD);
+    }
+  }
+
+  void send(std::size_t slab, const std::vector<float>& data) override {
+    const std::uint64_t count = data.size();
+    MPI_Send(&count, 1, MPI_UINT64_T, 0, slab_tag(slab), MPI_COMM_WORLD);
+    for (std::size_t done = 0; done < count; done += kPieceFloats) {
+      const int piece = static_cast<int>(std::min<std::size_t>(kPieceFloats, count - done));
+      MPI_Send(data.data() + done, piece, MPI_FLOAT, 0, slab_tag(slab), MPI_COMM_WORLD);
+    }
+    bytes_sent += sizeof count + count * sizeof(float);
+    ++slabs_sent;
+  }
+
+  void receive(std::size_t slab, int from, std::vector<float>& data) override {
+    // Wait for the slab, watching for any rank's failure meanwhile: the
+    // failed rank need not be the one this slab comes from.
+    for (;;) {
+      int arrived = 0;
+      MPI_Iprobe(MPI_ANY_SOURCE, kFailureTag, MPI_COMM_WORLD, &arrived, MPI_STATUS_IGNORE);
+      if (arrived) throw_failure();
+      MPI_Iprobe(from, slab_tag(slab), MPI_COMM_WORLD, &arrived, MPI_STATUS_IGNORE);
+      if (arrived) break;
+      std::this_thread::sleep_for(std::chrono::microseconds(200));
+    }
+    std::uint64_t count = 0;
+    MPI_Recv(&count, 1, MPI_UINT64_T, from, slab_tag(slab), MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    data.resize(count);
+    for (std::size_t done = 0; done < count; done += kPieceFloats) {
+      const int piece = static_cast<int>(std::min<std::size_t>(kPieceFloats, count - done));
+      MPI_Recv(data.data() + done, piece, MPI_FLOAT, from, slab_tag(slab), MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    }
+    bytes_received += sizeof count + count * sizeof(float);
+  }
+
+  void report_failure(const std::string& message) override {
+    if (rank_ == 0 || failure_reported) return;
+    MPI_Send(message.data(), static_cast<int>(message.size()), MPI_CHAR, 0, kFailureTag, MPI_COMM_WORLD);
+    bytes_sent += message.size();
+    failure_reported = true;
+  }
+
+  std::uint64_t bytes_sent = 0;
+  std::uint64_t bytes_received = 0;
+  std::uint64_t slabs_sent = 0;
+  bool failure_reported = false;
+
+ private:
+  [[noreturn]] void throw_failure() {
+    MPI_Status status;
+    MPI_Probe(MPI_ANY_SOURCE, kFailureTag, MPI_COMM_WORLD, &status);
+    int length = 0;
+    MPI_Get_count(&status, MPI_CHAR, &length);
+    std::string message(static_cast<std::size_t>(length), '\0');
+    MPI_Recv(message.data(), length, MPI_CHAR, status.MPI_SOURCE, kFailureTag, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    throw std::runtime_error("rank " + std::to_string(status.MPI_SOURCE) + ": " + message);
+  }
+
+  int rank_ = 0;
+  int size_ = 1;
+};
+
+}  // namespace
+
+struct MpiRun::Impl {
+  std::shared_ptr<MpiExchange> exchange;
+};
+
+MpiRun::MpiRun() : impl_(std::make_unique<Impl>()) {
+  temporary_output().since = std::time(nullptr) - 1;  // whole seconds: never miss a file of this run
+  start_signal_thread();
+  int provided = 0;
+  MPI_Init_thread(nullptr, nullptr, MPI_THREAD_FUNNELED, &provided);
+  if (provided < MPI_THREAD_FUNNELED) {
+    MPI_Finalize();
+    throw Error(ErrorClass::InvalidArgument, "the MPI library does not allow threads (MPI_THREAD_FUNNELED)");
+  }
+  impl_->exchange = std::make_shared<MpiExchange>();
+  if (size() != launched_size()) {
+    // Each of the launcher's processes would write the whole volume.
+    const std::string message = "started as " + std::to_string(launched_size()) + " processes, but MPI sees " +
+                                std::to_string(size()) + " (with srun, give --mpi=pmix, or use mpirun)";
+    MPI_Finalize();
+    throw Error(ErrorClass::InvalidArgument, message);
+  }
+}
+
+MpiRun::~MpiRun() { MPI_Finalize(); }
+
+int MpiRun::rank() const { return impl_->exchange->rank(); }
+int MpiRun::size() const { return impl_->exchange->size(); }
+std::shared_ptr<recon::SlabExchange> MpiRun::exchange() const { return impl_->exchange; }
+
+std::vector<RankStats> MpiRun::gather(RankStats mine) {
+  mine.bytes_sent = impl_->exchange->bytes_sent;
+  mine.bytes_received = impl_->exchange->bytes_received;
+  mine.slabs_sent = impl_->exchange->slabs_sent;
+  static_assert(sizeof(RankStats) % 8 == 0, "RankStats travels as bytes");
+  std::vector<RankStats> all(rank() == 0 ? static_cast<std::size_t>(size()) : 0);
+  MPI_Gather(&mine, sizeof mine, MPI_BYTE, all.data(), sizeof mine, MPI_BYTE, 0, MPI_COMM_WORLD);
+  return all;
+}
+
+void MpiRun::fail(const std::exception& what) {
+  const auto* error = dynamic_cast<const Error*>(&what);
+  const std::string kind = error != nullptr ? std::string(" (") + error_class_name(error->error_class()) + ")" : "";
+  if (rank() != 0 && impl_->exchange->failure_reported) {
+    // Rank 0 prints it and ends the run once its output is gone; end it
+    // here only if rank 0 never does.
+    std::this_thread::sleep_for(std::chrono::seconds(60));
+  } else {
+    // One write, so that the lines of ranks failing at once do not interleave.
+    const std::string who = rank() == 0 ? "" : "rank " + std::to_string(rank()) + ": ";
+    const std::string line = "ivol recon: " + who + "error" + kind + ": " + what.what() + "\n";
+    std::cerr.write(line.data(), static_cast<std::streamsize>(line.size()));
+    std::cerr.flush();
+  }
+  MPI_Abort(MPI_COMM_WORLD, kExitFailure);  // mpirun exits with it, as one process would
+  std::_Exit(kExitFailure);
+}
+
+#else  // built without MPI
+
+bool MpiRun::available() { return false; }
+
+struct MpiRun::Impl {};
+
+MpiRun::MpiRun() {
+  throw Error(ErrorClass::InvalidArgument,
+              "started by mpirun, but this ivol was built without MPI (IVOL_WITH_MPI=OFF): every copy would "
+              "reconstruct and write the whole volume; install libopenmpi-dev and rebuild");
+}
+MpiRun::~MpiRun() = default;
+int MpiRun::rank() const { return 0; }
+int MpiRun::size() const { return 1; }
+std::shared_ptr<recon::SlabExchange> MpiRun::exchange() const { return nullptr; }
+std::vector<RankStats> MpiRun::gather(RankStats mine) { return {mine}; }
+void MpiRun::fail(const std::exception& what) {
+  std::cerr << "ivol recon: error: " << what.what() << std::endl;
+  std::_Exit(kExitFailure);
+}
+
+#endif
+
+void MpiRun::remove_temporaries_on_signal(const std::string& output) {
+  TemporaryOutput& t = temporary_output();
+  std::lock_guard<std::mutex> lock(t.mutex);
+  const std::size_t slash = output.find_last_of('/');
+  t.directory = slash == std::string::npos ? "." : slash == 0 ? "/" : output.substr(0, slash);
+  t.prefix = "." + (slash == std::string::npos ? output : output.substr(slash + 1)) + ".tmp-";
+}
+
+}  // namespace ivol::cli
