@@ -34,6 +34,7 @@ struct Case {
   ValueEncoding encoding;
   std::uint32_t block_bytes;
   bool compress;
+  bool byte_planes = true;
 };
 
 class RoundTrip : public ::testing::TestWithParam<Case> {};
@@ -48,6 +49,7 @@ TEST_P(RoundTrip, EveryViewMatches) {
   WriteOptions w;
   w.block_bytes = c.block_bytes;
   w.compress = c.compress;
+  w.byte_planes = c.byte_planes;
   const std::string path = test::temp_path("roundtrip.ivol");
   const Metadata metadata = sample_metadata();
   const WriteStats stats = write_octree(tree, metadata, path, w);
@@ -71,6 +73,19 @@ TEST_P(RoundTrip, EveryViewMatches) {
   const CheckReport report = check_file(path);
   EXPECT_TRUE(report.ok()) << (report.problems.empty() ? "" : report.problems[0].message);
   EXPECT_TRUE(report.tree_checked);
+  // Codec 2 for node words and values, never the metadata, and only when
+  // asked; a file that has such a block says version 1.2, an octree file
+  // without stays 1.0.
+  bool planes = false;
+  for (const BlockInfo& b : reader.info().blocks) {
+    if (b.codec == 2) {
+      EXPECT_TRUE(c.byte_planes && c.compress);
+      EXPECT_NE(b.stream, static_cast<std::uint8_t>(Stream::Metadata));
+      planes = true;
+    }
+  }
+  EXPECT_EQ(reader.info().version_minor, planes ? 2 : 0);
+  if (c.compress && c.byte_planes && volume.size() > 64) EXPECT_TRUE(planes);
 }
 
 INSTANTIATE_TEST_SUITE_P(Layouts, RoundTrip,
@@ -80,7 +95,9 @@ INSTANTIATE_TEST_SUITE_P(Layouts, RoundTrip,
                                            Case{{40, 33, 29}, ValueEncoding::Binary16, 256, true},
                                            Case{{40, 33, 29}, ValueEncoding::Float32, 1 << 20, true},
                                            Case{{64, 48, 80}, ValueEncoding::Binary16, 4096, false},
-                                           Case{{64, 64, 64}, ValueEncoding::Float32, 8192, true}));
+                                           Case{{64, 64, 64}, ValueEncoding::Float32, 8192, true},
+                                           Case{{40, 33, 29}, ValueEncoding::Binary16, 4096, true, false},
+                                           Case{{64, 64, 64}, ValueEncoding::UInt16, 16384, true}));
 
 TEST(RoundTrip, UInt16WithScaleAndOffset) {
   const Dims dims{30, 20, 10};

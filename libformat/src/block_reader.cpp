@@ -34,7 +34,7 @@ std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const Bl
   if (!known) return stored;
   const std::size_t decoded_size = std::size_t{block.element_count} * width;
   if (block.codec == 0) return stored;
-  if (block.codec != 1)
+  if (block.codec != 1 && block.codec != 2)
     throw Error(ErrorClass::UnsupportedFeature, part + "codec " + std::to_string(block.codec) + " is not known");
 
   if (stored.size() < 4 || std::memcmp(stored.data(), kZstdMagic, 4) != 0)
@@ -64,6 +64,13 @@ std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const Bl
   if (got != decoded_size)
     throw Error(ErrorClass::Malformed,
                 part + "decoded to " + std::to_string(got) + " bytes, expected " + std::to_string(decoded_size));
+  if (block.codec == 2 && width > 1) {  // byte planes back into elements
+    std::vector<std::uint8_t> elements(decoded_size);
+    const std::size_t n = block.element_count;
+    for (std::size_t p = 0; p < width; ++p)
+      for (std::size_t i = 0; i < n; ++i) elements[i * width + p] = decoded[p * n + i];
+    return elements;
+  }
   return decoded;
 }
 

@@ -252,7 +252,7 @@ class StructureReader {
         continue;  // an ignorable block of a stream we do not know: skipped
       }
       if (blk.flags != 0) bad(ErrorClass::Malformed, "blocks of known streams must have flags 0");
-      if (blk.codec > 1) bad(ErrorClass::UnsupportedFeature, "codec " + std::to_string(blk.codec) + " is not known");
+      if (blk.codec > 2) bad(ErrorClass::UnsupportedFeature, "codec " + std::to_string(blk.codec) + " is not known");
       const std::uint64_t width = stream_width(blk.stream, v.encoding);
       const std::uint64_t decoded = blk.element_count * width;
       if (decoded > layout::kMaxBlockDecodedBytes)

@@ -3,6 +3,7 @@
 #include <unistd.h>
 #include <zstd.h>
 
+#include <array>
 #include <cerrno>
 #include <cstring>
 #include <memory>
@@ -27,6 +28,16 @@ std::string directory_of(const std::string& path) {
   return path.substr(0, slash);
 }
 
+std::array<unsigned char, layout::kHeaderSize> header_bytes(std::uint16_t minor) {
+  std::array<unsigned char, layout::kHeaderSize> header{};
+  std::memcpy(header.data(), layout::kSignature.data(), 8);
+  layout::store<std::uint16_t>(header.data() + layout::kHeaderVersionMajor, layout::kVersionMajor);
+  layout::store<std::uint16_t>(header.data() + layout::kHeaderVersionMinor, minor);
+  layout::store<std::uint32_t>(header.data() + layout::kHeaderSizeField, layout::kHeaderSize);
+  layout::store<std::uint32_t>(header.data() + layout::kHeaderSize - 4, crc32c(header.data(), layout::kHeaderSize - 4));
+  return header;
+}
+
 }  // namespace
 
 EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_element, std::uint32_t element_count,
@@ -39,7 +50,19 @@ EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_ele
   const std::size_t raw_size = std::size_t{element_count} * width;
   if (raw_size > layout::kMaxBlockDecodedBytes)
     throw Error(ErrorClass::InvalidArgument, "encode_block: a block may hold at most 64 MiB");
+  // Elements wider than a byte: their bytes regrouped by position (spec §7,
+  // codec 2), so that the slowly varying high bytes of values and node words
+  // compress apart from the noisy low ones.
+  const bool planes = options.compress && options.byte_planes && stream != Stream::Metadata && width > 1;
+  std::vector<std::uint8_t> regrouped;
+  if (planes) {
+    regrouped.resize(raw_size);
+    const auto* in = static_cast<const std::uint8_t*>(data);
+    for (std::size_t i = 0; i < element_count; ++i)
+      for (std::size_t p = 0; p < width; ++p) regrouped[p * element_count + i] = in[i * width + p];
+  }
   if (options.compress) {
+    const void* content = planes ? regrouped.data() : data;
     block.bytes.resize(ZSTD_compressBound(raw_size));
     // One context per thread, reused: creating one costs more than a small block.
     thread_local std::unique_ptr<ZSTD_CCtx, decltype(&ZSTD_freeCCtx)> context(ZSTD_createCCtx(), ZSTD_freeCCtx);
@@ -49,12 +72,12 @@ EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_ele
     ZSTD_CCtx_setParameter(cctx, ZSTD_c_compressionLevel, options.zstd_level);
     ZSTD_CCtx_setParameter(cctx, ZSTD_c_checksumFlag, 1);
     ZSTD_CCtx_setParameter(cctx, ZSTD_c_contentSizeFlag, 1);
-    const std::size_t size = ZSTD_compress2(cctx, block.bytes.data(), block.bytes.size(), data, raw_size);
+    const std::size_t size = ZSTD_compress2(cctx, block.bytes.data(), block.bytes.size(), content, raw_size);
     if (ZSTD_isError(size))
       throw Error(ErrorClass::Io, std::string("zstd compression failed: ") + ZSTD_getErrorName(size));
     if (size < raw_size) {
       block.bytes.resize(size);
-      block.codec = Codec::Zstd;
+      block.codec = planes ? Codec::ZstdBytePlanes : Codec::Zstd;
     }
   }
   if (block.codec == Codec::Stored) {
@@ -69,15 +92,10 @@ FileWriter::FileWriter(const std::string& path, const VolumeLayout& layout) : pa
   remove_abandoned_temporaries(path);  // left by writers of this file that were killed
   fd_ = create_locked_temporary(path, temp_path_);
 
-  unsigned char header[layout::kHeaderSize] = {};
-  std::memcpy(header, layout::kSignature.data(), 8);
-  layout::store<std::uint16_t>(header + layout::kHeaderVersionMajor, layout::kVersionMajor);
-  // Octree files stay version 1.0, so that 1.0 readers read them.
-  layout::store<std::uint16_t>(header + layout::kHeaderVersionMinor,
-                               layout_.kind == StructureKind::Octree ? 0 : layout::kVersionMinor);
-  layout::store<std::uint32_t>(header + layout::kHeaderSizeField, layout::kHeaderSize);
-  layout::store<std::uint32_t>(header + layout::kHeaderSize - 4, crc32c(header, layout::kHeaderSize - 4));
-  write_all(header, sizeof header, "header");
+  // Octree files stay version 1.0, so that 1.0 readers read them, unless
+  // they use codec 2 (finish() then writes the header again).
+  const auto header = header_bytes(layout_.kind == StructureKind::Octree ? 0 : layout::kVersionMinor);
+  write_all(header.data(), header.size(), "header");
 }
 
 FileWriter::~FileWriter() {
@@ -155,6 +173,14 @@ void FileWriter::finish(const Metadata& metadata, const std::vector<std::uint64_
   std::memcpy(footer + layout::kFooterEndSignature, layout::kEndSignature.data(), 8);
   write_all(footer, sizeof footer, "footer");
 
+  // A block over byte planes (codec 2) needs a version 1.2 reader: say so.
+  bool planes = false;
+  for (const Entry& e : entries_) planes = planes || e.codec == static_cast<std::uint8_t>(Codec::ZstdBytePlanes);
+  if (planes) {
+    const auto header = header_bytes(layout::kVersionMinorBytePlanes);
+    if (::pwrite(fd_, header.data(), header.size(), 0) != static_cast<ssize_t>(header.size()))
+      io_error(path_, "cannot write the header");
+  }
   if (::fsync(fd_) != 0) io_error(path_, "cannot flush the file to disk");
   // Renamed while still open, so still locked: a cleaner never takes a
   // finished file for an abandoned one. Its bytes are on disk (fsync), so

@@ -18,7 +18,8 @@ constexpr std::array<unsigned char, 8> kEndSignature = {'I', 'V', 'O', 'L', '_',
 constexpr std::array<unsigned char, 4> kIndexSignature = {'I', 'V', 'I', 'X'};
 
 constexpr std::uint16_t kVersionMajor = 1;
-constexpr std::uint16_t kVersionMinor = 1;  // written only for the kinds of spec §8A
+constexpr std::uint16_t kVersionMinor = 1;            // written only for the kinds of spec §8A
+constexpr std::uint16_t kVersionMinorBytePlanes = 2;  // files with a block of codec 2
 
 // Header (§4)
 constexpr std::uint32_t kHeaderSize = 40;

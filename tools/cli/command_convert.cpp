@@ -21,6 +21,7 @@ struct ConvertSettings {
   float background = 0.0f;
   std::string encoding, keep, quantity, value_unit;
   std::uint32_t block_bytes = 0;
+  std::string codec = "zstd-planes";
   std::uint64_t memory_mib = 0;
   std::string out_type;
   unsigned level = 0;
@@ -61,6 +62,10 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember({"binary16", "uint16", "float32"}));
   into->add_option("--keep", s->keep, "threshold=T|otsu,margin=M: full resolution only around the object");
   into->add_option("--block-size", s->block_bytes, "Decoded bytes per block");
+  into->add_option("--codec", s->codec,
+                   "zstd-planes: values over byte planes (format 1.2, smaller); zstd: format 1.0/1.1 readers read it")
+      ->check(CLI::IsMember({"zstd-planes", "zstd"}))
+      ->capture_default_str();
   into->add_option("--memory", s->memory_mib, "About how many MiB the conversion may hold (default 2048)");
   into->add_option("--quantity", s->quantity, "What the values are, e.g. linear_attenuation");
   into->add_option("--value-unit", s->value_unit, "Unit of the values, e.g. 1/mm");
@@ -99,6 +104,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       if (!s->encoding.empty()) options.encoding = parse_encoding(s->encoding);
       if (!s->keep.empty()) options.keep = convert::parse_keep_rule(s->keep);
       options.block_bytes = s->block_bytes;
+      options.byte_planes = s->codec == "zstd-planes";
       // A slab's samples are held about four times over (as read, as float,
       // the keep mask, the subtrees being built): give a quarter to the slab.
       options.slab_budget_bytes = (s->memory_mib << 20) / 4;

@@ -31,6 +31,7 @@ struct ImportOptions {
   std::optional<ValueEncoding> encoding;  // default: lossless for the sample type
   std::optional<KeepRule> keep;           // default: lossless (equal leaves merge)
   std::uint32_t block_bytes = 0;          // 0: the library's default
+  bool byte_planes = true;                // values over byte planes (codec 2, format 1.2)
   std::uint64_t slab_budget_bytes = 0;    // 0: the library's default
   Metadata metadata;                      // provenance etc.; geometry from the volume
   Progress progress;
