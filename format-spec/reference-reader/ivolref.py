@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""ivolref.py -- independent reference reader for the .ivol format, version 1.1.
+"""ivolref.py -- independent reference reader for the .ivol format, version 1.2.
 
 Written from format-spec/ivol.md alone (no code of the ivol project was read).
 Section numbers (§n) below refer to that document.  Where the specification
@@ -564,10 +564,11 @@ def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
     if actual != e.crc:   # §7: the CRC is checked before decoding
         fail("checksum", "%s: CRC-32C of the %d stored bytes is 0x%08X, the block table "
              "says 0x%08X" % (where, e.stored_size, actual, e.crc))
-    if e.codec not in (0, 1):      # checked when the block is read (SPEC-NOTES 8)
-        fail("unsupported-feature", "%s: codec %d, this reader knows 0 (stored) and 1 (zstd)"
-             % (where, e.codec))
-    size = e.element_count * stream_width(ix, e.stream)
+    if e.codec not in (0, 1, 2):   # checked when the block is read (SPEC-NOTES 8)
+        fail("unsupported-feature", "%s: codec %d, this reader knows 0 (stored), 1 (zstd) "
+             "and 2 (zstd over byte planes)" % (where, e.codec))
+    width = stream_width(ix, e.stream)
+    size = e.element_count * width
     if size > MAX_BLOCK_DECODED:
         fail("malformed", "%s: decoded size %d exceeds 64 MiB" % (where, size))
     if size > limit:   # §11: the metadata is at most 16 MiB
@@ -577,14 +578,29 @@ def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
             fail("malformed", "%s: stored block (codec 0) has stored_size %d, expected "
                  "element_count x width = %d" % (where, e.stored_size, size))
         return stored
-    return decode_zstd_frame(stored, size, where)
+    content = decode_zstd_frame(stored, size, where)
+    if e.codec == 1:
+        return content
+    return unshuffle_byte_planes(content, e.element_count, width)
+
+
+def unshuffle_byte_planes(content, n, w):
+    """§7 codec 2 (since 1.2): the frame's content holds the decoded bytes
+    regrouped by byte position; decoded byte i·w + p = content byte p·n + i.
+    The width w is the block's stream width (§6.4), whatever the stream
+    (SPEC-NOTES 56); for w = 1 the content is the decoded bytes."""
+    if w == 1:
+        return content
+    planes = np.frombuffer(content, dtype=np.uint8).reshape(w, n)   # planes[p, i] = byte p·n + i
+    return planes.T.tobytes()                                        # row i: bytes i·w .. i·w + w
 
 
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 
 
 def decode_zstd_frame(data, size, where):
-    """§7 codec 1: exactly one zstd frame (RFC 8878 §3.1.1) with Frame_Content_Size."""
+    """§7 codecs 1 and 2: exactly one zstd frame (RFC 8878 §3.1.1) with
+    Frame_Content_Size.  Codec 2 applies the same frame rules (SPEC-NOTES 57)."""
     def need(n, what):
         if len(data) < n:
             fail("malformed", "%s: zstd frame ends inside the %s" % (where, what))
@@ -1441,7 +1457,7 @@ def first_difference(a, b):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(
-        prog="ivolref.py", description="Reference reader for .ivol version 1.1 "
+        prog="ivolref.py", description="Reference reader for .ivol version 1.2 "
         "(written from format-spec/ivol.md alone).")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("check", help="full verification; prints ok")

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Conformance test vectors for the .ivol format, version 1.1.
+"""Conformance test vectors for the .ivol format, version 1.2.
 
 Written from format-spec/ivol.md alone (no code of the ivol project is used).
 Needs only the Python standard library, numpy and zstandard; run it with
@@ -16,7 +16,8 @@ The script contains
   * an octree writer (§6-§10): lossless merging of regions whose non-padding
     voxels all have the same stored bits, padding held at the coarsest level,
     breadth-first arrays, inner averages by the recursion of §10, blocks per
-    level and split by a size limit, stored or zstd blocks, index, footer,
+    level and split by a size limit, stored, zstd or (since 1.2) zstd over
+    byte planes (codec 2) blocks, index, footer,
   * an independent level-of-detail computation by weighted 2x2x2 box
     filtering of the dense source (§12.3 / §10),
   * writers of the structures of §8A (version 1.1): regular grid, rectilinear
@@ -60,6 +61,7 @@ KIND_OCTREE, KIND_REGULAR, KIND_RECTILINEAR, KIND_NESTED = 1, 2, 3, 4
 KIND_NAME = {KIND_OCTREE: "octree", KIND_REGULAR: "regular",           # as metadata structure.kind
              KIND_RECTILINEAR: "rectilinear", KIND_NESTED: "nested"}
 CODEC_STORED, CODEC_ZSTD = 0, 1
+CODEC_PLANES = 2                 # zstd over byte planes, since 1.2 (§7)
 
 
 # ---------------------------------------------------------------- CRC-32C (§2.1)
@@ -418,7 +420,37 @@ class Blk:
             return self.data
         if self.codec == CODEC_ZSTD:
             return zframe(self.data, self.zcheck, self.zsize)
+        if self.codec == CODEC_PLANES:
+            return zframe(byte_planes(self.data, len(self.data) // self.count), self.zcheck, self.zsize)
         return self.data            # unknown codec: raw bytes
+
+
+def byte_planes(data, w):
+    """§7 codec 2: with n = element_count and w = width, content byte p*n + i
+    is decoded byte i*w + p (the lowest byte of every element first)."""
+    n = len(data) // w
+    assert n * w == len(data)
+    out = bytearray(len(data))
+    for p in range(w):
+        out[p * n:(p + 1) * n] = data[p::w]          # bytes i*w + p, i = 0 .. n-1
+    return bytes(out)
+
+
+def from_byte_planes(content, w):
+    """The inverse of byte_planes: decoded byte i*w + p = content byte p*n + i."""
+    n = len(content) // w
+    out = bytearray(len(content))
+    for p in range(w):
+        out[p::w] = content[p * n:(p + 1) * n]
+    return bytes(out)
+
+
+def _check_byte_planes():
+    # the definition of §7, element by element, on a small case
+    data = bytes(range(1, 13))                   # 3 elements of width 4
+    want = bytes([1, 5, 9, 2, 6, 10, 3, 7, 11, 4, 8, 12])
+    assert byte_planes(data, 4) == want and from_byte_planes(want, 4) == data
+    assert byte_planes(data, 1) == data
 
 
 def zframe(data, checksum=True, content_size=True):
@@ -448,7 +480,9 @@ def split_range(a, b, per):
 def level_blocks(t, codec=CODEC_ZSTD, limit=None, zcheck=True):
     """Blocks in the order of §15: values of level l, then nodes of level l.
     limit: the largest decoded size of a block in bytes.  codec may be
-    'auto' (zstd when smaller), 'alt' (alternate stored/zstd)."""
+    'auto' (zstd when smaller), 'alt' (alternate stored/zstd), 'cycle'
+    (stored/zstd/byte planes in turn), 'planes' (values blocks codec 2,
+    the others codec 1)."""
     vw = VWIDTH[t.enc]
     blocks = []
     for l in range(t.D + 1):
@@ -463,6 +497,10 @@ def level_blocks(t, codec=CODEC_ZSTD, limit=None, zcheck=True):
             b.codec = CODEC_ZSTD if len(zframe(b.data, zcheck)) < len(b.data) else CODEC_STORED
         elif codec == "alt":
             b.codec = (CODEC_STORED, CODEC_ZSTD)[n % 2]
+        elif codec == "cycle":             # 0, 1, 2, 0, 1, 2, ... in file order
+            b.codec = (CODEC_STORED, CODEC_ZSTD, CODEC_PLANES)[n % 3]
+        elif codec == "planes":            # §15: values over byte planes, the rest zstd
+            b.codec = CODEC_PLANES if b.stream == STREAM_VALUES else CODEC_ZSTD
         else:
             b.codec = codec
     return blocks
@@ -568,6 +606,10 @@ def grid_blocks(g, codec=CODEC_ZSTD, limit=None, slimit=None, zcheck=True, struc
             b.codec = CODEC_ZSTD if len(zframe(b.data, zcheck)) < len(b.data) else CODEC_STORED
         elif codec == "alt":
             b.codec = (CODEC_STORED, CODEC_ZSTD)[n % 2]
+        elif codec == "cycle":             # 0, 1, 2, 0, 1, 2, ... in file order
+            b.codec = (CODEC_STORED, CODEC_ZSTD, CODEC_PLANES)[n % 3]
+        elif codec == "planes":            # §15: values over byte planes, the rest zstd
+            b.codec = CODEC_PLANES if b.stream == STREAM_VALUES else CODEC_ZSTD
         else:
             b.codec = codec
     return blocks
@@ -794,6 +836,8 @@ def decode_block(data, e, width):
         _fail("malformed", "zstd.data", str(ex))
     if not dobj.eof or dobj.unused_data or len(out) != need:
         _fail("malformed", "zstd.extra")
+    if e["codec"] == CODEC_PLANES:
+        return from_byte_planes(out, width)
     return out
 
 
@@ -911,7 +955,7 @@ def read_ivol(data, verify=True):
         if stream in (1, 2, 3) or (stream == 4 and sk == 3) or (stream == 5 and sk == 4):
             if flags != 0:
                 _fail("malformed", "block.flags", "block %d" % b)
-            if codec not in (0, 1):
+            if codec not in (0, 1, 2):
                 _fail("unsupported-feature", "codec", "block %d codec %d" % (b, codec))
             if cnt * width[stream] > MIB64:
                 _fail("malformed", "block.too_large", "block %d" % b)
@@ -1560,7 +1604,7 @@ def gen():
     # optional features
     d, *_ = simple_file(BASE, UINT16, optional=(1 << 0) | (1 << 17) | (1 << 63))
     add_valid("optional_features_unknown", d, BASE, UINT16,
-              "optional_features = bits 0, 17 and 63 set (unknown to 1.0 and 1.1): a reader must ignore them.")
+              "optional_features = bits 0, 17 and 63 set (unknown to 1.0 - 1.2): a reader must ignore them.")
 
     # minor version 1.7 with bigger header, fixed part and entries
     t = build_tree(BASE, UINT16)
@@ -1573,7 +1617,7 @@ def gen():
     add_valid("minor_1_7_extended", d, BASE, UINT16,
               "version 1.7: header_size 56 (16 unknown non-zero bytes at 36..52, header_crc at 52), "
               "fixed_size 80 (32 unknown bytes at 48..80, level table at 80), block_entry_size 40 "
-              "(8 unknown bytes per entry). A 1.0 or 1.1 reader must skip the extra bytes.")
+              "(8 unknown bytes per entry). A 1.0, 1.1 or 1.2 reader must skip the extra bytes.")
 
     MINOR17 = d
     # the largest header, fixed part and block entries a reader must accept
@@ -1582,14 +1626,14 @@ def gen():
     bl = level_blocks(t, CODEC_STORED)
     bl.append(meta_block(DEFAULT_META, CODEC_STORED))
     pat = lambda nb, s0: bytes((s0 + q) % 251 for q in range(nb))
-    d, _ = assemble(t, bl, minor=2, header_extra=pat(4056, 1), fixed_extra=pat(4048, 2),
+    d, _ = assemble(t, bl, minor=3, header_extra=pat(4056, 1), fixed_extra=pat(4048, 2),
                     entry_extra=pat(4064, 3))
     assert u32(d, 12) == 4096
     add_valid("limits_4096", d, src, FLOAT32,
-              "1x1x1 float32, version 1.2, with header_size, fixed_size and block_entry_size all 4096 "
+              "1x1x1 float32, version 1.3, with header_size, fixed_size and block_entry_size all 4096 "
               "(the largest a reader must accept), the unknown bytes filled with a non-zero pattern. "
-              "(version_minor was 1 in the 1.0 vectors; since 1.1 defines minor 1 without any extension "
-              "bytes, the file now claims a later minor version, 2.)")
+              "(version_minor was 1 in the 1.0 vectors and 2 in the 1.1 vectors; 1.1 and 1.2 define "
+              "minor 1 and 2 without any extension bytes, so the file now claims a later minor version, 3.)")
 
     # metadata with all keys
     text = METADATA_FULL.encode("utf-8")
@@ -1729,7 +1773,7 @@ def gen():
     inv("header_reserved_nonzero", reseal(patch(base, 32, "<I", 1), index=False), "malformed",
         "header.reserved", "Header reserved field (offset 32) = 1, header CRC recomputed.")
     inv("required_feature_bit0", reseal(patch(base, 16, "<Q", 1), index=False), "unsupported-feature",
-        "required_features", "required_features bit 0 set (unknown in 1.0 and 1.1), header CRC recomputed.")
+        "required_features", "required_features bit 0 set (unknown in 1.0 - 1.2), header CRC recomputed.")
     inv("required_feature_bit63", reseal(patch(base, 16, "<Q", 1 << 63), index=False),
         "unsupported-feature", "required_features", "required_features bit 63 set.")
     inv("order_reserved_before_required", reseal(patch(patch(base, 16, "<Q", 1), 32, "<I", 7), index=False),
@@ -1856,13 +1900,16 @@ def gen():
     inv("block_stored_size_plus_1", pen(vblk, "stored_size", "<I", len(bblocks[vblk].stored_bytes()) + 1),
         "malformed", "block.placement",
         "A block's stored_size one too large: the next block does not start where it ends.")
-    bl = level_blocks(bt, CODEC_ZSTD)
-    bl.append(meta_block(DEFAULT_META))
-    bl[vblk].codec = 2
-    bl[vblk].stored = bl[vblk].data
-    d, _ = assemble(bt, bl)
-    inv("codec_2", d, "unsupported-feature", "codec",
-        "A values block with codec 2 (unknown); its stored bytes are the raw values, CRC correct.")
+    for unknown in (3, 255):
+        bl = level_blocks(bt, CODEC_ZSTD)
+        bl.append(meta_block(DEFAULT_META))
+        bl[vblk].codec = unknown
+        bl[vblk].stored = bl[vblk].data
+        d, _ = assemble(bt, bl)
+        inv("codec_%d" % unknown, d, "unsupported-feature", "codec",
+            "A values block with codec %d (unknown: 1.2 defines 0, 1 and 2); its stored bytes are the "
+            "raw values, CRC correct.%s" % (unknown, " (Was codec_2 in the 1.0 and 1.1 vectors; 1.2 made "
+                                           "codec 2 zstd over byte planes.)" if unknown == 3 else ""))
     bl = level_blocks(bt, CODEC_ZSTD)
     bl.append(meta_block(DEFAULT_META))
     zb = Blk(STREAM_VALUES, 2, bt.first_value[2], 0, b"", codec=CODEC_ZSTD)
@@ -2183,6 +2230,8 @@ def gen():
         "malformed", "metadata.json", "Metadata with the token NaN, which is not JSON (RFC 8259).")
     gen_grids_valid()
     gen_grids_invalid(base, bblocks, bt)
+    gen_codec2_valid(BASE)
+    gen_codec2_invalid(bt, vblk, nblk1)
     return SAMPLE
 
 
@@ -2650,11 +2699,207 @@ def gen_grids_invalid(octree_base, octree_blocks, octree_tree):
 
     # structure kinds (§6.1)
     inv("structure_kind_5", pg(rb, rblay, 8, "<B", 5), "unsupported-feature", "structure_kind",
-        "%s with structure_kind = 5 (not defined in 1.1)." % gdesc["RB"])
+        "%s with structure_kind = 5 (not defined in 1.1 or 1.2)." % gdesc["RB"])
     return rb
 
 
-README_HEAD = """# .ivol 1.1 conformance vectors
+# --------------------------------------- codec 2, zstd over byte planes (version 1.2)
+
+def gen_codec2_valid(base_src):
+    """Valid files with blocks of codec 2 (§7); all carry version_minor 2 (§4)
+    except codec2_minor_0, which tests that a reader does not check it."""
+    V2 = " (version 1.2: version_minor 2.)"
+    src = vol_object_in_air(40, 33, 29, BINARY16, 104, 0.0015, (19.5, 15.0, 13.0), 11.0, 0.9, 1.1)
+    d, _, t, bl = simple_file(src, BINARY16, codec="planes", limit=4096, minor=2)
+    assert {(b.stream, b.codec) for b in bl} == {(1, 1), (2, 1), (3, 2)}
+    add_valid("codec2_sphere_40x33x29_binary16", d, src, BINARY16,
+              "The volume of sphere_40x33x29_binary16 written as §15 recommends for 1.2: every values block "
+              "codec 2 (zstd over byte planes, width 2: the low bytes of the block's values, then their high "
+              "bytes), the nodes blocks and the metadata block codec 1; blocks of at most 4096 decoded "
+              "bytes, %d values blocks.%s" % (sum(1 for b in bl if b.stream == 3), V2))
+
+    rng = np.random.default_rng(105)                       # the volume of gradient_12x10x9_float32
+    z, y, x = np.mgrid[0:9, 0:10, 0:12]
+    vals = 0.01 * x + 0.1 * y - 0.05 * z + rng.normal(0, 1e-4, (9, 10, 12))
+    vals[0:4, 0:8, 0:8] = -7.25
+    vals[4:9, 8:10, 8:12] = 3.0e-41
+    src = arr_f32(vals, (9, 10, 12))
+    d, _, t, bl = simple_file(src, FLOAT32, codec=CODEC_PLANES, meta_codec=CODEC_PLANES, minor=2)
+    assert all(b.codec == CODEC_PLANES for b in bl) and any(b.stream == 2 and b.count > 1 for b in bl)
+    add_valid("codec2_gradient_12x10x9_float32", d, src, FLOAT32,
+              "The volume of gradient_12x10x9_float32 with EVERY block codec 2: values of width 4 "
+              "(four byte planes), node words of width 8 (eight planes; §7 does not restrict codec 2 to "
+              "the values stream) and the metadata of width 1 (where codec 2 is codec 1).%s" % V2)
+
+    src = vol_object_in_air(24, 20, 18, UINT16, 106, 300, (11.0, 10.0, 9.0), 7.5, 20000, 40000)
+    d, _, t, bl = simple_file(src, UINT16, codec="cycle", limit=48, meta_first=True,
+                              scale=2.0 ** -12, offset=-1.0, minor=2)
+    per = {}
+    for b in bl:
+        per.setdefault((b.stream, b.level), set()).add(b.codec)
+    assert any(c == {0, 1, 2} for c in per.values())
+    add_valid("codec2_multiblock_24x20x18_uint16", d, src, UINT16,
+              "The volume of multiblock_24x20x18_uint16 (uint16, scale 2^-12, offset -1), blocks of at most "
+              "48 decoded bytes; the metadata block first (codec 1), then the level blocks with codecs 0, 1, "
+              "2, 0, 1, 2, ... in file order, so one stream and level mixes stored, zstd and byte-plane "
+              "blocks, for values (width 2) and nodes (width 8).%s" % V2)
+
+    src = arr_f32([0.1], (1, 1, 1))
+    d, *_ = simple_file(src, FLOAT32, codec=CODEC_PLANES, meta_codec=CODEC_PLANES, minor=2)
+    add_valid("codec2_tiny_1x1x1_float32", d, src, FLOAT32,
+              "1x1x1 float32 (0.1f): the one values block (one element, n = 1: the planes are the "
+              "element's bytes in order) and the metadata block are codec 2.%s" % V2)
+
+    rng = np.random.default_rng(101)                       # the volume of odd_3x5x7_uint16
+    src = rng.integers(0, 4096, size=(7, 5, 3)).astype(np.uint16)
+    src[0:2, 0:2, 0:2] = 777
+    src[4:7, 4:5, 0:3] = 1234
+    src[2:4, 2:4, 2:3] = 55
+    d, _, t, bl = simple_file(src, UINT16, codec="planes", zcheck=False, scale=0.0007, offset=-1.25,
+                              minor=2)
+    for b in bl:
+        assert not zstandard.get_frame_parameters(b.stored_bytes()).has_checksum
+    add_valid("codec2_no_checksum_3x5x7_uint16", d, src, UINT16,
+              "The volume of odd_3x5x7_uint16 with its values blocks codec 2 and every zstd frame (codec 1 "
+              "and 2) without the optional content checksum.%s" % V2)
+
+    bx, by, bz = [0, 1, 4, 5, 11, 19, 20], [0, 11], [0, 2, 3, 7]
+    rng = np.random.default_rng(203)                       # the grid of rectilinear_20x11x7_uint16
+    cv = [int(v) for v in rng.integers(0, 65536, 18)]
+    src = rect_source(UINT16, bx, by, bz, cv)
+    g = write_rectilinear(src, UINT16, bx, by, bz)
+    d, lay, bl = grid_file(g, codec=CODEC_PLANES, limit=16, slimit=8, meta_first=True, scale=0.5,
+                           offset=-1000.0, minor=2)
+    assert {(b.stream, b.codec) for b in bl} == {(1, 1), (3, 2), (4, 2)}
+    add_valid("codec2_rectilinear_20x11x7_uint16", d, src, UINT16,
+              "The rectilinear grid of rectilinear_20x11x7_uint16 (structure_kind 3) with every borders "
+              "block (u32, width 4) and values block (width 2) codec 2, metadata codec 1; 13 borders in 7 "
+              "blocks, 18 values in 3 blocks.%s" % V2, kind=KIND_RECTILINEAR)
+
+    expo = [[[(i + j + 2 * k) % 4 for i in range(5)] for j in range(3)] for k in range(2)]
+    rng = np.random.default_rng(206)                       # the grid of nested_37x21x10_uint16_c8
+    src = nested_source(UINT16, (37, 21, 10), 3, expo, lambda: int(rng.integers(0, 65536)))
+    g = write_nested(src, UINT16, 3, expo)
+    meta = dict(DEFAULT_META)
+    meta["structure"] = {"kind": "nested", "lossless": True, "source_encoding": "uint16"}
+    d, lay, bl = grid_file(g, meta=meta, codec=CODEC_PLANES, limit=512, slimit=64, scale=0.25,
+                           offset=-512.0, minor=2)
+    assert {(b.stream, b.codec) for b in bl} == {(1, 1), (3, 2), (5, 2)}
+    add_valid("codec2_nested_37x21x10_uint16_c8", d, src, UINT16,
+              "The nested grid of nested_37x21x10_uint16_c8 (structure_kind 4, cell_log2 3) with every cells "
+              "block (u64 cell words, width 8) and values block codec 2, metadata codec 1.%s" % V2,
+              kind=KIND_NESTED, extra={"cell_log2": 3})
+
+    d, _, t, bl = simple_file(base_src, UINT16, codec="planes", minor=0)
+    add_valid("codec2_minor_0", d, base_src, UINT16,
+              "6x5x4 uint16 octree with its values blocks codec 2 but version_minor 0: §4 asks writers "
+              "for at least 2, but readers MUST NOT refuse a file for its minor version (§4, §14.1); a "
+              "reader that knows codec 2 reads it.")
+
+    t = build_tree(base_src, UINT16)
+    bl = level_blocks(t, CODEC_ZSTD)
+    bl.insert(2, Blk(200, 0, 0, 24, b"codec 255: skip me all\x00\x01", codec=255, flags=1))
+    bl.append(meta_block(DEFAULT_META))
+    d, _ = assemble(t, bl)
+    add_valid("ignorable_stream_200_codec_255", d, base_src, UINT16,
+              "ignorable_stream_200 with codec 255 (unknown) in the entry of its ignorable stream-200 "
+              "block: a reader that does not know the stream gives its codec no meaning (§6.4) and skips "
+              "the block.")
+
+
+def gen_codec2_invalid(bt, vblk, nblk1):
+    """Invalid codec-2 blocks: the frame rules of codec 1 apply to codec 2
+    (§7). The 6x5x4 uint16 octree of the other invalid files, values blocks
+    codec 2, version_minor 2; one defect in the values block of level 2."""
+    what = "6x5x4 uint16 octree (values blocks codec 2, version 1.2): the values block of level 2"
+
+    def c2(stored_of, minor=2, blk=None, codec=CODEC_PLANES):
+        bl = level_blocks(bt, "planes")
+        bl.append(meta_block(DEFAULT_META))
+        b = bl[vblk if blk is None else blk]
+        b.codec = codec
+        b.stored = stored_of(b.data, byte_planes(b.data, len(b.data) // b.count))
+        d, _ = assemble(bt, bl, minor=minor)
+        return d
+
+    def inv(name, data, expect, tag, desc):
+        add_invalid(name, data, expect, tag, desc)
+
+    def bad_checksum(data, content):
+        fr = bytearray(zframe(content))
+        assert zstandard.get_frame_parameters(bytes(fr)).has_checksum
+        fr[-1] ^= 0xFF
+        return bytes(fr)
+
+    inv("codec2_content_checksum_bad", c2(bad_checksum), "checksum", "zstd.checksum",
+        "%s has a wrong zstd content checksum (last byte of the frame changed, block CRC recomputed): "
+        "class checksum as for codec 1 (§7, §13). The checksum is XXH64 of the frame's content, the byte "
+        "planes, not of the regrouped elements." % what)
+    inv("codec2_no_content_size", c2(lambda data, content: zframe(content, content_size=False)),
+        "malformed", "zstd.content_size",
+        "%s is a zstd frame without Frame_Content_Size (codec 2 follows every rule of codec 1)." % what)
+    inv("codec2_content_size_one_element_more",
+        c2(lambda data, content: zframe(byte_planes(data + b"\x01\x00", 2))),
+        "malformed", "zstd.content_size",
+        "%s is a frame of the byte planes of element_count + 1 elements: Frame_Content_Size is "
+        "element_count x 2 + 2, not element_count x width." % what)
+    inv("codec2_content_size_one_byte_short", c2(lambda data, content: zframe(content[:-1])),
+        "malformed", "zstd.content_size",
+        "%s is a frame of its byte planes without their last byte: Frame_Content_Size is "
+        "element_count x 2 - 1 (not even a whole number of elements)." % what)
+    inv("codec2_one_frame_per_plane",
+        c2(lambda data, content: zframe(content[:len(content) // 2]) + zframe(content[len(content) // 2:])),
+        "malformed", "zstd.content_size",
+        "%s is two zstd frames, one per byte plane (low bytes, then high bytes): a codec-2 block is "
+        "exactly one frame holding all planes." % what)
+    inv("codec2_trailing_skippable_frame",
+        c2(lambda data, content: zframe(content) + struct.pack("<II", 0x184D2A50, 4) + b"skip"),
+        "malformed", "zstd.extra",
+        "%s is a correct frame of its byte planes followed by a skippable frame." % what)
+    inv("codec2_trailing_bytes", c2(lambda data, content: zframe(content) + b"\x00\x00\x00"),
+        "malformed", "zstd.extra",
+        "%s is a correct frame of its byte planes followed by 3 zero bytes (stored_size and CRC "
+        "include them)." % what)
+
+    def with_dict_id(data, content):
+        fr = bytearray(zframe(content))
+        fhd = fr[4]
+        assert fhd & 3 == 0
+        at = 5 + (0 if (fhd >> 5) & 1 else 1)           # after the Window_Descriptor, if any
+        fr[4] = fhd | 1                                  # Dictionary_ID_Flag 1: one byte
+        fr[at:at] = b"\x2a"
+        assert zstandard.get_frame_parameters(bytes(fr)).dict_id == 42
+        return bytes(fr)
+
+    inv("codec2_dictionary_id", c2(with_dict_id), "malformed", "zstd.dict",
+        "%s is a frame whose header names Dictionary_ID 42 (one byte inserted into the frame header): "
+        "the frame must not need a dictionary." % what)
+    inv("codec2_raw_planes", c2(lambda data, content: content), "malformed", "zstd.frame",
+        "%s holds its byte planes uncompressed (stored_size = element_count x 2, as for codec 0, but no "
+        "zstd frame): codec 2 stored bytes are one zstd frame." % what)
+
+    def rows_not_planes(data, content):
+        assert content != data
+        return zframe(data)
+
+    inv("codec2_nodes_not_regrouped", c2(rows_not_planes, blk=nblk1), "malformed", None,
+        "6x5x4 uint16 octree, version 1.2: the nodes block of level 1 (%d node words) is marked codec 2 "
+        "but its frame holds the words in element order (a codec-1 frame): regrouped as byte planes of "
+        "width 8 they are not the node words of §8, and the tree's rules fail." % bt.inner_count[1])
+
+    S = (1 << 25) + 1                                    # 2 x S = 64 MiB + 2 decoded bytes
+    g = Grid(KIND_REGULAR, UINT16, (S, 1, 1), [])
+    big = Blk(STREAM_VALUES, 0, 0, S, bytes(2 * S), codec=CODEC_PLANES)
+    d, _ = assemble(g, [big, meta_block(DEFAULT_META)], minor=2, structure_kind=KIND_REGULAR)
+    inv("codec2_block_decoded_64mib_plus_2", d, "malformed", "block.too_large",
+        "Regular grid %d x 1 x 1 uint16 (depth 26), all zero, in ONE values block of codec 2 with "
+        "element_count %d: decoded size element_count x width = 64 MiB + 2 > 64 MiB (§7); the frame "
+        "(%d bytes) holds exactly that many bytes. Stream coverage is exact; a reader must refuse it "
+        "from the index (element_count x width, not element_count alone) before allocating."
+        % (S, S, len(big.stored_bytes())))
+
+
+README_HEAD = """# .ivol 1.2 conformance vectors
 
 Generated by `make_vectors.py` from the specification `format-spec/ivol.md`
 alone. Regenerate with
@@ -2714,6 +2959,21 @@ z-fastest sum gives other bits). These files carry version_minor 1. The
 octree files of 1.0 are unchanged, except where the list of changes below
 says otherwise.
 
+Version 1.2 adds codec 2, zstd over byte planes (§7): the stored bytes are
+one zstd frame under every rule of codec 1, whose content is the block's
+decoded bytes regrouped by byte position (with n = element_count and w the
+stream's width, content byte p*n + i is decoded byte i*w + p). The
+`codec2_*` files cover it: values of width 2 (binary16, uint16) and 4
+(float32), node words and cell words (width 8), borders (width 4), the
+metadata (width 1, where codec 2 is codec 1), one-element blocks, frames
+without content checksum, and files that mix codecs 0, 1 and 2 (also within
+one stream and level). They carry version_minor 2 (§4), except
+`codec2_minor_0`, which a reader must read all the same (readers MUST NOT
+refuse a file for its minor version). The invalid `codec2_*` files break
+the frame rules of §7 in a codec-2 block, each with the class §7 and §13
+give. Every valid codec-2 file has the same dense export and levels of
+detail as the file it is derived from (named in its description).
+
 ### Changes to the 1.0 vectors for 1.1
 
 * `invalid/structure_kind_2.ivol` is now `invalid/structure_kind_9.ivol`:
@@ -2731,6 +2991,24 @@ says otherwise.
   files they are unknown streams as in 1.0 (§6.4), so the old vectors with
   stream 200 keep their meaning, and `valid/ignorable_stream_4_octree.ivol`
   shows the same for stream 4.
+
+### Changes to the 1.1 vectors for 1.2
+
+* `invalid/codec_2.ivol` is gone: 1.2 made codec 2 zstd over byte planes.
+  The unknown codec is now tested by `invalid/codec_3.ivol` and
+  `invalid/codec_255.ivol` (same construction: a values block whose stored
+  bytes are the raw values; same class, `unsupported-feature`).
+  `invalid/codec2_raw_planes.ivol` shows what such a block is under 1.2
+  when labelled codec 2 (its stored bytes are not a zstd frame:
+  `malformed`).
+* `valid/limits_4096.ivol` now has version_minor 3 instead of 2: its
+  extension bytes belong to a later minor version, and 1.2 (minor 2) defines
+  none. A reader must accept it either way.
+* New: 8 valid and 11 invalid `codec2_*` files (above), and
+  `valid/ignorable_stream_200_codec_255.ivol` (an unknown codec in the entry
+  of an ignorable unknown-stream block has no meaning, §6.4).
+* The manifest's `format` is `ivol 1.2`. Descriptions that said "unknown to
+  1.0 and 1.1" now say "1.0 - 1.2".
 
 ## Vectors
 """
@@ -2761,6 +3039,10 @@ def write_readme(zver):
   allocating. A reader that imposes lower limits of its own (§13) may report
   its limit for `metadata_16mib` instead of reading it; that is not an error
   of the file.
+* `invalid/codec2_block_decoded_64mib_plus_2.ivol` is a 2.5 KB file whose
+  one codec-2 values block decodes to 64 MiB + 2 bytes (element_count
+  2^25 + 1 of width 2); a reader must refuse it from the index, by
+  element_count x width, before it allocates or decodes.
 * `invalid/borders_count_huge.ivol` declares a borders block of 2^24
   elements (64 MiB decoded, within the block limit of §7); a reader must
   refuse it by the limit of §8A.2 (at most size_x + size_y + size_z + 3
@@ -2777,6 +3059,7 @@ def write_readme(zver):
 def main():
     _check_crc()
     _check_encoders()
+    _check_byte_planes()
     for sub in ("valid", "invalid"):
         p = os.path.join(HERE, sub)
         if os.path.isdir(p):
@@ -2784,7 +3067,7 @@ def main():
         os.makedirs(p)
     gen()
     zver = ".".join(str(v) for v in zstandard.ZSTD_VERSION)
-    man = {"format": "ivol 1.1", "generator": "make_vectors.py", "zstd_version": zver,
+    man = {"format": "ivol 1.2", "generator": "make_vectors.py", "zstd_version": zver,
            "vectors": MANIFEST}
     with open(os.path.join(HERE, "manifest.json"), "w", encoding="utf-8") as fh:
         json.dump(man, fh, indent=1, ensure_ascii=False)
