@@ -10,6 +10,11 @@ set -u
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1  # CI runs as root
 export OMPI_MCA_btl=self,vader                                   # one machine: shared memory only
 export SOURCE_DATE_EPOCH=1700000000                              # the same "created" in every file
+# In the sanitizer build: OpenMPI's own allocations at exit (libmpi and its
+# dlopen'ed components, "<unknown module>" once unloaded) are reported as
+# leaks that no suppression can name. Leaks of ivol's code are checked by
+# every other test of that build.
+export ASAN_OPTIONS="${ASAN_OPTIONS:+$ASAN_OPTIONS:}detect_leaks=0"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 passed=0
