@@ -111,10 +111,27 @@ std::vector<std::uint8_t> to_binary16_bytes(const std::vector<float>& values) {
   return bytes;
 }
 
+// What both ivol forms read the same way: through a Reader, a preview from
+// the level of detail (stored inner averages for the octree; computed from
+// the dense export for the regular grid, spec §12.3).
+class IvolFile : public PeerFormat {
+ public:
+  std::vector<float> read_box(const std::string& path, std::uint32_t, const ivol::Box& box) override {
+    ivol::Reader reader(path);
+    return reader.read_box(box);
+  }
+  std::vector<float> read_preview(const std::string& path, std::uint32_t, std::uint32_t factor) override {
+    ivol::Reader reader(path);
+    unsigned lod = 0;
+    while ((1u << lod) < factor) ++lod;
+    return reader.read_lod(lod);
+  }
+};
+
 // The octree: built from the dense volume (with the keep mask: full
 // resolution where it is set, one mean-valued leaf elsewhere) and written
 // with the library's defaults (16 KiB blocks, zstd level 3, all cores).
-class IvolOctree : public PeerFormat {
+class IvolOctree : public IvolFile {
  public:
   explicit IvolOctree(bool keep_mode) : keep_mode_(keep_mode) {}
   std::string name() const override { return "ivol octree"; }
@@ -128,23 +145,13 @@ class IvolOctree : public PeerFormat {
     const ivol::BuildResult built = ivol::build_octree(volume.values->data(), {volume.n, volume.n, volume.n}, options);
     ivol::write_octree(built.octree, ivol::Metadata{}, path);
   }
-  std::vector<float> read_box(const std::string& path, std::uint32_t, const ivol::Box& box) override {
-    ivol::Reader reader(path);
-    return reader.read_box(box);
-  }
-  std::vector<float> read_preview(const std::string& path, std::uint32_t, std::uint32_t factor) override {
-    ivol::Reader reader(path);
-    unsigned lod = 0;
-    while ((1u << lod) < factor) ++lod;
-    return reader.read_lod(lod);  // the stored inner averages: no full-resolution block is read
-  }
 
  private:
   bool keep_mode_;
 };
 
 // The paper's regular grid in its form of spec §8A: every voxel, binary16.
-class IvolRegular : public PeerFormat {
+class IvolRegular : public IvolFile {
  public:
   std::string name() const override { return "ivol regular"; }
   std::string details() const override { return "binary16, every voxel; zstd-3, 16 KiB blocks"; }
@@ -157,16 +164,6 @@ class IvolRegular : public PeerFormat {
     auto structure = ivol::generate_structure(ivol::StructureKind::Regular, everything);
     structure->sample_dense(volume.values->data());
     ivol::write_structure(*structure, path, ivol::Metadata{});
-  }
-  std::vector<float> read_box(const std::string& path, std::uint32_t, const ivol::Box& box) override {
-    ivol::Reader reader(path);
-    return reader.read_box(box);
-  }
-  std::vector<float> read_preview(const std::string& path, std::uint32_t, std::uint32_t factor) override {
-    ivol::Reader reader(path);
-    unsigned lod = 0;
-    while ((1u << lod) < factor) ++lod;
-    return reader.read_lod(lod);
   }
 };
 

@@ -21,13 +21,6 @@ namespace {
   throw Error(ErrorClass::Io, path + ": " + what + ": " + std::strerror(errno));
 }
 
-std::string directory_of(const std::string& path) {
-  const auto slash = path.find_last_of('/');
-  if (slash == std::string::npos) return ".";
-  if (slash == 0) return "/";
-  return path.substr(0, slash);
-}
-
 std::array<unsigned char, layout::kHeaderSize> header_bytes(std::uint16_t minor) {
   std::array<unsigned char, layout::kHeaderSize> header{};
   std::memcpy(header.data(), layout::kSignature.data(), 8);
@@ -185,16 +178,10 @@ void FileWriter::finish(const Metadata& metadata, const std::vector<std::uint64_
   // Renamed while still open, so still locked: a cleaner never takes a
   // finished file for an abandoned one. Its bytes are on disk (fsync), so
   // closing can lose nothing.
-  if (::rename(temp_path_.c_str(), path_.c_str()) != 0) io_error(path_, "cannot rename the finished file into place");
+  rename_into_place(temp_path_, path_);
   finished_ = true;
   ::close(fd_);
   fd_ = -1;
-  // Make the rename itself durable.
-  const int dir = ::open(directory_of(path_).c_str(), O_RDONLY | O_DIRECTORY);
-  if (dir >= 0) {
-    ::fsync(dir);
-    ::close(dir);
-  }
 }
 
 }  // namespace ivol

@@ -108,6 +108,16 @@ int create_locked_temporary(const std::string& final_path, std::string& temp_pat
   return fd;
 }
 
+void rename_into_place(const std::string& temp_path, const std::string& final_path) {
+  if (::rename(temp_path.c_str(), final_path.c_str()) != 0)
+    io_error(final_path, "cannot rename the finished file into place");
+  const int dir = ::open(directory_of(final_path).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dir >= 0) {
+    ::fsync(dir);
+    ::close(dir);
+  }
+}
+
 std::size_t remove_abandoned_temporaries(const std::string& final_path) {
   const std::string directory = directory_of(final_path);
   const std::string prefix = temporary_prefix(final_path);
@@ -126,8 +136,7 @@ std::size_t remove_abandoned_temporaries(const std::string& final_path) {
     if (fd < 0) continue;
     struct stat st {};
     // Holding a read lock while unlinking: no live writer holds its write lock.
-    if (::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && lock_whole_file(fd, F_RDLCK) &&
-        ::unlink(path.c_str()) == 0)
+    if (::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && lock_whole_file(fd, F_RDLCK) && ::unlink(path.c_str()) == 0)
       ++removed;
     ::close(fd);
   }

@@ -12,6 +12,19 @@
 namespace ivol::convert {
 namespace {
 
+// A reconstruction's volume as a converter's input: float32 voxels with the
+// grid's geometry, in mm.
+DenseVolume float_volume_of(const recon::VolumeGrid& grid) {
+  DenseVolume shape;
+  shape.dims = Dims{grid.size[0], grid.size[1], grid.size[2]};
+  shape.type = SampleType::Float32;
+  shape.has_geometry = true;
+  shape.voxel_size = {grid.voxel_size[0], grid.voxel_size[1], grid.voxel_size[2]};
+  shape.origin = {grid.origin[0], grid.origin[1], grid.origin[2]};
+  shape.unit = "mm";
+  return shape;
+}
+
 void add(recon::FdkTimings& into, const recon::FdkTimings& t) {
   into.setup += t.setup;
   into.reading += t.reading;
@@ -26,12 +39,7 @@ void add(recon::FdkTimings& into, const recon::FdkTimings& t) {
 
 ReconstructionSlabs::ReconstructionSlabs(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid)
     : reconstructor_(reconstructor), grid_(grid) {
-  shape_.dims = Dims{grid.size[0], grid.size[1], grid.size[2]};
-  shape_.type = SampleType::Float32;
-  shape_.has_geometry = true;
-  shape_.voxel_size = {grid.voxel_size[0], grid.voxel_size[1], grid.voxel_size[2]};
-  shape_.origin = {grid.origin[0], grid.origin[1], grid.origin[2]};
-  shape_.unit = "mm";
+  shape_ = float_volume_of(grid);
 }
 
 void ReconstructionSlabs::read(std::uint32_t z0, std::uint32_t count, void* out) {
@@ -91,12 +99,7 @@ class SlabHandoff final : public SlabReader {
  public:
   explicit SlabHandoff(const recon::VolumeGrid& grid)
       : slice_(std::size_t{grid.size[0]} * grid.size[1]), depth_(grid.size[2]) {
-    shape_.dims = Dims{grid.size[0], grid.size[1], grid.size[2]};
-    shape_.type = SampleType::Float32;
-    shape_.has_geometry = true;
-    shape_.voxel_size = {grid.voxel_size[0], grid.voxel_size[1], grid.voxel_size[2]};
-    shape_.origin = {grid.origin[0], grid.origin[1], grid.origin[2]};
-    shape_.unit = "mm";
+    shape_ = float_volume_of(grid);
   }
 
   void push(std::uint32_t k_begin, std::uint32_t k_end, const float* data) {

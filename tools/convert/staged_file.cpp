@@ -6,20 +6,12 @@
 
 #include <cerrno>
 #include <cstring>
-#include <vector>
 
 #include "ivol/error.hpp"
 #include "ivol/temporary_file.hpp"
 
 namespace ivol::convert {
 namespace {
-
-std::string directory_of(const std::string& path) {
-  const std::size_t slash = path.find_last_of('/');
-  if (slash == std::string::npos) return ".";
-  if (slash == 0) return "/";
-  return path.substr(0, slash);
-}
 
 [[noreturn]] void io_error(const std::string& path, const std::string& what) {
   throw Error(ErrorClass::Io, path + ": " + what + ": " + std::strerror(errno));
@@ -47,15 +39,8 @@ void StagedFile::commit() {
   const bool synced = ::fsync(fd) == 0;
   ::close(fd);
   if (!synced) io_error(final_path_, "cannot flush the file to disk");
-  if (::rename(temp_path_.c_str(), final_path_.c_str()) != 0)
-    io_error(final_path_, "cannot rename the finished file into place");
+  rename_into_place(temp_path_, final_path_);
   committed_ = true;
-  // Make the rename itself durable.
-  const int dir = ::open(directory_of(final_path_).c_str(), O_RDONLY | O_DIRECTORY);
-  if (dir >= 0) {
-    ::fsync(dir);
-    ::close(dir);
-  }
 }
 
 }  // namespace ivol::convert

@@ -3,9 +3,9 @@
 // renames it into place when complete. While it writes, it holds a write
 // lock on the file (an open-file-description lock, fcntl F_OFD_SETLK, which
 // leaves flock(2) free for libraries such as HDF5 that lock the file they
-// write); the kernel drops the lock when the process ends, however it ends. A writer killed outright (SIGKILL, the OOM killer)
-// cannot remove its temporary file, so the next writer of the same output
-// removes every such file that nobody holds locked.
+// write); the kernel drops the lock when the process ends, however it ends. A writer killed outright (SIGKILL, the OOM
+// killer) cannot remove its temporary file, so the next writer of the same output removes every such file that nobody
+// holds locked.
 #pragma once
 
 #include <cstddef>
@@ -20,6 +20,11 @@ namespace ivol {
 // naming final_path on failure. Closing the descriptor releases the lock:
 // rename the file into place before closing it.
 int create_locked_temporary(const std::string& final_path, std::string& temp_path);
+
+// Renames a finished (and flushed) temporary file to `final_path`, replacing
+// any file there atomically, and makes the rename durable by flushing the
+// directory. Throws ivol::Error naming final_path when the rename fails.
+void rename_into_place(const std::string& temp_path, const std::string& final_path);
 
 // Removes the temporary files of `final_path` that no live writer holds.
 // Returns how many it removed. Never touches final_path itself, nor files
