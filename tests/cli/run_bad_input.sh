@@ -54,6 +54,9 @@ open(d + "/garbage.xml", "w").write("<RTKThreeDCircularGeometry version='3'><Pro
 PY
 "$IVOL" -q convert "$work/v.raw" "$work/v.ivol" --dims 16,16,16
 head -c 2000 "$work/v.ivol" > "$work/truncated.ivol"
+# A file on which Debian 12's libhdf5 crashes (found by fuzzing; the first
+# byte is the harness's format selector).
+tail -c +2 "$(dirname "$0")/../fuzz/regressions/libhdf5/converters-hdf5-null-read" > "$work/libhdf5-crash.h5"
 "$IVOL" -q phantom pencil-holder --views 20 --detector 32 --radius 12 -o "$work/p.raw"
 "$IVOL" -q phantom pencil-holder --views 24 --detector 32 --radius 12 -o "$work/q.h5"
 scan=(--geometry "$work/p.xml" --pitch 1.5 --detector 32,32 --views 20)
@@ -61,6 +64,8 @@ grid=(--size 16 --voxel 1.5)
 
 bad convert-garbage-tiff   2 "garbage.tif"            -- "$IVOL" convert "$work/garbage.tif" "$out/x.ivol"
 bad convert-garbage-hdf5   2 "garbage.h5"             -- "$IVOL" convert "$work/garbage.h5" "$out/x.ivol"
+bad convert-libhdf5-crash  2 "libhdf5-crash.h5: libhdf5 crashed" -- "$IVOL" convert "$work/libhdf5-crash.h5" "$out/x.ivol"
+bad recon-libhdf5-crash    2 "libhdf5-crash.h5: libhdf5 crashed" -- "$IVOL" recon "$work/libhdf5-crash.h5" --sid 600 --sdd 1200 --pitch 1.5 --size 16 --voxel 1.5 -o "$out/x.ivol"
 bad convert-garbage-vdb    2 "garbage.vdb"            -- "$IVOL" convert "$work/garbage.vdb" "$out/x.ivol"
 bad convert-raw-size       2 "16384"                  -- "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,17
 bad convert-truncated-ivol 2 "truncated"              -- "$IVOL" convert "$work/truncated.ivol" "$out/x.raw"

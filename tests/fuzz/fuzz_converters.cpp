@@ -46,7 +46,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         projections = open_tiff_projections(path, StoredQuantity::LineIntegrals);
         break;
       case 6:
-        projections = open_dxchange_projections(path, {true, 1e-3}).projections;
+        projections = open_dxchange_projections_in_process(path, {true, 1e-3}).projections;
         break;
       case 7:
         (void)ivol::recon::read_rtk_geometry_xml(path, {8, 8, 1.0, 1.0}, -3.5, -3.5);
@@ -77,7 +77,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         reader = ivol::convert::open_tiff_slabs(path);
         break;
       case 2:
-        reader = ivol::convert::open_hdf5_slabs(path);
+        reader = ivol::convert::open_hdf5_slabs_in_process(path);
         break;
       case 3:
         (void)ivol::convert::read_vdb(path);

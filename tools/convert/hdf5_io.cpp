@@ -274,8 +274,8 @@ class Hdf5SlabReader final : public SlabReader {
 
 }  // namespace
 
-std::unique_ptr<SlabReader> open_hdf5_slabs(const std::string& path, const std::string& dataset,
-                                            Hdf5SourceInfo* source) {
+std::unique_ptr<SlabReader> open_hdf5_slabs_in_process(const std::string& path, const std::string& dataset,
+                                                       Hdf5SourceInfo* source) {
   return std::make_unique<Hdf5SlabReader>(path, dataset, source);
 }
 

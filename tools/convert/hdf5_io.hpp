@@ -44,8 +44,16 @@ DenseVolume read_hdf5(const std::string& path, const std::string& dataset = "/ex
                       Hdf5SourceInfo* source = nullptr);
 
 // The same, slab by slab (hyperslab reads): memory holds one slab.
+// libhdf5 runs in a child process of its own (isolated_worker.hpp): a crash
+// of the library on a damaged file is an ivol::Error(Malformed) naming it,
+// not the end of ivol. read_hdf5 reads through it too.
 std::unique_ptr<SlabReader> open_hdf5_slabs(const std::string& path, const std::string& dataset = "/exchange/data",
                                             Hdf5SourceInfo* source = nullptr);
+// The same in this process, as the child runs it; for the fuzz harness,
+// which must see the library's crashes to tell them from ivol's.
+std::unique_ptr<SlabReader> open_hdf5_slabs_in_process(const std::string& path,
+                                                       const std::string& dataset = "/exchange/data",
+                                                       Hdf5SourceInfo* source = nullptr);
 
 // Writes a chunked (64^3, clipped to the volume) dataset with the shuffle and
 // deflate filters (deflate_level 0: chunked, no filters), creating the groups

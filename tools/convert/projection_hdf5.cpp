@@ -127,7 +127,7 @@ class DxchangeReader final : public ProjectionReader {
 
 }  // namespace
 
-DxchangeProjections open_dxchange_projections(const std::string& path, const DxchangeOptions& options) {
+DxchangeProjections open_dxchange_projections_in_process(const std::string& path, const DxchangeOptions& options) {
   QuietHdf5Errors quiet;
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) throw Error(ErrorClass::Io, path + ": cannot open: no such file");

@@ -55,7 +55,9 @@ class ProjectionReader : public ivol::recon::ProjectionSource {
   void read_rows(std::size_t view, int row_begin, int row_end, float* out) final;
 
   const std::string& path() const { return path_; }
-  StoredQuantity quantity() const { return intensities_ ? StoredQuantity::Intensities : StoredQuantity::LineIntegrals; }
+  virtual StoredQuantity quantity() const {
+    return intensities_ ? StoredQuantity::Intensities : StoredQuantity::LineIntegrals;
+  }
   // Pixels whose I − D or F − D was raised to the floor, over all reads so far.
   std::uint64_t clamped_pixels() const { return clamped_; }
 
@@ -67,6 +69,9 @@ class ProjectionReader : public ivol::recon::ProjectionSource {
   // Turns the reader into an intensity reader. `flat` and `dark` are per-pixel
   // means (rows × columns) or empty (see the conventions above).
   void set_fields(std::vector<double> flat, std::vector<double> dark, const IntensityOptions& options);
+  // For a reader whose conversion to line integrals happens elsewhere (in
+  // the process that reads HDF5): the pixels it clamped.
+  void count_clamped(std::uint64_t pixels) { clamped_ += pixels; }
 
   std::string path_;
   int columns_;
@@ -156,7 +161,12 @@ struct DxchangeProjections {
 // hyperslab; /exchange/data_white and /exchange/data_dark (n, rows, columns)
 // or (rows, columns), averaged over n; with data_white the data are
 // intensities (data_dark optional), without it see assume_line_integrals.
+// libhdf5 runs in a child process of its own (isolated_worker.hpp): a crash
+// of the library on a damaged file is an ivol::Error(Malformed) naming it.
 DxchangeProjections open_dxchange_projections(const std::string& path, const DxchangeOptions& options = {});
+// The same in this process, as the child runs it; for the fuzz harness,
+// which must see the library's crashes to tell them from ivol's.
+DxchangeProjections open_dxchange_projections_in_process(const std::string& path, const DxchangeOptions& options = {});
 
 // Flat and dark images (rows × columns each) for write_dxchange.
 struct FieldImages {

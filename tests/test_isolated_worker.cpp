@@ -1,0 +1,220 @@
+// The child process that third-party parsers run in (isolated_worker.hpp),
+// and the HDF5 readers that use it: a library crash on a damaged file must
+// become an ivol::Error naming the file, clean errors must come back
+// unchanged, and the values must be those of the in-process readers.
+#include <gtest/gtest.h>
+#include <hdf5.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <csignal>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
+#include <vector>
+
+#include "hdf5_io.hpp"
+#include "isolated_worker.hpp"
+#include "ivol/error.hpp"
+#include "projection_io.hpp"
+#include "test_support.hpp"
+
+namespace ivol::convert {
+namespace {
+
+// Runs `call` and returns the ivol::Error it throws (a failure if none).
+template <typename Call>
+Error error_of(Call call) {
+  try {
+    call();
+  } catch (const Error& e) {
+    return e;
+  }
+  ADD_FAILURE() << "no ivol::Error was thrown";
+  return Error(ErrorClass::InvalidArgument, "");
+}
+
+bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+
+TEST(IsolatedWorker, RepliesAndBulkDataArriveWhole) {
+  IsolatedWorker worker("subject", "a library", [](std::string_view request, WorkerReply& out) {
+    WireReader in{std::string(request)};
+    const auto count = in.get<std::uint64_t>();
+    out.reply = "got " + in.get_string();
+    out.bulk.resize(count);
+    for (std::size_t i = 0; i < count; ++i) out.bulk[i] = static_cast<char>(i * 7 + i / 4099);
+  });
+  for (std::uint64_t count : {std::uint64_t{0}, std::uint64_t{1}, std::uint64_t{48} << 20}) {
+    WireWriter request;
+    request.put(count).put_string("slab");
+    std::vector<char> bulk(count, 0);
+    EXPECT_EQ(worker.call(request.bytes(), "testing", bulk.data(), bulk.size()), "got slab");
+    std::size_t wrong = 0;
+    for (std::size_t i = 0; i < count; ++i) wrong += bulk[i] != static_cast<char>(i * 7 + i / 4099);
+    EXPECT_EQ(wrong, 0u) << count << " bytes";
+  }
+}
+
+TEST(IsolatedWorker, ChildErrorsComeBackWithTheirClassAndMessage) {
+  IsolatedWorker worker("x.h5", "libhdf5", [](std::string_view request, WorkerReply&) {
+    if (request == "checksum") throw Error(ErrorClass::Checksum, "x.h5: chunk 3: checksum mismatch");
+    throw std::runtime_error("x.h5: something else");
+  });
+  const Error checksum = error_of([&] { worker.call("checksum", "reading"); });
+  EXPECT_EQ(checksum.error_class(), ErrorClass::Checksum);
+  EXPECT_STREQ(checksum.what(), "x.h5: chunk 3: checksum mismatch");
+  const Error other = error_of([&] { worker.call("other", "reading"); });
+  EXPECT_EQ(other.error_class(), ErrorClass::Malformed);
+  EXPECT_STREQ(other.what(), "x.h5: something else");
+  // An error is not a crash: the child still serves.
+  EXPECT_EQ(error_of([&] { worker.call("checksum", "reading"); }).error_class(), ErrorClass::Checksum);
+}
+
+TEST(IsolatedWorker, ACrashIsAnErrorNamingTheFileTheRequestAndTheSignal) {
+  IsolatedWorker worker("scan.h5", "libhdf5", [](std::string_view request, WorkerReply& out) {
+    if (request == "kill") raise(SIGKILL);
+    if (request == "segv") {
+      volatile int* nowhere = nullptr;
+      *nowhere = 1;  // under a sanitizer the child reports and exits instead
+    }
+    out.reply = "fine";
+  });
+  EXPECT_EQ(worker.call("ok", "warming up"), "fine");
+  const Error killed = error_of([&] { worker.call("kill", "reading view 3 rows 0..8"); });
+  EXPECT_EQ(killed.error_class(), ErrorClass::Malformed);
+  EXPECT_TRUE(contains(killed.what(), "scan.h5: libhdf5 crashed (signal 9")) << killed.what();
+  EXPECT_TRUE(contains(killed.what(), "while reading view 3 rows 0..8")) << killed.what();
+  // The worker is gone: later calls are refused, not sent into a dead socket.
+  const Error later = error_of([&] { worker.call("ok", "reading"); });
+  EXPECT_TRUE(contains(later.what(), "stopped by an earlier failure")) << later.what();
+
+  IsolatedWorker segv("scan.h5", "libhdf5", [](std::string_view, WorkerReply&) {
+    volatile int* nowhere = nullptr;
+    *nowhere = 1;
+  });
+  const Error crashed = error_of([&] { segv.call("segv", "opening"); });
+  EXPECT_TRUE(contains(crashed.what(), "libhdf5 crashed (signal 11") ||
+              contains(crashed.what(), "libhdf5 ended with exit status"))
+      << crashed.what();
+}
+
+TEST(IsolatedWorker, TheChildEndsWithTheWorker) {
+  // A child that lived on would keep the parent's descriptors, and the lock
+  // on its temporary file, alive.
+  pid_t child = -1;
+  {
+    IsolatedWorker worker("subject", "a library", [](std::string_view, WorkerReply& out) { out.reply = "here"; });
+    child = worker.child();
+    EXPECT_EQ(worker.call("", "checking"), "here");
+    EXPECT_EQ(::kill(child, 0), 0);
+  }
+  EXPECT_NE(::kill(child, 0), 0) << "the child outlived its worker";
+  EXPECT_EQ(errno, ESRCH);
+}
+
+// --- The HDF5 readers through the worker -------------------------------------
+
+std::string source_dir() { return IVOL_SOURCE_DIR; }
+
+// A kept fuzzing input (first byte: the harness's format selector) as a file.
+std::string regression_file(const std::string& name) {
+  std::ifstream in(source_dir() + "/tests/fuzz/regressions/" + name, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_GT(bytes.size(), 1u) << name;
+  const std::string path = ivol::test::temp_path(std::filesystem::path(name).filename().string() + ".h5");
+  std::ofstream(path, std::ios::binary) << bytes.substr(1);
+  return path;
+}
+
+// Debian 12's libhdf5 1.10.8 crashes on this file in any build
+// (tests/fuzz/regressions/README.md); other versions may refuse it cleanly.
+constexpr bool kLibraryCrashesOnNullRead = H5_VERS_MAJOR == 1 && H5_VERS_MINOR == 10 && H5_VERS_RELEASE == 8;
+
+TEST(Hdf5Isolation, ALibraryCrashOnADamagedVolumeIsAnErrorNamingTheFile) {
+  const std::string path = regression_file("libhdf5/converters-hdf5-null-read");
+  const Error e = error_of([&] { read_hdf5(path); });
+  EXPECT_EQ(e.error_class(), ErrorClass::Malformed);
+  EXPECT_TRUE(contains(e.what(), path)) << e.what();
+  if (kLibraryCrashesOnNullRead)
+    EXPECT_TRUE(contains(e.what(), "libhdf5 crashed") && contains(e.what(), "opening dataset /exchange/data"))
+        << e.what();
+}
+
+TEST(Hdf5Isolation, ALibraryCrashOnDamagedProjectionsIsAnErrorNamingTheFile) {
+  const std::string path = regression_file("libhdf5/converters-hdf5-null-read");
+  const Error e = error_of([&] { open_dxchange_projections(path, {true, 1e-3}); });
+  EXPECT_TRUE(contains(e.what(), path)) << e.what();
+  if (kLibraryCrashesOnNullRead) EXPECT_TRUE(contains(e.what(), "libhdf5 crashed")) << e.what();
+}
+
+// Line integrals made up on the spot, for write_dxchange.
+class MadeUpScan final : public ivol::recon::ProjectionSource {
+ public:
+  int columns() const override { return 7; }
+  int rows() const override { return 5; }
+  std::size_t view_count() const override { return 4; }
+  void read_rows(std::size_t view, int row_begin, int row_end, float* out) override {
+    for (int r = row_begin; r < row_end; ++r)
+      for (int c = 0; c < columns(); ++c) *out++ = static_cast<float>(0.01 * c + 0.1 * r + 0.37 * view);
+  }
+};
+
+TEST(Hdf5Isolation, ProjectionsThroughTheChildEqualThoseReadInProcess) {
+  MadeUpScan scan;
+  FieldImages fields;
+  fields.flat.assign(35, 1000.0f);
+  fields.dark.assign(35, 10.0f);
+  fields.dark[3] = 1200.0f;  // a dead pixel: F − D below the floor, clamped at every read
+  const std::string path = ivol::test::temp_path("isolated_dx.h5");
+  write_dxchange(path, scan, {0.0, 45.0, 90.0, 135.0}, fields);
+
+  DxchangeProjections here = open_dxchange_projections_in_process(path);
+  DxchangeProjections there = open_dxchange_projections(path);
+  EXPECT_EQ(there.theta_deg, here.theta_deg);
+  EXPECT_EQ(there.projections->quantity(), StoredQuantity::Intensities);
+  EXPECT_EQ(there.projections->columns(), 7);
+  EXPECT_EQ(there.projections->rows(), 5);
+  EXPECT_EQ(there.projections->view_count(), 4u);
+  std::vector<float> a(35), b(35);
+  for (std::size_t v = 0; v < 4; ++v) {
+    here.projections->read_rows(v, 0, 5, a.data());
+    there.projections->read_rows(v, 0, 5, b.data());
+    EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(float)), 0) << "view " << v;
+    here.projections->read_rows(v, 2, 4, a.data());
+    there.projections->read_rows(v, 2, 4, b.data());
+    EXPECT_EQ(std::memcmp(a.data(), b.data(), 14 * sizeof(float)), 0) << "view " << v << " rows 2..4";
+  }
+  EXPECT_EQ(there.projections->clamped_pixels(), 4u);
+  EXPECT_EQ(there.projections->clamped_pixels(), here.projections->clamped_pixels());
+  // The child checks arguments as the reader in this process does.
+  EXPECT_EQ(error_of([&] { there.projections->read_rows(4, 0, 1, b.data()); }).error_class(),
+            ErrorClass::InvalidArgument);
+}
+
+// Files on which libhdf5 reads out of bounds: harmless or refused in a normal
+// build, a sanitizer's exit in the child under ASan. Either way this process
+// goes on, and every failure names the file.
+TEST(Hdf5Isolation, OverreadsInTheLibraryNeverReachThisProcess) {
+  const std::string volume = regression_file("converters-hdf5-chunk-overread");
+  try {
+    const DenseVolume v = read_hdf5(volume);
+    EXPECT_EQ(v.dims, (Dims{5, 4, 3}));
+  } catch (const Error& e) {
+    EXPECT_TRUE(contains(e.what(), volume)) << e.what();
+  }
+  const std::string scan = regression_file("libhdf5/converters-dxchange-chunk-overread");
+  try {
+    DxchangeProjections p = open_dxchange_projections(scan, {true, 1e-3});
+    std::vector<float> rows(static_cast<std::size_t>(p.projections->columns()) * p.projections->rows());
+    for (std::size_t v = 0; v < p.projections->view_count(); ++v)
+      p.projections->read_rows(v, 0, p.projections->rows(), rows.data());
+    ADD_FAILURE() << "a damaged chunk was read without an error";
+  } catch (const Error& e) {
+    EXPECT_TRUE(contains(e.what(), scan)) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace ivol::convert

@@ -1,0 +1,182 @@
+// The HDF5 readers as ivol uses them: the in-process readers
+// (hdf5_io.cpp, projection_hdf5.cpp) run in a child process, and these
+// proxies forward shapes, slabs and rows from it (isolated_worker.hpp says
+// why).
+#include <memory>
+#include <utility>
+
+#include "hdf5_io.hpp"
+#include "isolated_worker.hpp"
+#include "ivol/error.hpp"
+#include "projection_io.hpp"
+
+namespace ivol::convert {
+namespace {
+
+constexpr const char* kLibrary = "libhdf5";
+constexpr char kOpen = 'o';
+constexpr char kRead = 'r';
+
+// --- Volumes ----------------------------------------------------------------
+
+WorkerHandler volume_handler(const std::string& path, const std::string& dataset) {
+  auto reader = std::make_shared<std::unique_ptr<SlabReader>>();
+  return [path, dataset, reader](std::string_view request, WorkerReply& out) {
+    WireReader in{std::string(request)};
+    const char operation = in.get<char>();
+    if (operation == kOpen) {
+      Hdf5SourceInfo source;
+      *reader = open_hdf5_slabs_in_process(path, dataset, &source);
+      const DenseVolume& shape = (*reader)->shape();
+      WireWriter reply;
+      reply.put(shape.dims).put(shape.type).put(shape.voxel_size).put(shape.origin).put_string(shape.unit);
+      reply.put(shape.has_geometry).put_string(source.stored_type).put(source.narrowed_to_f32).put(source.chunked);
+      reply.put(source.chunk).put_string(source.filters);
+      out.reply = std::move(reply.bytes());
+      return;
+    }
+    if (operation != kRead || !*reader)
+      throw Error(ErrorClass::InvalidArgument, "isolated HDF5 reader: unexpected request " + std::string(1, operation));
+    const auto z0 = in.get<std::uint32_t>();
+    const auto count = in.get<std::uint32_t>();
+    const DenseVolume& shape = (*reader)->shape();
+    out.bulk.resize(std::size_t{count} * shape.dims[0] * shape.dims[1] * sample_size(shape.type));
+    (*reader)->read(z0, count, out.bulk.data());
+  };
+}
+
+class IsolatedHdf5SlabReader final : public SlabReader {
+ public:
+  IsolatedHdf5SlabReader(const std::string& path, const std::string& dataset, Hdf5SourceInfo* source)
+      : dataset_(dataset), worker_(path, kLibrary, volume_handler(path, dataset)) {
+    WireWriter request;
+    request.put(kOpen);
+    WireReader reply(worker_.call(request.bytes(), "opening dataset " + dataset));
+    shape_.dims = reply.get<Dims>();
+    shape_.type = reply.get<SampleType>();
+    shape_.voxel_size = reply.get<std::array<double, 3>>();
+    shape_.origin = reply.get<std::array<double, 3>>();
+    shape_.unit = reply.get_string();
+    shape_.has_geometry = reply.get<bool>();
+    Hdf5SourceInfo info;
+    info.stored_type = reply.get_string();
+    info.narrowed_to_f32 = reply.get<bool>();
+    info.chunked = reply.get<bool>();
+    info.chunk = reply.get<std::array<unsigned long long, 3>>();
+    info.filters = reply.get_string();
+    if (source) *source = std::move(info);
+  }
+
+  void read(std::uint32_t z0, std::uint32_t count, void* out) override {
+    WireWriter request;
+    request.put(kRead).put(z0).put(count);
+    const std::size_t bytes = std::size_t{count} * shape_.dims[0] * shape_.dims[1] * sample_size(shape_.type);
+    worker_.call(
+        request.bytes(),
+        "reading slices " + std::to_string(z0) + " .. " + std::to_string(z0 + count) + " of dataset " + dataset_, out,
+        bytes);
+  }
+
+ private:
+  std::string dataset_;
+  IsolatedWorker worker_;
+};
+
+// --- DXchange projections ---------------------------------------------------
+
+WorkerHandler projection_handler(const std::string& path, const DxchangeOptions& options) {
+  auto reader = std::make_shared<std::unique_ptr<ProjectionReader>>();
+  return [path, options, reader](std::string_view request, WorkerReply& out) {
+    WireReader in{std::string(request)};
+    const char operation = in.get<char>();
+    if (operation == kOpen) {
+      DxchangeProjections scan = open_dxchange_projections_in_process(path, options);
+      *reader = std::move(scan.projections);
+      const ProjectionReader& r = **reader;
+      WireWriter reply;
+      reply.put(r.columns()).put(r.rows()).put<std::uint64_t>(r.view_count()).put(r.quantity());
+      reply.put<std::uint64_t>(scan.theta_deg.size());
+      for (double angle : scan.theta_deg) reply.put(angle);
+      out.reply = std::move(reply.bytes());
+      return;
+    }
+    if (operation != kRead || !*reader)
+      throw Error(ErrorClass::InvalidArgument, "isolated HDF5 reader: unexpected request " + std::string(1, operation));
+    const auto view = in.get<std::uint64_t>();
+    const int row_begin = in.get<int>();
+    const int row_end = in.get<int>();
+    ProjectionReader& r = **reader;
+    const std::uint64_t clamped_before = r.clamped_pixels();
+    const std::size_t count = static_cast<std::size_t>(row_end - row_begin) * static_cast<std::size_t>(r.columns());
+    out.bulk.resize(count * sizeof(float));
+    r.read_rows(static_cast<std::size_t>(view), row_begin, row_end, reinterpret_cast<float*>(out.bulk.data()));
+    WireWriter reply;
+    reply.put<std::uint64_t>(r.clamped_pixels() - clamped_before);
+    out.reply = std::move(reply.bytes());
+  };
+}
+
+struct ScanShape {
+  int columns = 0;
+  int rows = 0;
+  std::size_t views = 0;
+  StoredQuantity quantity = StoredQuantity::LineIntegrals;
+};
+
+// The child converts intensities to line integrals (it holds the flat and
+// dark fields); this side passes the floats on. float → double → float is
+// exact, so the values are those of the in-process reader.
+class IsolatedDxchangeReader final : public ProjectionReader {
+ public:
+  IsolatedDxchangeReader(const std::string& path, const ScanShape& shape, std::unique_ptr<IsolatedWorker> worker)
+      : ProjectionReader(path, shape.columns, shape.rows, shape.views),
+        quantity_(shape.quantity),
+        worker_(std::move(worker)) {}
+
+  StoredQuantity quantity() const override { return quantity_; }
+
+ protected:
+  void read_samples(std::size_t view, int row_begin, int row_end, double* out) override {
+    WireWriter request;
+    request.put(kRead).put<std::uint64_t>(view).put(row_begin).put(row_end);
+    const std::size_t count = static_cast<std::size_t>(row_end - row_begin) * static_cast<std::size_t>(columns_);
+    line_integrals_.resize(count);
+    WireReader reply(worker_->call(request.bytes(),
+                                   "reading view " + std::to_string(view) + " rows " + std::to_string(row_begin) +
+                                       ".." + std::to_string(row_end) + " of dataset /exchange/data",
+                                   line_integrals_.data(), count * sizeof(float)));
+    count_clamped(reply.get<std::uint64_t>());
+    for (std::size_t i = 0; i < count; ++i) out[i] = line_integrals_[i];
+  }
+
+ private:
+  StoredQuantity quantity_;
+  std::unique_ptr<IsolatedWorker> worker_;
+  std::vector<float> line_integrals_;
+};
+
+}  // namespace
+
+std::unique_ptr<SlabReader> open_hdf5_slabs(const std::string& path, const std::string& dataset,
+                                            Hdf5SourceInfo* source) {
+  return std::make_unique<IsolatedHdf5SlabReader>(path, dataset, source);
+}
+
+DxchangeProjections open_dxchange_projections(const std::string& path, const DxchangeOptions& options) {
+  auto worker = std::make_unique<IsolatedWorker>(path, kLibrary, projection_handler(path, options));
+  WireWriter request;
+  request.put(kOpen);
+  WireReader reply(worker->call(request.bytes(), "opening the DXchange datasets"));
+  ScanShape shape;
+  shape.columns = reply.get<int>();
+  shape.rows = reply.get<int>();
+  shape.views = static_cast<std::size_t>(reply.get<std::uint64_t>());
+  shape.quantity = reply.get<StoredQuantity>();
+  DxchangeProjections scan;
+  scan.theta_deg.resize(static_cast<std::size_t>(reply.get<std::uint64_t>()));
+  for (double& angle : scan.theta_deg) angle = reply.get<double>();
+  scan.projections = std::make_unique<IsolatedDxchangeReader>(path, shape, std::move(worker));
+  return scan;
+}
+
+}  // namespace ivol::convert

@@ -1,0 +1,115 @@
+// Running a third-party parser in a child process, so that a crash inside it
+// becomes an error naming the file instead of the end of ivol.
+//
+// Why: Debian 12's libhdf5 1.10.8 reads out of bounds or through a null
+// pointer on some damaged files (tests/fuzz/regressions/libhdf5). ivol cannot
+// fix the library, but it can keep it away from its own memory: the worker
+// forks, the child alone calls the library, and the parent talks to it over
+// a socket. If the child dies (a signal, or a sanitizer's exit), the parent
+// throws ivol::Error(Malformed) naming the file, the request and the signal;
+// a clean ivol::Error in the child is passed back with its class and message.
+//
+// The child is a fork without exec, so it starts with the parent's memory
+// and descriptors (libhdf5's own state among them, which may name files the
+// parent has open). It reads and writes nothing but the socket, is killed
+// when the parent dies (PR_SET_PDEATHSIG) or drops the worker, and leaves
+// through _exit, so none of the parent's atexit handlers or buffered output
+// runs twice. Whatever descriptor or lock it shares with the parent thus
+// ends with the parent.
+#pragma once
+
+#include <sys/types.h>
+
+#include <cstdint>
+#include <cstring>
+#include <functional>
+#include <string>
+#include <string_view>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+namespace ivol::convert {
+
+// Appends numbers and strings to a request or a reply.
+class WireWriter {
+ public:
+  template <typename T>
+  WireWriter& put(const T& value) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    const auto* bytes = reinterpret_cast<const char*>(&value);
+    bytes_.append(bytes, sizeof value);
+    return *this;
+  }
+  WireWriter& put_string(const std::string& text) {
+    put<std::uint64_t>(text.size());
+    bytes_ += text;
+    return *this;
+  }
+  std::string& bytes() { return bytes_; }
+
+ private:
+  std::string bytes_;
+};
+
+// Reads them back in the same order; a short message throws (the other end
+// is ivol itself, so that is a bug, not a damaged file).
+// The reader keeps its own copy: replies arrive as temporaries.
+class WireReader {
+ public:
+  explicit WireReader(std::string bytes) : bytes_(std::move(bytes)) {}
+  template <typename T>
+  T get() {
+    static_assert(std::is_trivially_copyable_v<T>);
+    T value;
+    std::memcpy(&value, take(sizeof value), sizeof value);
+    return value;
+  }
+  std::string get_string() {
+    const auto size = get<std::uint64_t>();
+    return std::string(take(size), size);
+  }
+
+ private:
+  const char* take(std::size_t size);
+  std::string bytes_;
+  std::size_t position_ = 0;
+};
+
+// What the child does with one request: fill `reply` (small results) and,
+// for bulk data, `bulk` (sent without a copy into the reply). An exception
+// is sent back to the parent instead.
+struct WorkerReply {
+  std::string reply;
+  std::vector<char> bulk;
+};
+using WorkerHandler = std::function<void(std::string_view request, WorkerReply& out)>;
+
+class IsolatedWorker {
+ public:
+  // Starts the child. `subject` names what it works on, for messages (the
+  // file's path); `library` names what runs there ("libhdf5").
+  IsolatedWorker(std::string subject, std::string library, WorkerHandler handler);
+  ~IsolatedWorker();  // closes the socket and reaps the child
+  IsolatedWorker(const IsolatedWorker&) = delete;
+  IsolatedWorker& operator=(const IsolatedWorker&) = delete;
+
+  // Sends `request` and returns the reply. When the request expects bulk
+  // data, its size must be `bulk_bytes` and it lands in `bulk`. `doing`
+  // describes the request for the message if the child dies ("reading
+  // slices 0 .. 16"). Rethrows the child's ivol::Error.
+  std::string call(const std::string& request, const std::string& doing, void* bulk = nullptr,
+                   std::size_t bulk_bytes = 0);
+
+  pid_t child() const { return child_; }
+
+ private:
+  [[noreturn]] void fail(const std::string& doing);
+
+  std::string subject_;
+  std::string library_;
+  int socket_ = -1;
+  pid_t child_ = -1;
+};
+
+}  // namespace ivol::convert
