@@ -108,8 +108,10 @@ std::string describe_end(int status) {
     const char* name = strsignal(number);
     return "crashed (signal " + std::to_string(number) + (name ? std::string(", ") + name : std::string()) + ")";
   }
-  if (WIFEXITED(status)) return "ended with exit status " + std::to_string(WEXITSTATUS(status));
-  return "ended";
+  // The child leaves without replying only when something stopped it: a
+  // sanitizer's report (printed above), abort handlers.
+  if (WIFEXITED(status)) return "crashed (exit status " + std::to_string(WEXITSTATUS(status)) + ")";
+  return "crashed";
 }
 
 }  // namespace
