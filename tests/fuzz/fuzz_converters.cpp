@@ -4,10 +4,17 @@
 // rest is the file. Whatever the input, opening and reading it must return
 // or throw (ivol::Error, or std::runtime_error from the projection readers):
 // no crash, no sanitizer report.
+//
+// libFuzzer runs it on the in-process HDF5 readers, so that a crash inside
+// libhdf5 is seen (and can be told from one of ivol's). With
+// IVOL_FUZZ_ISOLATED=1 (replay only) HDF5 goes through the readers users
+// get, libhdf5 in a child process: the library's crashes must then be clean
+// errors.
 #include <unistd.h>
 
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <string>
 
 #include "hdf5_io.hpp"
@@ -26,6 +33,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if (!f) return 0;
   std::fwrite(data + 1, 1, size - 1, f);
   std::fclose(f);
+  static const bool isolated = std::getenv("IVOL_FUZZ_ISOLATED") != nullptr;
   try {
     using namespace ivol::convert;
     std::unique_ptr<ProjectionReader> projections;
@@ -46,7 +54,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         projections = open_tiff_projections(path, StoredQuantity::LineIntegrals);
         break;
       case 6:
-        projections = open_dxchange_projections_in_process(path, {true, 1e-3}).projections;
+        projections = (isolated ? open_dxchange_projections(path, {true, 1e-3})
+                                : open_dxchange_projections_in_process(path, {true, 1e-3}))
+                          .projections;
         break;
       case 7:
         (void)ivol::recon::read_rtk_geometry_xml(path, {8, 8, 1.0, 1.0}, -3.5, -3.5);
@@ -77,7 +87,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         reader = ivol::convert::open_tiff_slabs(path);
         break;
       case 2:
-        reader = ivol::convert::open_hdf5_slabs_in_process(path);
+        reader = isolated ? open_hdf5_slabs(path) : open_hdf5_slabs_in_process(path);
         break;
       case 3:
         (void)ivol::convert::read_vdb(path);
