@@ -4,32 +4,32 @@
 #include <atomic>
 #include <exception>
 #include <mutex>
+#include <string>
 #include <thread>
 
-namespace ivol::detail {
+#include "ivol/error.hpp"
 
-BlockPipeline::BlockPipeline(FileWriter& writer, const WriteOptions& options)
-    : writer_(writer),
-      options_(options),
-      threads_(std::max(1u, options.threads ? options.threads : std::thread::hardware_concurrency())) {}
+namespace ivol {
 
-void BlockPipeline::add(Stream stream, unsigned level, std::uint64_t first_element, std::uint32_t element_count,
-                        std::size_t width, std::vector<std::uint8_t> raw) {
-  decoded_bytes_ += raw.size();
-  pending_.push_back({stream, level, first_element, element_count, width, std::move(raw)});
-  if (pending_.size() >= 4 * threads_) flush();
+namespace {
+
+unsigned thread_count(const WriteOptions& options) {
+  return std::max(1u, options.threads ? options.threads : std::thread::hardware_concurrency());
 }
 
-void BlockPipeline::flush() {
-  std::vector<EncodedBlock> encoded(pending_.size());
+}  // namespace
+
+std::vector<EncodedBlock> encode_blocks(const RawBlock* blocks, std::size_t count, const WriteOptions& options) {
+  std::vector<EncodedBlock> encoded(count);
   std::atomic<std::size_t> next{0};
   std::exception_ptr failure;
   std::mutex failure_mutex;
   auto work = [&] {
-    for (std::size_t i; (i = next.fetch_add(1)) < pending_.size();) {
-      const Pending& p = pending_[i];
+    for (std::size_t i; (i = next.fetch_add(1)) < count;) {
+      const RawBlock& b = blocks[i];
       try {
-        encoded[i] = encode_block(p.stream, p.level, p.first_element, p.element_count, p.width, p.raw.data(), options_);
+        encoded[i] =
+            encode_block(b.stream, b.level, b.first_element, b.element_count, b.width, b.bytes.data(), options);
       } catch (...) {
         std::lock_guard<std::mutex> lock(failure_mutex);
         failure = std::current_exception();
@@ -37,10 +37,36 @@ void BlockPipeline::flush() {
     }
   };
   std::vector<std::thread> pool;
-  for (unsigned t = 1; t < std::min<std::size_t>(threads_, pending_.size()); ++t) pool.emplace_back(work);
+  for (unsigned t = 1; t < std::min<std::size_t>(thread_count(options), count); ++t) pool.emplace_back(work);
   work();
   for (auto& th : pool) th.join();
   if (failure) std::rethrow_exception(failure);
+  return encoded;
+}
+
+namespace detail {
+
+BlockPipeline::BlockPipeline(FileWriter& writer, const WriteOptions& options)
+    : writer_(writer),
+      options_(options),
+      batch_blocks_(options.encoder ? std::max<std::size_t>(1, options.encoder->batch_blocks())
+                                    : 4 * thread_count(options)) {}
+
+void BlockPipeline::add(Stream stream, unsigned level, std::uint64_t first_element, std::uint32_t element_count,
+                        std::size_t width, std::vector<std::uint8_t> raw) {
+  decoded_bytes_ += raw.size();
+  pending_.push_back({stream, static_cast<std::uint8_t>(level), first_element, element_count,
+                      static_cast<std::uint32_t>(width), std::move(raw)});
+  if (pending_.size() >= batch_blocks_) flush();
+}
+
+void BlockPipeline::flush() {
+  if (pending_.empty()) return;
+  const std::vector<EncodedBlock> encoded =
+      options_.encoder ? options_.encoder->encode(pending_, options_) : encode_blocks(pending_, options_);
+  if (encoded.size() != pending_.size())
+    throw Error(ErrorClass::Io, "block encoder returned " + std::to_string(encoded.size()) + " blocks for " +
+                                    std::to_string(pending_.size()));
   for (const EncodedBlock& block : encoded) writer_.append(block);
   pending_.clear();
 }
@@ -74,4 +100,5 @@ void BlockAssembler::finish() {
   buffer_ = {};
 }
 
-}  // namespace ivol::detail
+}  // namespace detail
+}  // namespace ivol

@@ -1,11 +1,13 @@
 // Compresses blocks in parallel, a batch at a time, and appends them to a
-// FileWriter in the order they were given. Memory: one batch of blocks.
-// Internal to libformat.
+// FileWriter in the order they were given: on this process's threads, or
+// through WriteOptions::encoder. Memory: one batch of blocks. Internal to
+// libformat.
 #pragma once
 
 #include <cstdint>
 #include <vector>
 
+#include "ivol/block_encoder.hpp"
 #include "ivol/writer.hpp"
 
 namespace ivol::detail {
@@ -20,18 +22,10 @@ class BlockPipeline {
   std::uint64_t decoded_bytes() const { return decoded_bytes_; }
 
  private:
-  struct Pending {
-    Stream stream;
-    unsigned level;
-    std::uint64_t first_element;
-    std::uint32_t element_count;
-    std::size_t width;
-    std::vector<std::uint8_t> raw;
-  };
   FileWriter& writer_;
   WriteOptions options_;
-  unsigned threads_;
-  std::vector<Pending> pending_;
+  std::size_t batch_blocks_;
+  std::vector<RawBlock> pending_;
   std::uint64_t decoded_bytes_ = 0;
 };
 

@@ -2,6 +2,7 @@
 // only the structure's voxels are backprojected, each at its own size.
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <stdexcept>
 #include <unordered_map>
@@ -326,7 +327,9 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
   // A slab's tasks are made by the thread that computes it and kept until the
   // slab is delivered, so only the slabs in flight hold task lists.
   std::vector<std::unique_ptr<SlabTasks>> tasks(slab_count);
-  std::uint64_t samples = 0;
+  // What this process backprojected: every slab's samples, or only its own
+  // slabs' when distributed (rank 0 delivers the others' too).
+  std::atomic<std::uint64_t> own_samples{0};
   double delivering = 0;
   try {
     detail::for_each_slab(
@@ -334,6 +337,7 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
         [&](detail::FdkDevice& device, std::size_t s, std::vector<float>& sums) {
           auto made = std::make_unique<SlabTasks>(tasks_of_slab(structure, index, slab_of, s));
           device.reconstruct_tasks(bands[s], made->blocks, {&made->centres, &made->octants}, sums);
+          own_samples += made->samples();
           // Read by the delivering thread after the slab's hand-over (with an
           // exchange, only rank 0 delivers; the others send the sums).
           if (!m.options.exchange || m.options.exchange->rank() == 0) tasks[s] = std::move(made);
@@ -343,7 +347,6 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
           std::unique_ptr<SlabTasks> t = std::move(tasks[s]);
           if (!t) t = std::make_unique<SlabTasks>(tasks_of_slab(structure, index, slab_of, s));
           deliver(structure, *t, sums, values);
-          samples += t->samples();
           t.reset();
           if (progress) progress(index.complete_below[s]);
           delivering += detail::seconds_since(delivery_start);
@@ -356,7 +359,7 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
   m.problem.grid = nullptr;
   m.add_timings_since(before, report.timings);
   report.timings.delivery += delivering;
-  report.voxel_updates = samples * m.geometry.view_count();
+  report.voxel_updates = own_samples.load() * m.geometry.view_count();
   report.timings.total = constructor_setup + detail::seconds_since(start);
   return report;
 }

@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # ivol recon under mpirun (docs/distributed.md): 2 and 4 ranks on this one
 # machine must give the single process's file byte for byte (dense, --keep
-# otsu with its distributed preview, --structure octree and nested), and a
-# rank that fails must end the whole run with its message, a non-zero exit
-# and nothing left behind. $IVOL is the binary under test, $MPIEXEC mpirun.
+# otsu with its distributed preview, --structure octree and nested), the
+# ranks other than 0 must compress blocks of it, and a rank that fails (while
+# reconstructing or while compressing) must end the whole run with its
+# message, a non-zero exit and nothing left behind. $IVOL is the binary under
+# test, $MPIEXEC mpirun.
 set -u
 : "${IVOL:?set IVOL to the ivol binary}"
 : "${MPIEXEC:?set MPIEXEC to mpirun}"
@@ -55,16 +57,63 @@ for ranks in 2 4; do
   done
 done
 
-# The JSON report of a distributed run names every rank and what it sent.
-"$MPIEXEC" --oversubscribe -np 2 "${recon[@]}" --slab-slices 3 --json -o json.ivol >"$work/report.json" 2>"$work/log"
-if /usr/bin/python3 -c "
-import json, sys
-r = json.load(open('$work/report.json'))['ranks']
-sys.exit(0 if len(r) == 2 and r[1]['bytes_sent'] > 0 and r[0]['bytes_received'] == r[1]['bytes_sent'] else 1)"; then
-  ok "json-ranks"
-else
-  fail "json-ranks"
-fi
+# The JSON report of a distributed run names every rank, what it sent and
+# how many of the file's blocks it compressed: every rank compresses some
+# (dense: the whole file is compressed after the last slab arrives; octree:
+# likewise; nested: as slabs finish, the others join once their slabs are
+# sent, so only the total is checked). The structure report's voxel updates
+# are the single process's, not N times them (each rank counts its own).
+for mode in dense octree nested; do
+  for ranks in 2 4; do
+    # shellcheck disable=SC2086
+    "$MPIEXEC" --oversubscribe -np "$ranks" "${recon[@]}" ${mode_args[$mode]} --slab-slices 3 --json \
+      -o "json-$mode-$ranks.ivol" >"$work/report.json" 2>"$work/log"
+    # shellcheck disable=SC2086
+    [ "$mode" = dense ] || "${recon[@]}" ${mode_args[$mode]} --json -f -o "json-one-$mode.ivol" >"$work/one.json"
+    if MODE=$mode RANKS=$ranks /usr/bin/python3 -c "
+import json, os, sys, subprocess
+mode, ranks = os.environ['MODE'], int(os.environ['RANKS'])
+report = json.load(open('$work/report.json'))
+r = report['ranks']
+blocks = json.loads(subprocess.run(['$IVOL', 'info', '--json', 'json-%s-%d.ivol' % (mode, ranks)],
+                                   capture_output=True, check=True).stdout)['blocks']
+checks = [len(r) == ranks, r[1]['bytes_sent'] > 0,
+          sum(k['bytes_sent'] for k in r[1:]) == r[0]['bytes_received'],
+          # every block but the metadata block, compressed somewhere
+          sum(k['blocks_compressed'] for k in r) == blocks - 1,
+          all(k['block_bytes_sent'] > 0 and k['blocks_compressed'] > 0 for k in r[1:]) or mode == 'nested']
+if mode != 'dense':
+    one = json.load(open('$work/one.json'))
+    checks += [report['voxel_updates'] == one['voxel_updates'],
+               abs(report['gups'] - sum(k['gups'] for k in r)) < 1e-9]
+print(checks)
+sys.exit(0 if all(checks) else 1)" >>"$work/log" 2>&1; then
+      ok "json-ranks-$mode-$ranks"
+    else
+      fail "json-ranks-$mode-$ranks"
+    fi
+  done
+done
+
+# A rank that fails while compressing blocks for rank 0 (a failure injected
+# for this test) ends the run with its message; rank 0 removes its temporary
+# file.
+for mode in dense octree; do
+  for ranks in 2 4; do
+    victim=$((ranks - 1))
+    # shellcheck disable=SC2086
+    IVOL_TEST_FAIL_COMPRESSION_RANK=$victim "$MPIEXEC" --oversubscribe -np "$ranks" "${recon[@]}" \
+      ${mode_args[$mode]} --slab-slices 3 -o "compress-fails-$mode.ivol" >"$work/log" 2>&1
+    status=$?
+    if [ "$status" -eq 2 ] &&
+      grep -q "ivol recon: error: rank $victim: compressing blocks for rank 0: failure injected" "$work/log" &&
+      nothing_left "compress-fails-$mode.ivol"; then
+      ok "rank-$victim-compression-fails-$mode"
+    else
+      fail "rank-$victim-compression-fails-$mode (exit $status)"
+    fi
+  done
+done
 
 # Rank 1 reads a copy of the scan whose compressed chunks are damaged: it
 # fails while reconstructing its slabs, tells rank 0, which removes its

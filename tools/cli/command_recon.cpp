@@ -63,6 +63,57 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
+// Each rank's share of a distributed run (docs/distributed.md).
+nlohmann::json ranks_json(const std::vector<RankStats>& ranks) {
+  nlohmann::json list = nlohmann::json::array();
+  for (std::size_t r = 0; r < ranks.size(); ++r) {
+    const RankStats& k = ranks[r];
+    const double gups = k.backprojection > 0 ? static_cast<double>(k.voxel_updates) / k.backprojection * 1e-9 : 0.0;
+    list.push_back({{"rank", r},
+                    {"seconds", k.seconds},
+                    {"backprojection_seconds", k.backprojection},
+                    {"gups", gups},
+                    {"voxel_updates", k.voxel_updates},
+                    {"slabs_sent", k.slabs_sent},
+                    {"bytes_sent", k.bytes_sent},
+                    {"bytes_received", k.bytes_received},
+                    {"blocks_compressed", k.blocks_compressed},
+                    {"compression_input_bytes", k.compression_input_bytes},
+                    {"compression_output_bytes", k.compression_output_bytes},
+                    {"compression_seconds", k.compression_seconds},
+                    {"block_bytes_sent", k.block_bytes_sent},
+                    {"block_bytes_received", k.block_bytes_received}});
+  }
+  return list;
+}
+
+// This rank's part of the report, before the bytes and compression that
+// MpiRun::gather adds.
+RankStats rank_stats(const recon::FdkReport& fdk, std::chrono::steady_clock::time_point start) {
+  RankStats mine;
+  mine.seconds = seconds_since(start);
+  mine.backprojection = fdk.timings.backprojection;
+  mine.voxel_updates = fdk.voxel_updates;
+  return mine;
+}
+
+// The run's throughput: each rank's updates over its own backprojection time, summed.
+double total_gups(const std::vector<RankStats>& ranks) {
+  double gups = 0;
+  for (const RankStats& k : ranks)
+    if (k.backprojection > 0) gups += static_cast<double>(k.voxel_updates) / k.backprojection * 1e-9;
+  return gups;
+}
+
+void print_ranks(const std::vector<RankStats>& ranks) {
+  std::cerr << std::fixed << std::setprecision(2) << "ivol recon: " << ranks.size() << " ranks:";
+  for (std::size_t r = 0; r < ranks.size(); ++r)
+    std::cerr << (r ? ";" : "") << " rank " << r << " " << ranks[r].seconds << " s, sent "
+              << human_bytes(ranks[r].bytes_sent) << " (" << ranks[r].slabs_sent << " slabs), compressed "
+              << ranks[r].blocks_compressed << " blocks";
+  std::cerr << "\n";
+}
+
 // The paper's pipeline: a low-resolution preview finds the object, the
 // structure is generated from it, the FDK backprojects into the structure's
 // voxels only, and the structure is written as an .ivol file of its kind
@@ -73,7 +124,7 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 // lists of the slabs in flight; never the dense volume nor all the values.
 int run_structure(const ReconSettings& s, const GlobalOptions& global, const recon::VolumeGrid& grid,
                   const recon::FdkOptions& fdk_options, OpenedScan& scan, recon::FdkReconstructor& reconstructor,
-                  Metadata metadata, std::chrono::steady_clock::time_point start) {
+                  Metadata metadata, std::chrono::steady_clock::time_point start, MpiRun* mpi) {
   StructureKind kind{};
   parse_structure(s.structure, kind);
   const recon::Preview preview =
@@ -112,15 +163,21 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   metadata.voxel_size = grid.voxel_size;
   metadata.origin = grid.origin;
   metadata.unit = "mm";
-  if (fdk_options.exchange && fdk_options.exchange->rank() != 0) {
-    // A rank of a distributed run other than 0: its slabs go to rank 0, which writes and reports.
+  if (mpi && mpi->rank() != 0) {
+    // A rank of a distributed run other than 0: its slabs go to rank 0, which
+    // writes and reports; then it compresses blocks for rank 0's writer.
     StructureValueWindow unused(*structure);
-    reconstructor.reconstruct_structure(grid, *structure, unused, {});
+    const recon::FdkReport mine = reconstructor.reconstruct_structure(grid, *structure, unused, {});
+    mpi->serve_compression();
+    mpi->gather(rank_stats(mine, start));
     return kExitOk;
   }
   StreamingOptions options;
   options.build.encoding = parse_encoding(s.encoding);
   options.slab_budget_bytes = (s.memory_mib << 20) / 4;
+  // The other ranks take a share of the compression once their slabs are
+  // sent; the writer calls it on this (the MPI) thread.
+  if (mpi) options.write.encoder = mpi->block_encoder();
   StructureStreamWriter writer(*structure, s.output, options);
   StructureValueWindow values(*structure);
   double writing_during_fdk = 0;  // the writer works inside the FDK's slab hand-over
@@ -130,8 +187,19 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
         writer.write_ready(z_complete, values);
         writing_during_fdk += seconds_since(began);
       });
+  if (mpi) mpi->every_slab_received();  // the rest of the file is compressed on every rank
   const StreamingResult written = writer.finish(metadata, values);
   const double writing = written.write.seconds;
+  std::vector<RankStats> ranks;
+  double gups = fdk.gups();
+  std::uint64_t voxel_updates = fdk.voxel_updates;  // this process's own slabs
+  if (mpi) {
+    mpi->end_compression();
+    ranks = mpi->gather(rank_stats(fdk, start));
+    gups = total_gups(ranks);
+    voxel_updates = 0;
+    for (const RankStats& k : ranks) voxel_updates += k.voxel_updates;
+  }
   const double total = seconds_since(start);
   const StructureMemory memory = structure->memory();
   nlohmann::json report = {
@@ -148,7 +216,8 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
       {"dense_float32_bytes", grid.voxel_count() * 4},
       {"file_bytes", written.write.file_bytes},
       {"peak_value_bytes", values.peak_bytes()},
-      {"gups", fdk.gups()},
+      {"gups", gups},
+      {"voxel_updates", voxel_updates},
       {"seconds",
        {{"total", total},
         {"preview", preview.seconds},
@@ -158,6 +227,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
         {"backprojection", fdk.timings.backprojection},
         {"reconstruction", fdk.timings.total - writing_during_fdk},
         {"writing", writing}}}};
+  if (mpi) report["ranks"] = ranks_json(ranks);
   if (s.json) {
     std::cout << report.dump(2) << "\n";
   } else if (!global.quiet) {
@@ -168,33 +238,9 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
               << " s (preview " << preview.seconds << " s, generation " << generating << " s, FDK "
               << fdk.timings.total - writing_during_fdk << " s, writing " << writing << " s); " << s.output << ": "
               << human_bytes(written.write.file_bytes) << "\n";
+    if (mpi) print_ranks(ranks);
   }
   return kExitOk;
-}
-
-// Each rank's share of a distributed run (docs/distributed.md).
-nlohmann::json ranks_json(const std::vector<RankStats>& ranks) {
-  nlohmann::json list = nlohmann::json::array();
-  for (std::size_t r = 0; r < ranks.size(); ++r) {
-    const RankStats& k = ranks[r];
-    const double gups = k.backprojection > 0 ? static_cast<double>(k.voxel_updates) / k.backprojection * 1e-9 : 0.0;
-    list.push_back({{"rank", r},
-                    {"seconds", k.seconds},
-                    {"backprojection_seconds", k.backprojection},
-                    {"gups", gups},
-                    {"slabs_sent", k.slabs_sent},
-                    {"bytes_sent", k.bytes_sent},
-                    {"bytes_received", k.bytes_received}});
-  }
-  return list;
-}
-
-void print_ranks(const std::vector<RankStats>& ranks) {
-  std::cerr << std::fixed << std::setprecision(2) << "ivol recon: " << ranks.size() << " ranks:";
-  for (std::size_t r = 0; r < ranks.size(); ++r)
-    std::cerr << (r ? ";" : "") << " rank " << r << " " << ranks[r].seconds << " s, sent "
-              << human_bytes(ranks[r].bytes_sent) << " (" << ranks[r].slabs_sent << " slabs)";
-  std::cerr << "\n";
 }
 
 }  // namespace
@@ -311,14 +357,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       if (!s->keep.empty())
         throw Error(ErrorClass::InvalidArgument, "--keep and --structure: choose one (--structure uses --threshold)");
       if (mpi && root) mpi->remove_temporaries_on_signal(s->output);
-      const int status = run_structure(*s, global, grid, options, scan, reconstructor, import.metadata, start);
-      if (mpi) {
-        RankStats mine;
-        mine.seconds = seconds_since(start);
-        const std::vector<RankStats> ranks = mpi->gather(mine);
-        if (root && !global.quiet && !s->json) print_ranks(ranks);
-      }
-      return status;
+      return run_structure(*s, global, grid, options, scan, reconstructor, import.metadata, start, mpi);
     }
     convert::ImportReport written;
     recon::FdkTimings t;
@@ -336,19 +375,20 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     } else {
       // Distributed: one reconstruction of the whole grid, cut the same way
       // on every rank; rank 0 writes while its slabs and the others' arrive.
+      // The other ranks then compress blocks for rank 0's writer.
       if (root) mpi->remove_temporaries_on_signal(s->output);
-      const convert::StreamedReconstruction streamed =
-          convert::reconstruct_to_ivol(reconstructor, grid, s->output, import, root);
-      RankStats mine;
-      mine.seconds = seconds_since(start);
-      mine.backprojection = streamed.fdk.timings.backprojection;
-      mine.voxel_updates = streamed.fdk.voxel_updates;
-      ranks = mpi->gather(mine);
+      import.encoder = mpi->block_encoder();
+      const convert::StreamedReconstruction streamed = convert::reconstruct_to_ivol(
+          reconstructor, grid, s->output, import, root, root ? mpi->writer_service() : nullptr);
+      if (root)
+        mpi->end_compression();
+      else
+        mpi->serve_compression();
+      ranks = mpi->gather(rank_stats(streamed.fdk, start));
       if (!root) return kExitOk;
       written = streamed.written;
       t = streamed.fdk.timings;
-      for (const RankStats& k : ranks)
-        if (k.backprojection > 0) gups += static_cast<double>(k.voxel_updates) / k.backprojection * 1e-9;
+      gups = total_gups(ranks);
       reconstruction = t.total;
       writing = written.seconds - streamed.writer_waiting;
     }

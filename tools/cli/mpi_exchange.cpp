@@ -20,6 +20,9 @@
 
 #ifdef IVOL_WITH_MPI
 #include <mpi.h>
+
+#include "mpi_block_farm.hpp"
+#include "mpi_messages.hpp"
 #endif
 
 namespace ivol::cli {
@@ -95,9 +98,8 @@ bool MpiRun::available() { return true; }
 
 namespace {
 
-// Tags: a slab's data carries its index (modulo the range every MPI has), a
-// failure its own tag.
-constexpr int kFailureTag = 32000;
+// Tags: a slab's data carries its index (modulo the range every MPI has);
+// the other messages' tags are in mpi_messages.hpp.
 int slab_tag(std::size_t slab) { return 1 + static_cast<int>(slab % 30000); }
 // MPI counts are ints: larger slabs go in pieces.
 constexpr std::size_t kPieceFloats = std::size_t{1} << 28;
@@ -146,14 +148,7 @@ class MpiExchange final : public recon::SlabExchange {
   void receive(std::size_t slab, int from, std::vector<float>& data) override {
     // Wait for the slab, watching for any rank's failure meanwhile: the
     // failed rank need not be the one this slab comes from.
-    for (;;) {
-      int arrived = 0;
-      MPI_Iprobe(MPI_ANY_SOURCE, kFailureTag, MPI_COMM_WORLD, &arrived, MPI_STATUS_IGNORE);
-      if (arrived) throw_failure();
-      MPI_Iprobe(from, slab_tag(slab), MPI_COMM_WORLD, &arrived, MPI_STATUS_IGNORE);
-      if (arrived) break;
-      std::this_thread::sleep_for(std::chrono::microseconds(200));
-    }
+    mpi::wait_for(from, slab_tag(slab));
     std::uint64_t count = 0;
     MPI_Recv(&count, 1, MPI_UINT64_T, from, slab_tag(slab), MPI_COMM_WORLD, MPI_STATUS_IGNORE);
     data.resize(count);
@@ -166,7 +161,7 @@ class MpiExchange final : public recon::SlabExchange {
 
   void report_failure(const std::string& message) override {
     if (rank_ == 0 || failure_reported) return;
-    MPI_Send(message.data(), static_cast<int>(message.size()), MPI_CHAR, 0, kFailureTag, MPI_COMM_WORLD);
+    MPI_Send(message.data(), static_cast<int>(message.size()), MPI_CHAR, 0, mpi::kFailureTag, MPI_COMM_WORLD);
     bytes_sent += message.size();
     failure_reported = true;
   }
@@ -177,16 +172,6 @@ class MpiExchange final : public recon::SlabExchange {
   bool failure_reported = false;
 
  private:
-  [[noreturn]] void throw_failure() {
-    MPI_Status status;
-    MPI_Probe(MPI_ANY_SOURCE, kFailureTag, MPI_COMM_WORLD, &status);
-    int length = 0;
-    MPI_Get_count(&status, MPI_CHAR, &length);
-    std::string message(static_cast<std::size_t>(length), '\0');
-    MPI_Recv(message.data(), length, MPI_CHAR, status.MPI_SOURCE, kFailureTag, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-    throw std::runtime_error("rank " + std::to_string(status.MPI_SOURCE) + ": " + message);
-  }
-
   int rank_ = 0;
   int size_ = 1;
 };
@@ -195,6 +180,7 @@ class MpiExchange final : public recon::SlabExchange {
 
 struct MpiRun::Impl {
   std::shared_ptr<MpiExchange> exchange;
+  std::shared_ptr<MpiBlockFarm> farm;
 };
 
 MpiRun::MpiRun() : impl_(std::make_unique<Impl>()) {
@@ -207,6 +193,7 @@ MpiRun::MpiRun() : impl_(std::make_unique<Impl>()) {
     throw Error(ErrorClass::InvalidArgument, "the MPI library does not allow threads (MPI_THREAD_FUNNELED)");
   }
   impl_->exchange = std::make_shared<MpiExchange>();
+  impl_->farm = std::make_shared<MpiBlockFarm>(impl_->exchange);
   if (size() != launched_size()) {
     // Each of the launcher's processes would write the whole volume.
     const std::string message = "started as " + std::to_string(launched_size()) + " processes, but MPI sees " +
@@ -221,11 +208,29 @@ MpiRun::~MpiRun() { MPI_Finalize(); }
 int MpiRun::rank() const { return impl_->exchange->rank(); }
 int MpiRun::size() const { return impl_->exchange->size(); }
 std::shared_ptr<recon::SlabExchange> MpiRun::exchange() const { return impl_->exchange; }
+// IVOL_MPI_COMPRESS_ON_RANK0=1 compresses on rank 0 alone, as before the
+// farm: for measuring what the farm changes (bench/RESULTS.md).
+std::shared_ptr<BlockEncoder> MpiRun::block_encoder() const {
+  const char* rank0_only = std::getenv("IVOL_MPI_COMPRESS_ON_RANK0");
+  if (rank0_only != nullptr && std::string(rank0_only) == "1") return nullptr;
+  return impl_->farm;
+}
+convert::WriterService* MpiRun::writer_service() const { return impl_->farm.get(); }
+void MpiRun::every_slab_received() { impl_->farm->every_slab_received(); }
+void MpiRun::end_compression() { impl_->farm->release(); }
+void MpiRun::serve_compression() { impl_->farm->work(); }
 
 std::vector<RankStats> MpiRun::gather(RankStats mine) {
-  mine.bytes_sent = impl_->exchange->bytes_sent;
-  mine.bytes_received = impl_->exchange->bytes_received;
+  const CompressionStats& compression = impl_->farm->stats();
+  mine.block_bytes_sent = compression.bytes_sent;
+  mine.block_bytes_received = compression.bytes_received;
+  mine.bytes_sent = impl_->exchange->bytes_sent + compression.bytes_sent;
+  mine.bytes_received = impl_->exchange->bytes_received + compression.bytes_received;
   mine.slabs_sent = impl_->exchange->slabs_sent;
+  mine.blocks_compressed = compression.blocks;
+  mine.compression_input_bytes = compression.input_bytes;
+  mine.compression_output_bytes = compression.output_bytes;
+  mine.compression_seconds = compression.seconds;
   static_assert(sizeof(RankStats) % 8 == 0, "RankStats travels as bytes");
   std::vector<RankStats> all(rank() == 0 ? static_cast<std::size_t>(size()) : 0);
   MPI_Gather(&mine, sizeof mine, MPI_BYTE, all.data(), sizeof mine, MPI_BYTE, 0, MPI_COMM_WORLD);
@@ -265,6 +270,11 @@ MpiRun::~MpiRun() = default;
 int MpiRun::rank() const { return 0; }
 int MpiRun::size() const { return 1; }
 std::shared_ptr<recon::SlabExchange> MpiRun::exchange() const { return nullptr; }
+std::shared_ptr<BlockEncoder> MpiRun::block_encoder() const { return nullptr; }
+convert::WriterService* MpiRun::writer_service() const { return nullptr; }
+void MpiRun::every_slab_received() {}
+void MpiRun::end_compression() {}
+void MpiRun::serve_compression() {}
 std::vector<RankStats> MpiRun::gather(RankStats mine) { return {mine}; }
 void MpiRun::fail(const std::exception& what) {
   std::cerr << "ivol recon: error: " << what.what() << std::endl;

@@ -1,11 +1,13 @@
 // `mpirun -np N ivol recon …`: the ranks of a distributed reconstruction
 // (docs/distributed.md). recon stays free of MPI; this file gives it a
 // SlabExchange over MPI. Rank 0 receives every slab, writes the file and
-// prints the report; the other ranks reconstruct their slabs and send them.
+// prints the report; the other ranks reconstruct their slabs and send them,
+// then compress blocks of the file for rank 0 (mpi_block_farm.hpp).
 //
 // MPI is used from the main thread only (MPI_THREAD_FUNNELED): the FDK's
 // consume loop, where slabs are sent and received, runs on the calling
-// thread, and rank 0's writer runs on a thread of its own that never calls MPI.
+// thread, and rank 0's writer runs on a thread of its own that never calls
+// MPI (its batches of blocks go to the main thread, writer_service()).
 #pragma once
 
 #include <cstdint>
@@ -13,7 +15,9 @@
 #include <string>
 #include <vector>
 
+#include "ivol/block_encoder.hpp"
 #include "ivol/recon/slab_exchange.hpp"
+#include "recon_slabs.hpp"
 
 namespace ivol::cli {
 
@@ -22,9 +26,18 @@ struct RankStats {
   double seconds = 0;         // from the start of the command to the end of its work
   double backprojection = 0;  // seconds in backprojection kernels
   std::uint64_t voxel_updates = 0;
-  std::uint64_t bytes_sent = 0;      // slab data to rank 0 (and failures)
-  std::uint64_t bytes_received = 0;  // slab data from the other ranks (rank 0)
+  std::uint64_t bytes_sent = 0;      // slab data to rank 0 (and failures), and block_bytes_sent
+  std::uint64_t bytes_received = 0;  // slab data from the other ranks (rank 0), and block_bytes_received
   std::uint64_t slabs_sent = 0;
+  // Compressing the file's blocks (mpi_block_farm.hpp): how many this rank
+  // compressed, their bytes before and after, its seconds in zstd, and the
+  // blocks' traffic (raw to the ranks, compressed back to rank 0).
+  std::uint64_t blocks_compressed = 0;
+  std::uint64_t compression_input_bytes = 0;
+  std::uint64_t compression_output_bytes = 0;
+  double compression_seconds = 0;
+  std::uint64_t block_bytes_sent = 0;
+  std::uint64_t block_bytes_received = 0;
 };
 
 class MpiRun {
@@ -49,8 +62,20 @@ class MpiRun {
   int size() const;
   std::shared_ptr<recon::SlabExchange> exchange() const;
 
+  // Distributed compression, mpi_block_farm.hpp. Rank 0: the writer's
+  // WriteOptions::encoder, the service its thread needs from the main thread
+  // (convert::reconstruct_to_ivol), every_slab_received() when its
+  // reconstruction is done (so that all ranks share the batches after it),
+  // and, once the file is written, end_compression() to let the other ranks go. The other ranks:
+  // serve_compression() once their slabs are sent, until rank 0 ends it.
+  std::shared_ptr<BlockEncoder> block_encoder() const;
+  convert::WriterService* writer_service() const;
+  void every_slab_received();
+  void end_compression();
+  void serve_compression();
+
   // Collective: every rank's stats on rank 0, rank by rank (empty elsewhere).
-  // Bytes and slabs come from the exchange.
+  // Bytes, slabs and compression come from the exchange and the farm.
   std::vector<RankStats> gather(RankStats mine);
 
   // After a temporary file for `output` may exist on this rank: on SIGTERM

@@ -160,6 +160,7 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
   report.value_offset = build.value_offset;
   if (options.block_bytes) streaming.write.block_bytes = options.block_bytes;
   streaming.write.byte_planes = options.byte_planes;
+  streaming.write.encoder = options.encoder;
   if (options.slab_budget_bytes) streaming.slab_budget_bytes = options.slab_budget_bytes;
 
   StreamingOctreeWriter writer(path, shape.dims, streaming);

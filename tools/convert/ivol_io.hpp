@@ -3,10 +3,12 @@
 #pragma once
 
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 
 #include "dense_volume.hpp"
+#include "ivol/block_encoder.hpp"
 #include "ivol/encoding.hpp"
 #include "ivol/metadata.hpp"
 #include "ivol/reader.hpp"
@@ -33,6 +35,7 @@ struct ImportOptions {
   std::uint32_t block_bytes = 0;          // 0: the library's default
   bool byte_planes = true;                // values over byte planes (codec 2, format 1.2)
   std::uint64_t slab_budget_bytes = 0;    // 0: the library's default
+  std::shared_ptr<BlockEncoder> encoder;  // where blocks are compressed; null: here (ivol/block_encoder.hpp)
   Metadata metadata;                      // provenance etc.; geometry from the volume
   Progress progress;
 };

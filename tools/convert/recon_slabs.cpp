@@ -153,7 +153,8 @@ class SlabHandoff final : public SlabReader {
 }  // namespace
 
 StreamedReconstruction reconstruct_to_ivol(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid,
-                                           const std::string& path, const ImportOptions& options, bool write) {
+                                           const std::string& path, const ImportOptions& options, bool write,
+                                           WriterService* service) {
   StreamedReconstruction result;
   if (!write) {
     result.fdk = reconstructor.reconstruct(grid, [](std::uint32_t, std::uint32_t, const float*) {
@@ -171,14 +172,17 @@ StreamedReconstruction reconstruct_to_ivol(recon::FdkReconstructor& reconstructo
       writer_error = std::current_exception();
       handoff.stop(true);
     }
+    if (service) service->close();
   });
   try {
     result.fdk = reconstructor.reconstruct(
         grid, [&](std::uint32_t k0, std::uint32_t k1, const float* data) { handoff.push(k0, k1, data); });
+    if (service) service->serve();
   } catch (...) {
     const std::exception_ptr error = std::current_exception();
     handoff.stop(false);
-    writer.join();  // the writer removes its temporary file as it unwinds
+    if (service) service->close();  // a writer already waiting on it fails too
+    writer.join();                  // the writer removes its temporary file as it unwinds
     std::rethrow_exception(writer_error ? writer_error : error);
   }
   writer.join();

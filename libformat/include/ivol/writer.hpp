@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -13,6 +14,8 @@
 #include "ivol/octree.hpp"
 
 namespace ivol {
+
+class BlockEncoder;  // ivol/block_encoder.hpp
 
 enum class Stream : std::uint8_t { Metadata = 1, Nodes = 2, Values = 3, Borders = 4, Cells = 5 };
 // Spec §7. ZstdBytePlanes: zstd over the elements' bytes regrouped by byte
@@ -32,6 +35,9 @@ struct WriteOptions {
   // readers.
   bool byte_planes = true;
   unsigned threads = 0;  // compression threads; 0: all hardware threads
+  // Where batches of blocks are compressed; null: on this process's threads.
+  // The file is the same either way (ivol/block_encoder.hpp).
+  std::shared_ptr<BlockEncoder> encoder;
 };
 
 // One block, compressed and checksummed, ready to be appended.
