@@ -10,10 +10,7 @@
 #include <thread>
 
 namespace ivol::convert {
-namespace {
 
-// A reconstruction's volume as a converter's input: float32 voxels with the
-// grid's geometry, in mm.
 DenseVolume float_volume_of(const recon::VolumeGrid& grid) {
   DenseVolume shape;
   shape.dims = Dims{grid.size[0], grid.size[1], grid.size[2]};
@@ -24,6 +21,8 @@ DenseVolume float_volume_of(const recon::VolumeGrid& grid) {
   shape.unit = "mm";
   return shape;
 }
+
+namespace {
 
 void add(recon::FdkTimings& into, const recon::FdkTimings& t) {
   into.setup += t.setup;

@@ -13,6 +13,10 @@
 
 namespace ivol::convert {
 
+// A reconstruction's volume as a converter's input: float32 voxels with the
+// grid's geometry, in mm (no samples).
+DenseVolume float_volume_of(const recon::VolumeGrid& grid);
+
 class ReconstructionSlabs final : public SlabReader {
  public:
   // float32 samples, the grid's voxel size and origin in mm.
