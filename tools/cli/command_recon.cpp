@@ -273,7 +273,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
   fdk->add_option("--device-memory", s->device_memory_mib, "MiB of device memory to use (default: 80 % of it)");
   fdk->add_option("--slab-slices", s->slab_slices,
                   "Most slices per slab (default: as many as fit the device; under mpirun, at most the volume's "
-                  "depth over the ranks)");
+                  "depth over the ranks; under mpirun without --structure, also the writer's slabs that the ranks "
+                  "build, a power of two)");
   auto* out = cmd->add_option_group("output");
   out->add_option("--encoding", s->encoding, "binary16 or float32")
       ->check(CLI::IsMember({"binary16", "float32"}))

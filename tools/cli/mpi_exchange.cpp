@@ -225,7 +225,6 @@ std::shared_ptr<BlockEncoder> MpiRun::block_encoder() const {
   if (rank0_only != nullptr && std::string(rank0_only) == "1") return nullptr;
   return impl_->farm;
 }
-convert::WriterService* MpiRun::writer_service() const { return impl_->farm.get(); }
 void MpiRun::every_slab_received() { impl_->farm->every_slab_received(); }
 void MpiRun::end_compression() { impl_->farm->release(); }
 void MpiRun::serve_compression() { impl_->farm->work(); }
@@ -283,7 +282,6 @@ int MpiRun::rank() const { return 0; }
 int MpiRun::size() const { return 1; }
 std::shared_ptr<recon::SlabExchange> MpiRun::exchange() const { return nullptr; }
 std::shared_ptr<BlockEncoder> MpiRun::block_encoder() const { return nullptr; }
-convert::WriterService* MpiRun::writer_service() const { return nullptr; }
 void MpiRun::every_slab_received() {}
 void MpiRun::end_compression() {}
 void MpiRun::serve_compression() {}

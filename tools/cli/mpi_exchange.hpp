@@ -6,10 +6,10 @@
 // a structure's as sums), then compress blocks of the file for rank 0
 // (mpi_block_farm.hpp).
 //
-// MPI is used from the main thread only (MPI_THREAD_FUNNELED): the FDK's
-// consume loop, where slabs are sent and received, runs on the calling
-// thread, and rank 0's writer runs on a thread of its own that never calls
-// MPI (its batches of blocks go to the main thread, writer_service()).
+// MPI is used from the main thread only (MPI_THREAD_FUNNELED): slabs are
+// sent and received there (the FDK's consume loop for structures, the loop of
+// convert::reconstruct_distributed for dense volumes), and rank 0's writer,
+// whose batches of blocks go to the other ranks, runs there too.
 #pragma once
 
 #include <cstdint>
@@ -19,7 +19,6 @@
 
 #include "ivol/block_encoder.hpp"
 #include "ivol/recon/slab_exchange.hpp"
-#include "recon_slabs.hpp"
 
 namespace ivol::cli {
 
@@ -75,13 +74,11 @@ class MpiRun {
   std::shared_ptr<recon::SlabExchange> exchange() const;
 
   // Distributed compression, mpi_block_farm.hpp. Rank 0: the writer's
-  // WriteOptions::encoder, the service its thread needs from the main thread
-  // (convert::reconstruct_to_ivol), every_slab_received() when its
-  // reconstruction is done (so that all ranks share the batches after it),
-  // and, once the file is written, end_compression() to let the other ranks go. The other ranks:
-  // serve_compression() once their slabs are sent, until rank 0 ends it.
+  // WriteOptions::encoder, every_slab_received() when its reconstruction is
+  // done (so that all ranks share the batches after it), and, once the file
+  // is written, end_compression() to let the other ranks go. The other
+  // ranks: serve_compression() once their slabs are sent, until rank 0 ends it.
   std::shared_ptr<BlockEncoder> block_encoder() const;
-  convert::WriterService* writer_service() const;
   void every_slab_received();
   void end_compression();
   void serve_compression();
