@@ -18,21 +18,18 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
+// A later slab's report into the first's (which says the devices and plan).
 void add(recon::FdkReport& into, const recon::FdkReport& report) {
-  if (into.devices.empty())
-    into = report;  // devices, warnings, plan
-  else {
-    recon::FdkTimings& t = into.timings;
-    t.setup += report.timings.setup;
-    t.reading += report.timings.reading;
-    t.filtering += report.timings.filtering;
-    t.backprojection += report.timings.backprojection;
-    t.transfer += report.timings.transfer;
-    t.delivery += report.timings.delivery;
-    t.total += report.timings.total;
-    into.slab_count += report.slab_count;
-    into.voxel_updates += report.voxel_updates;
-  }
+  recon::FdkTimings& t = into.timings;
+  t.setup += report.timings.setup;
+  t.reading += report.timings.reading;
+  t.filtering += report.timings.filtering;
+  t.backprojection += report.timings.backprojection;
+  t.transfer += report.timings.transfer;
+  t.delivery += report.timings.delivery;
+  t.total += report.timings.total;
+  into.slab_count += report.slab_count;
+  into.voxel_updates += report.voxel_updates;
 }
 
 // The rank (IVOL_TEST_FAIL_BUILD_RANK, for the tests only) that fails while
@@ -86,12 +83,16 @@ DistributedBuild reconstruct_distributed(recon::FdkReconstructor& reconstructor,
     const std::uint32_t hi = std::min(depth, z0 + n + margin);
     values.resize((hi - lo) * slice);
     const auto reconstructing = std::chrono::steady_clock::now();
-    add(result.fdk, reconstructor.reconstruct(
-                        grid,
-                        [&](std::uint32_t k0, std::uint32_t k1, const float* data) {
-                          std::memcpy(values.data() + (k0 - lo) * slice, data, (k1 - k0) * slice * sizeof(float));
-                        },
-                        lo, hi));
+    const recon::FdkReport fdk = reconstructor.reconstruct(
+        grid,
+        [&](std::uint32_t k0, std::uint32_t k1, const float* data) {
+          std::memcpy(values.data() + (k0 - lo) * slice, data, (k1 - k0) * slice * sizeof(float));
+        },
+        lo, hi);
+    if (result.slabs_built == 0)
+      result.fdk = fdk;
+    else
+      add(result.fdk, fdk);
     result.reconstruction_seconds += seconds_since(reconstructing);
     const auto building = std::chrono::steady_clock::now();
     std::vector<std::uint8_t> keep;
