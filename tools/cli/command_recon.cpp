@@ -438,8 +438,9 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       std::cerr << std::fixed << std::setprecision(2) << "ivol recon: " << grid.size[0] << "x" << grid.size[1] << "x"
                 << grid.size[2] << " voxels from " << scan.geometry.view_count() << " views on "
                 << reconstructor.device_names().front() << " in " << total << " s (filtering " << t.filtering
-                << " s, backprojection " << t.backprojection << " s = " << gups << " GUPS, writing " << writing
-                << " s); " << s->output << ": " << human_bytes(written.file_bytes) << "\n";
+                << " s, backprojection " << t.backprojection << " s = " << gups << " GUPS, writing " << writing << " s";
+      if (mpi) std::cerr << ", building rank 0's slabs " << building << " s";
+      std::cerr << "); " << s->output << ": " << human_bytes(written.file_bytes) << "\n";
       if (mpi) print_ranks(ranks);
     }
     return kExitOk;
