@@ -2,13 +2,16 @@
 // whole octree in memory and writing it, whatever the slab thickness.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
+#include <functional>
 #include <random>
 
 #include "ivol/build.hpp"
 #include "ivol/check.hpp"
 #include "ivol/error.hpp"
 #include "ivol/keep_mask.hpp"
+#include "ivol/octree_slab_builder.hpp"
 #include "ivol/streaming_writer.hpp"
 #include "ivol/writer.hpp"
 #include "test_support.hpp"
@@ -103,6 +106,134 @@ TEST(StreamingWriter, UInt16SlabsAndMisuse) {
   const std::string expected = test::temp_path("u16-memory.ivol");
   write_octree(build_octree(volume.data(), dims, in_memory).octree, Metadata{}, expected);
   EXPECT_EQ(test::read_bytes(path), test::read_bytes(expected));
+}
+
+// Slabs built away from the writer (OctreeSlabBuilder, as another rank does),
+// their bytes copied as a message would carry them, give the same file as
+// add_slab: with and without keep masks, float32 and uint16 samples, a last
+// slab thinner than the others.
+struct BuiltCase {
+  Dims dims;
+  ValueEncoding encoding;
+  bool keep;
+  bool uint16_samples;
+  std::uint32_t slab;
+};
+
+class BuiltSlabs : public ::testing::TestWithParam<BuiltCase> {};
+
+TEST_P(BuiltSlabs, SameBytesAsAddSlab) {
+  const BuiltCase c = GetParam();
+  ASSERT_NE(c.dims[2] % c.slab, 0u) << "the last slab should be thinner";
+  std::mt19937_64 rng(c.dims[0] * 13 + c.slab);
+  const std::vector<float> volume = test::random_volume(c.dims, rng, 0.05, 5);
+  std::vector<std::uint16_t> codes(volume.size());
+  for (std::size_t i = 0; i < volume.size(); ++i)
+    codes[i] = static_cast<std::uint16_t>(std::max(0.0f, volume[i]) * 1000);
+  std::vector<std::uint8_t> keep;
+  if (c.keep) keep = threshold_keep_mask(volume.data(), c.dims, 2.0f, 1);
+  StreamingOptions options;
+  options.build.encoding = c.encoding;
+  options.build.threads = 2;
+  options.write.block_bytes = 512;
+  options.slab_slices = c.slab;
+  const std::uint64_t slice = std::uint64_t{c.dims[0]} * c.dims[1];
+  const std::uint8_t* mask = c.keep ? keep.data() : nullptr;
+  Metadata metadata;
+  metadata.user = {{"built", true}};
+
+  const std::string direct_path = test::temp_path("direct.ivol");
+  StreamingOctreeWriter direct(direct_path, c.dims, options);
+  while (direct.next_slab_count() > 0) {
+    const std::uint64_t first = direct.next_slab_first() * slice;
+    if (c.uint16_samples)
+      direct.add_slab(codes.data() + first, mask ? mask + first : nullptr);
+    else
+      direct.add_slab(volume.data() + first, mask ? mask + first : nullptr);
+  }
+  const StreamingResult expected = direct.finish(metadata);
+
+  const OctreeSlabBuilder builder(c.dims, options);
+  ASSERT_EQ(builder.slab_count(), (c.dims[2] + c.slab - 1) / c.slab);
+  std::vector<std::vector<std::uint8_t>> messages;
+  // Built in reverse order, as ranks finish in any order.
+  for (std::uint32_t k = builder.slab_count(); k-- > 0;) {
+    const std::uint64_t first = builder.slab_first(k) * slice;
+    const BuiltSlab built = c.uint16_samples ? builder.build(k, codes.data() + first, mask ? mask + first : nullptr)
+                                             : builder.build(k, volume.data() + first, mask ? mask + first : nullptr);
+    messages.insert(messages.begin(), built.bytes);
+  }
+  const std::string built_path = test::temp_path("built.ivol");
+  StreamingOctreeWriter writer(built_path, c.dims, options);
+  for (const auto& message : messages) writer.add_built_slab(BuiltSlab{message});
+  const StreamingResult result = writer.finish(metadata);
+  EXPECT_EQ(result.max_abs_error, expected.max_abs_error);
+  EXPECT_EQ(result.lossless, expected.lossless);
+  EXPECT_EQ(result.kept_voxels, expected.kept_voxels);
+  EXPECT_EQ(test::read_bytes(built_path), test::read_bytes(direct_path));
+  EXPECT_TRUE(check_file(built_path).ok());
+}
+
+INSTANTIATE_TEST_SUITE_P(Slabs, BuiltSlabs,
+                         ::testing::Values(BuiltCase{{40, 33, 29}, ValueEncoding::Binary16, false, false, 8},
+                                           BuiltCase{{40, 33, 29}, ValueEncoding::Binary16, true, false, 8},
+                                           BuiltCase{{40, 33, 29}, ValueEncoding::Float32, true, false, 16},
+                                           BuiltCase{{33, 20, 37}, ValueEncoding::UInt16, false, true, 8},
+                                           BuiltCase{{33, 20, 37}, ValueEncoding::UInt16, true, true, 4},
+                                           BuiltCase{{17, 5, 71}, ValueEncoding::Binary16, true, false, 2},
+                                           BuiltCase{{9, 9, 9}, ValueEncoding::Binary16, true, false, 2}));
+
+// A writer refuses a built slab of another layout, out of order, or damaged,
+// with an ivol::Error that says so, and leaves nothing behind.
+TEST(BuiltSlabs, RefusedWhenTheyDoNotFit) {
+  const Dims dims{16, 12, 20};
+  std::mt19937_64 rng(5);
+  const std::vector<float> volume = test::random_volume(dims, rng, 0.05, 5);
+  StreamingOptions options;
+  options.slab_slices = 8;
+  const std::uint64_t slice = std::uint64_t{dims[0]} * dims[1];
+  const OctreeSlabBuilder builder(dims, options);
+  const BuiltSlab first = builder.build(0, volume.data());
+  const BuiltSlab second = builder.build(1, volume.data() + 8 * slice);
+  StreamingOptions thinner = options;
+  thinner.slab_slices = 4;
+  const BuiltSlab other_layout = OctreeSlabBuilder(dims, thinner).build(0, volume.data());
+  StreamingOptions float32 = options;
+  float32.build.encoding = ValueEncoding::Float32;
+  const BuiltSlab other_encoding = OctreeSlabBuilder(dims, float32).build(0, volume.data());
+  const std::uint8_t keep_all[16 * 12 * 8] = {};
+  const BuiltSlab with_mask = builder.build(1, volume.data() + 8 * slice, keep_all);
+  EXPECT_THROW(builder.build(3, volume.data()), Error);  // the volume has slabs 0 .. 2
+
+  const std::string path = test::temp_path("refuses.ivol");
+  auto message_of = [](const std::function<void()>& f) -> std::string {
+    try {
+      f();
+    } catch (const Error& e) {
+      return e.what();
+    }
+    return "no error";
+  };
+  {
+    StreamingOctreeWriter writer(path, dims, options);
+    EXPECT_NE(message_of([&] { writer.add_built_slab(second); }).find("built slab 1 given where slab 0 is expected"),
+              std::string::npos);
+    EXPECT_NE(message_of([&] { writer.add_built_slab(other_layout); }).find("another layout"), std::string::npos);
+    EXPECT_NE(message_of([&] { writer.add_built_slab(other_encoding); }).find("another layout"), std::string::npos);
+    BuiltSlab damaged = first;
+    damaged.bytes.resize(damaged.bytes.size() - 1);
+    EXPECT_NE(message_of([&] { writer.add_built_slab(damaged); }).find("do not hold"), std::string::npos);
+    EXPECT_NE(message_of([&] {
+                writer.add_built_slab(BuiltSlab{{1, 2, 3}});
+              }).find("shorter than its header"),
+              std::string::npos);
+    writer.add_built_slab(first);
+    EXPECT_NE(message_of([&] { writer.add_built_slab(with_mask); }).find("every slab has a keep mask or none"),
+              std::string::npos);
+    EXPECT_NE(message_of([&] { writer.add_built_slab(first); }).find("built slab 0 given where slab 1 is expected"),
+              std::string::npos);
+  }
+  EXPECT_FALSE(std::filesystem::exists(path));
 }
 
 }  // namespace

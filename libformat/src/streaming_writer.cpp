@@ -14,16 +14,21 @@
 
 #include "block_pipeline.hpp"
 #include "ivol/error.hpp"
-#include "octree_builder.hpp"
+#include "ivol/octree_slab_builder.hpp"
+#include "slab_subtrees.hpp"
 
 namespace ivol {
 namespace {
 
 using detail::BuildStats;
+using detail::BuiltSlabHeader;
+using detail::BuiltSubtreeRecord;
 using detail::KeepPyramid;
 using detail::LevelArrays;
 using detail::NodeResult;
 using detail::RegionStats;
+using detail::SlabGrid;
+using detail::SubtreeRecord;
 
 std::string directory_of(const std::string& path) {
   const auto slash = path.find_last_of('/');
@@ -75,6 +80,7 @@ class SpillFile {
 struct StreamingOctreeWriter::Impl {
   virtual ~Impl() = default;
   virtual void add(const void* samples, const std::uint8_t* keep) = 0;
+  virtual void add_built(const BuiltSlab& built) = 0;
   virtual StreamingResult finish(const Metadata& metadata, const StreamingOctreeWriter::AmendMetadata& amend) = 0;
   std::uint32_t slab_slices = 0;
   std::uint32_t slabs_done = 0;
@@ -91,15 +97,14 @@ class Engine final : public StreamingOctreeWriter::Impl {
       : path_(path),
         options_(options),
         builder_(nullptr, volume_dims, options.build, nullptr),
+        slab_grid_(volume_dims, slab),
         spill_(options.spill_directory.empty() ? directory_of(path) : options.spill_directory) {
     dims = volume_dims;
     slab_slices = slab;
     is_float = std::is_same_v<Source, float>;
-    depth_ = builder_.layout().depth;
-    unsigned s = 0;
-    while ((1u << s) < slab) ++s;
-    subtree_level_ = depth_ - s;
-    for (int a = 0; a < 3; ++a) grid_[a] = (dims[a] + slab - 1) / slab;
+    depth_ = slab_grid_.depth;
+    subtree_level_ = slab_grid_.subtree_level;
+    for (int a = 0; a < 3; ++a) grid_[a] = slab_grid_.grid[a];
     const std::uint64_t count = std::uint64_t{grid_[0]} * grid_[1] * grid_[2];
     records_.resize(count);
     levels_ = depth_ - subtree_level_ + 1;
@@ -110,34 +115,12 @@ class Engine final : public StreamingOctreeWriter::Impl {
   void add(const void* samples, const std::uint8_t* keep) override {
     const auto start = std::chrono::steady_clock::now();
     const std::uint32_t k = slabs_done;
-    if (k >= grid_[2]) throw Error(ErrorClass::InvalidArgument, path_ + ": more slabs than the volume holds");
-    if (k > 0 && (keep != nullptr) != with_keep_)
-      throw Error(ErrorClass::InvalidArgument, path_ + ": either every slab has a keep mask or none");
-    with_keep_ = keep != nullptr;
-    const std::uint32_t z0 = k * slab_slices;
-    const std::uint32_t slices = std::min(slab_slices, dims[2] - z0);
-    std::unique_ptr<KeepPyramid> pyramid;
-    if (keep) pyramid = std::make_unique<KeepPyramid>(keep, Dims{dims[0], dims[1], slices}, depth_, z0, subtree_level_);
-    builder_.set_slab(static_cast<const Source*>(samples), z0, pyramid.get());
-
-    std::atomic<std::uint32_t> next{0};
-    std::mutex spill_mutex;
-    std::exception_ptr failure;
-    std::vector<BuildStats> thread_stats(threads_);
-    auto work = [&](unsigned t) {
-      const std::uint32_t per_slab = grid_[0] * grid_[1];
-      for (std::uint32_t n; (n = next.fetch_add(1)) < per_slab;) {
-        try {
-          const std::uint32_t i = n % grid_[0], j = n / grid_[0];
-          LevelArrays<Stored> arrays(depth_);
-          Record record;
-          record.root = builder_.build(subtree_level_, i, j, k, arrays, thread_stats[t]);
-          // The levels above can only coarsen when there is a keep mask.
-          if (keep) record.stats = builder_.region_stats(subtree_level_, i, j, k);
-          record.any_kept = !pyramid || pyramid->any(subtree_level_, i, j, k);
-          const std::uint64_t index = (std::uint64_t{k} * grid_[1] + j) * grid_[0] + i;
-          std::lock_guard<std::mutex> lock(spill_mutex);
-          record.spill_offset = spill_.size();
+    begin_slab(k, keep != nullptr);
+    const BuildStats slab_stats = detail::build_slab_subtrees<Source, Stored>(
+        builder_, slab_grid_, k, static_cast<const Source*>(samples), keep, threads_,
+        [&](std::uint32_t n, const SubtreeRecord& record, const LevelArrays<Stored>& arrays) {
+          const std::uint64_t index = std::uint64_t{k} * slab_grid_.subtrees_per_slab() + n;
+          records_[index] = Record{record, spill_.size()};
           for (unsigned l = subtree_level_; l <= depth_; ++l) {
             const auto& nodes = arrays.nodes[l];
             const auto& values = arrays.values[l];
@@ -146,20 +129,70 @@ class Engine final : public StreamingOctreeWriter::Impl {
             counts_[(index * levels_ + (l - subtree_level_)) * 2] = nodes.size();
             counts_[(index * levels_ + (l - subtree_level_)) * 2 + 1] = values.size();
           }
-          records_[index] = record;
-        } catch (...) {
-          std::lock_guard<std::mutex> lock(spill_mutex);
-          failure = std::current_exception();
-        }
-      }
-    };
-    std::vector<std::thread> pool;
-    for (unsigned t = 1; t < threads_; ++t) pool.emplace_back(work, t);
-    work(0);
-    for (auto& th : pool) th.join();
-    if (failure) std::rethrow_exception(failure);
-    for (const auto& s : thread_stats) stats_.merge(s);
-    builder_.set_slab(nullptr, 0, nullptr);
+        });
+    stats_.merge(slab_stats);
+    ++slabs_done;
+    build_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
+
+  // The same effect as add() with the samples and mask `built` was made
+  // from: its subtrees' data go to the spill file as they are.
+  void add_built(const BuiltSlab& built) override {
+    const auto start = std::chrono::steady_clock::now();
+    const std::vector<std::uint8_t>& bytes = built.bytes;
+    const std::string what = path_ + ": built slab";
+    if (bytes.size() < sizeof(BuiltSlabHeader))
+      throw Error(ErrorClass::Malformed,
+                  what + ": " + std::to_string(bytes.size()) + " bytes, shorter than its header");
+    BuiltSlabHeader header;
+    std::memcpy(&header, bytes.data(), sizeof header);
+    if (std::memcmp(header.magic, "ivolslab", 8) != 0 || header.version != detail::kBuiltSlabVersion)
+      throw Error(ErrorClass::Malformed, what + ": not a built slab of this version");
+    const bool same_layout =
+        header.dims[0] == dims[0] && header.dims[1] == dims[1] && header.dims[2] == dims[2] &&
+        header.slab_slices == slab_slices && header.encoding == static_cast<std::uint8_t>(builder_.layout().encoding) &&
+        header.value_scale == builder_.layout().value_scale && header.value_offset == builder_.layout().value_offset &&
+        (header.source_is_float != 0) == is_float;
+    if (!same_layout)
+      throw Error(ErrorClass::InvalidArgument,
+                  what + " " + std::to_string(header.slab) + " was made for another layout (" +
+                      std::to_string(header.dims[0]) + "x" + std::to_string(header.dims[1]) + "x" +
+                      std::to_string(header.dims[2]) + " in slabs of " + std::to_string(header.slab_slices) +
+                      "; this writer: " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
+                      std::to_string(dims[2]) + " in slabs of " + std::to_string(slab_slices) +
+                      ", or another encoding, scale, offset or sample type)");
+    const std::uint32_t k = slabs_done;
+    if (header.slab != k)
+      throw Error(ErrorClass::InvalidArgument, what + " " + std::to_string(header.slab) + " given where slab " +
+                                                   std::to_string(k) + " is expected (slabs go in z order)");
+    const std::uint32_t subtrees = slab_grid_.subtrees_per_slab();
+    const std::uint64_t records_at = sizeof header;
+    const std::uint64_t counts_at = records_at + std::uint64_t{subtrees} * sizeof(BuiltSubtreeRecord);
+    const std::uint64_t data_at = counts_at + std::uint64_t{subtrees} * levels_ * 2 * 8;
+    if (header.subtree_count != subtrees || data_at + header.data_bytes != bytes.size())
+      throw Error(ErrorClass::Malformed, what + " " + std::to_string(k) + ": " + std::to_string(bytes.size()) +
+                                             " bytes do not hold its " + std::to_string(subtrees) + " subtrees");
+    begin_slab(k, header.with_keep != 0);
+    const std::uint64_t base = spill_.append(bytes.data() + data_at, header.data_bytes);
+    for (std::uint32_t n = 0; n < subtrees; ++n) {
+      BuiltSubtreeRecord wire;
+      std::memcpy(&wire, bytes.data() + records_at + std::uint64_t{n} * sizeof wire, sizeof wire);
+      const std::uint64_t index = std::uint64_t{k} * subtrees + n;
+      std::memcpy(&counts_[index * levels_ * 2], bytes.data() + counts_at + std::uint64_t{n} * levels_ * 2 * 8,
+                  levels_ * 2 * 8);
+      std::uint64_t size = 0;
+      for (unsigned l = subtree_level_; l <= depth_; ++l)
+        size += count(index, l, 0) * 8 + count(index, l, 1) * sizeof(Stored);
+      if (wire.data_offset > header.data_bytes || size > header.data_bytes - wire.data_offset)
+        throw Error(ErrorClass::Malformed,
+                    what + " " + std::to_string(k) + ": subtree " + std::to_string(n) + " lies outside its data");
+      records_[index] = Record{detail::from_wire(wire), base + wire.data_offset};
+    }
+    BuildStats slab_stats;
+    slab_stats.max_abs_error = header.max_abs_error;
+    slab_stats.kept = header.kept;
+    slab_stats.coarsened = header.coarsened != 0;
+    stats_.merge(slab_stats);
     ++slabs_done;
     build_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
@@ -245,11 +278,17 @@ class Engine final : public StreamingOctreeWriter::Impl {
 
  private:
   struct Record {
-    NodeResult root;
-    RegionStats stats;
-    bool any_kept = false;
+    SubtreeRecord subtree;
     std::uint64_t spill_offset = 0;
   };
+
+  // Slab k is next, and has a keep mask as every slab before it or none.
+  void begin_slab(std::uint32_t k, bool with_keep) {
+    if (k >= grid_[2]) throw Error(ErrorClass::InvalidArgument, path_ + ": more slabs than the volume holds");
+    if (k > 0 && with_keep != with_keep_)
+      throw Error(ErrorClass::InvalidArgument, path_ + ": either every slab has a keep mask or none");
+    with_keep_ = with_keep;
+  }
 
   std::uint64_t count(std::uint64_t subtree, unsigned level, int stream) const {
     return counts_[(subtree * levels_ + (level - subtree_level_)) * 2 + stream];
@@ -282,9 +321,9 @@ class Engine final : public StreamingOctreeWriter::Impl {
     if (level == subtree_level_) {
       if (i >= grid_[0] || j >= grid_[1] || k >= grid_[2]) return NodeResult{};
       const Record& r = records_[(std::uint64_t{k} * grid_[1] + j) * grid_[0] + i];
-      stats = r.stats;
-      any_kept = r.any_kept;
-      return r.root;
+      stats = r.subtree.stats;
+      any_kept = r.subtree.any_kept;
+      return r.subtree.root;
     }
     const std::uint64_t weight = builder_.layout().weight(level, i, j, k);
     if (weight == 0) return NodeResult{};
@@ -306,6 +345,7 @@ class Engine final : public StreamingOctreeWriter::Impl {
   std::string path_;
   StreamingOptions options_;
   detail::Builder<Source, Stored> builder_;
+  SlabGrid slab_grid_;
   SpillFile spill_;
   unsigned depth_ = 0;
   unsigned subtree_level_ = 0;
@@ -319,24 +359,10 @@ class Engine final : public StreamingOctreeWriter::Impl {
   double build_seconds_ = 0.0;
 };
 
-std::uint32_t choose_slab(const Dims& dims, const StreamingOptions& options) {
-  const unsigned depth = depth_for(dims);
-  const std::uint32_t side = 1u << depth;
-  if (options.slab_slices) {
-    const std::uint32_t s = options.slab_slices;
-    if ((s & (s - 1)) != 0) throw Error(ErrorClass::InvalidArgument, "streaming: slab_slices must be a power of two");
-    return std::min(s, side);
-  }
-  const std::uint64_t slice_bytes = std::uint64_t{dims[0]} * dims[1] * 4;
-  std::uint32_t s = 8;
-  while (s < side && 2 * s * slice_bytes <= options.slab_budget_bytes) s *= 2;
-  return std::min(s, side);
-}
-
 template <typename Source>
 std::unique_ptr<StreamingOctreeWriter::Impl> make_engine(const std::string& path, const Dims& dims,
                                                          const StreamingOptions& options) {
-  const std::uint32_t slab = choose_slab(dims, options);
+  const std::uint32_t slab = detail::choose_slab_slices(dims, options);
   if (options.build.encoding == ValueEncoding::Float32)
     return std::make_unique<Engine<Source, std::uint32_t>>(path, dims, options, slab);
   return std::make_unique<Engine<Source, std::uint16_t>>(path, dims, options, slab);
@@ -352,12 +378,7 @@ struct StreamingState {
 
 StreamingOctreeWriter::StreamingOctreeWriter(const std::string& path, const Dims& dims,
                                              const StreamingOptions& options) {
-  for (auto n : dims)
-    if (n == 0 || n > (1u << 31))
-      throw Error(ErrorClass::InvalidArgument, "streaming: each dimension must be 1 .. 2^31");
-  if (!std::isfinite(options.build.value_scale) || options.build.value_scale == 0.0 ||
-      !std::isfinite(options.build.value_offset))
-    throw Error(ErrorClass::InvalidArgument, "streaming: value scale must be finite and non-zero, offset finite");
+  detail::check_streaming_options(dims, options);
   // The engine is made for the sample type of the first slab; until then keep
   // what it needs.
   pending_ = std::make_unique<StreamingState>(StreamingState{path, dims, options});
@@ -366,7 +387,7 @@ StreamingOctreeWriter::StreamingOctreeWriter(const std::string& path, const Dims
 StreamingOctreeWriter::~StreamingOctreeWriter() = default;
 
 std::uint32_t StreamingOctreeWriter::slab_slices() const {
-  return impl_ ? impl_->slab_slices : choose_slab(pending_->dims, pending_->options);
+  return impl_ ? impl_->slab_slices : detail::choose_slab_slices(pending_->dims, pending_->options);
 }
 
 std::uint32_t StreamingOctreeWriter::next_slab_first() const {
@@ -389,6 +410,20 @@ void StreamingOctreeWriter::add_slab(const std::uint16_t* samples, const std::ui
   if (!impl_) impl_ = make_engine<std::uint16_t>(pending_->path, pending_->dims, pending_->options);
   if (impl_->is_float) throw Error(ErrorClass::InvalidArgument, "streaming: slabs must all have one sample type");
   impl_->add(samples, keep);
+}
+
+void StreamingOctreeWriter::add_built_slab(const BuiltSlab& built) {
+  // The sample type the slab was built from decides the engine, as add_slab's does.
+  bool from_float = true;
+  if (built.bytes.size() >= sizeof(BuiltSlabHeader)) {
+    BuiltSlabHeader header;
+    std::memcpy(&header, built.bytes.data(), sizeof header);
+    from_float = header.source_is_float != 0;
+  }
+  if (!impl_)
+    impl_ = from_float ? make_engine<float>(pending_->path, pending_->dims, pending_->options)
+                       : make_engine<std::uint16_t>(pending_->path, pending_->dims, pending_->options);
+  impl_->add_built(built);
 }
 
 StreamingResult StreamingOctreeWriter::finish(const Metadata& metadata, const AmendMetadata& amend) {

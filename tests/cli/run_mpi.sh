@@ -2,9 +2,11 @@
 # ivol recon under mpirun (docs/distributed.md): 2 and 4 ranks on this one
 # machine must give the single process's file byte for byte (dense, --keep
 # otsu with its distributed preview, --structure octree and nested), the
-# ranks other than 0 must compress blocks of it, and a rank that fails (while
-# reconstructing or while compressing) must end the whole run with its
-# message, a non-zero exit and nothing left behind. $IVOL is the binary under
+# ranks other than 0 must build the octree subtrees of their slabs (dense)
+# and compress blocks of it, rank 0 must receive fewer bytes than the float32
+# slabs, and a rank that fails (while reconstructing, building or
+# compressing) must end the whole run with its message, a non-zero exit and
+# nothing left behind. $IVOL is the binary under
 # test, $MPIEXEC mpirun.
 set -u
 : "${IVOL:?set IVOL to the ivol binary}"
@@ -63,13 +65,13 @@ done
 # likewise; nested: as slabs finish, the others join once their slabs are
 # sent, so only the total is checked). The structure report's voxel updates
 # are the single process's, not N times them (each rank counts its own).
-for mode in dense octree nested; do
+for mode in dense keep octree nested; do
   for ranks in 2 4; do
     # shellcheck disable=SC2086
     "$MPIEXEC" --oversubscribe -np "$ranks" "${recon[@]}" ${mode_args[$mode]} --slab-slices 3 --json \
       -o "json-$mode-$ranks.ivol" >"$work/report.json" 2>"$work/log"
     # shellcheck disable=SC2086
-    [ "$mode" = dense ] || "${recon[@]}" ${mode_args[$mode]} --json -f -o "json-one-$mode.ivol" >"$work/one.json"
+    [ "$mode" = dense ] || [ "$mode" = keep ] || "${recon[@]}" ${mode_args[$mode]} --json -f -o "json-one-$mode.ivol" >"$work/one.json"
     if MODE=$mode RANKS=$ranks /usr/bin/python3 -c "
 import json, os, sys, subprocess
 mode, ranks = os.environ['MODE'], int(os.environ['RANKS'])
@@ -82,7 +84,12 @@ checks = [len(r) == ranks, r[1]['bytes_sent'] > 0,
           # every block but the metadata block, compressed somewhere
           sum(k['blocks_compressed'] for k in r) == blocks - 1,
           all(k['block_bytes_sent'] > 0 and k['blocks_compressed'] > 0 for k in r[1:]) or mode == 'nested']
-if mode != 'dense':
+if mode in ('dense', 'keep'):
+    # every rank built the subtrees of its writer slabs, and every slice
+    # was built once
+    checks += [all(k['slabs_built'] > 0 and k['build_seconds'] > 0 for k in r),
+               sum(k['slices_built'] for k in r) == 24]
+else:
     one = json.load(open('$work/one.json'))
     checks += [report['voxel_updates'] == one['voxel_updates'],
                abs(report['gups'] - sum(k['gups'] for k in r)) < 1e-9]
@@ -91,6 +98,47 @@ sys.exit(0 if all(checks) else 1)" >>"$work/log" 2>&1; then
       ok "json-ranks-$mode-$ranks"
     else
       fail "json-ranks-$mode-$ranks"
+    fi
+  done
+done
+
+# What rank 0 receives: built subtrees (binary16 values and node words),
+# fewer bytes than the float32 slices they were built from. The writer's own
+# slabs (16 slices here, two of them): with thin slabs of tiny subtrees the
+# subtrees' records would outweigh their voxels.
+for mode in dense keep; do
+  # shellcheck disable=SC2086
+  "$MPIEXEC" --oversubscribe -np 2 "${recon[@]}" ${mode_args[$mode]} --json -o "bytes-$mode.ivol" \
+    >"$work/report.json" 2>"$work/log"
+  if cmp "one-$mode.ivol" "bytes-$mode.ivol" >>"$work/log" 2>&1 && /usr/bin/python3 -c "
+import json, sys
+r = json.load(open('$work/report.json'))['ranks']
+float32 = 24 * 24 * 4 * r[1]['slices_built']
+checks = [r[1]['slabs_built'] > 0, 0 < r[0]['slab_bytes_received'] < float32,
+          r[0]['slab_bytes_received'] == r[1]['slab_bytes_sent']]
+print(checks, r[0]['slab_bytes_received'], float32)
+sys.exit(0 if all(checks) else 1)" >>"$work/log" 2>&1; then
+    ok "built-subtrees-fewer-bytes-$mode"
+  else
+    fail "built-subtrees-fewer-bytes-$mode"
+  fi
+done
+
+# A rank that fails while building its subtrees (a failure injected for this
+# test) ends the run with its message; rank 0 removes its temporary file.
+for mode in dense keep; do
+  for ranks in 2 4; do
+    victim=$((ranks - 1))
+    # shellcheck disable=SC2086
+    IVOL_TEST_FAIL_BUILD_RANK=$victim "$MPIEXEC" --oversubscribe -np "$ranks" "${recon[@]}" \
+      ${mode_args[$mode]} --slab-slices 3 -o "build-fails-$mode.ivol" >"$work/log" 2>&1
+    status=$?
+    if [ "$status" -eq 2 ] &&
+      grep -q "ivol recon: error: rank $victim: building the subtrees of slab $victim: failure injected" "$work/log" &&
+      nothing_left "build-fails-$mode.ivol"; then
+      ok "rank-$victim-build-fails-$mode"
+    else
+      fail "rank-$victim-build-fails-$mode (exit $status)"
     fi
   done
 done

@@ -15,6 +15,7 @@
 #include "ivol_io.hpp"
 #include "mpi_exchange.hpp"
 #include "option_parsing.hpp"
+#include "recon_built_slabs.hpp"
 #include "recon_slabs.hpp"
 #include "report.hpp"
 #include "scan_input.hpp"
@@ -77,6 +78,11 @@ nlohmann::json ranks_json(const std::vector<RankStats>& ranks) {
                     {"slabs_sent", k.slabs_sent},
                     {"bytes_sent", k.bytes_sent},
                     {"bytes_received", k.bytes_received},
+                    {"slab_bytes_sent", k.slab_bytes_sent},
+                    {"slab_bytes_received", k.slab_bytes_received},
+                    {"slabs_built", k.slabs_built},
+                    {"slices_built", k.slices_built},
+                    {"build_seconds", k.build_seconds},
                     {"blocks_compressed", k.blocks_compressed},
                     {"compression_input_bytes", k.compression_input_bytes},
                     {"compression_output_bytes", k.compression_output_bytes},
@@ -109,7 +115,8 @@ void print_ranks(const std::vector<RankStats>& ranks) {
   std::cerr << std::fixed << std::setprecision(2) << "ivol recon: " << ranks.size() << " ranks:";
   for (std::size_t r = 0; r < ranks.size(); ++r)
     std::cerr << (r ? ";" : "") << " rank " << r << " " << ranks[r].seconds << " s, sent "
-              << human_bytes(ranks[r].bytes_sent) << " (" << ranks[r].slabs_sent << " slabs), compressed "
+              << human_bytes(ranks[r].bytes_sent) << " (" << ranks[r].slabs_sent << " slabs), built "
+              << ranks[r].slabs_built << " slabs in " << ranks[r].build_seconds << " s, compressed "
               << ranks[r].blocks_compressed << " blocks";
   std::cerr << "\n";
 }
@@ -266,7 +273,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
   fdk->add_option("--device-memory", s->device_memory_mib, "MiB of device memory to use (default: 80 % of it)");
   fdk->add_option("--slab-slices", s->slab_slices,
                   "Most slices per slab (default: as many as fit the device; under mpirun, at most the volume's "
-                  "depth over the ranks)");
+                  "depth over the ranks; under mpirun without --structure, also the writer's slabs that the ranks "
+                  "build, a power of two)");
   auto* out = cmd->add_option_group("output");
   out->add_option("--encoding", s->encoding, "binary16 or float32")
       ->check(CLI::IsMember({"binary16", "float32"}))
@@ -311,7 +319,11 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     // Distributed, rank 0 writes the file and reports; the others only reconstruct.
     const bool root = !mpi || mpi->rank() == 0;
     const bool quiet = global.quiet || !root;
-    recon::FdkReconstructor reconstructor(*scan.projections, scan.geometry, options);
+    // Distributed and dense, each rank reconstructs whole writer slabs by
+    // itself (recon_built_slabs.hpp); the preview is still shared.
+    recon::FdkOptions reconstructor_options = options;
+    if (mpi && s->structure.empty()) reconstructor_options.exchange = nullptr;
+    recon::FdkReconstructor reconstructor(*scan.projections, scan.geometry, reconstructor_options);
     for (const std::string& w : reconstructor.warnings())
       if (!quiet) std::cerr << "ivol recon: warning: " << w << "\n";
 
@@ -364,6 +376,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     double gups = 0.0;
     double reconstruction = 0.0;
     double writing = 0.0;
+    double building = 0.0;  // distributed: rank 0's own slabs' subtrees
     std::vector<RankStats> ranks;
     if (!mpi) {
       convert::ReconstructionSlabs slabs(reconstructor, grid);
@@ -373,24 +386,30 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       reconstruction = slabs.read_seconds();
       writing = written.seconds - slabs.read_seconds();
     } else {
-      // Distributed: one reconstruction of the whole grid, cut the same way
-      // on every rank; rank 0 writes while its slabs and the others' arrive.
+      // Distributed: each rank reconstructs whole writer slabs, builds their
+      // subtrees and sends them to rank 0, which writes them in z order.
       // The other ranks then compress blocks for rank 0's writer.
       if (root) mpi->remove_temporaries_on_signal(s->output);
       import.encoder = mpi->block_encoder();
-      const convert::StreamedReconstruction streamed = convert::reconstruct_to_ivol(
-          reconstructor, grid, s->output, import, root, root ? mpi->writer_service() : nullptr);
+      const convert::DistributedBuild built =
+          convert::reconstruct_distributed(reconstructor, grid, s->output, import, *mpi->exchange(), s->slab_slices,
+                                           [&] { mpi->every_slab_received(); });
       if (root)
         mpi->end_compression();
       else
         mpi->serve_compression();
-      ranks = mpi->gather(rank_stats(streamed.fdk, start));
+      RankStats mine = rank_stats(built.fdk, start);
+      mine.slabs_built = built.slabs_built;
+      mine.slices_built = built.slices_built;
+      mine.build_seconds = built.build_seconds;
+      ranks = mpi->gather(mine);
       if (!root) return kExitOk;
-      written = streamed.written;
-      t = streamed.fdk.timings;
+      written = built.written;
+      t = built.fdk.timings;
       gups = total_gups(ranks);
-      reconstruction = t.total;
-      writing = written.seconds - streamed.writer_waiting;
+      reconstruction = built.reconstruction_seconds;
+      building = built.build_seconds;
+      writing = built.writing_seconds;
     }
     const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     nlohmann::json report = {{"output", s->output},
@@ -410,6 +429,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
                                {"transfer", t.transfer},
                                {"reconstruction", reconstruction},
                                {"writing", writing}}}};
+    if (mpi) report["seconds"]["building"] = building;
     if (import.keep) report["threshold"] = import.keep->threshold;
     if (mpi) report["ranks"] = ranks_json(ranks);
     if (s->json) {
@@ -418,8 +438,9 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       std::cerr << std::fixed << std::setprecision(2) << "ivol recon: " << grid.size[0] << "x" << grid.size[1] << "x"
                 << grid.size[2] << " voxels from " << scan.geometry.view_count() << " views on "
                 << reconstructor.device_names().front() << " in " << total << " s (filtering " << t.filtering
-                << " s, backprojection " << t.backprojection << " s = " << gups << " GUPS, writing " << writing
-                << " s); " << s->output << ": " << human_bytes(written.file_bytes) << "\n";
+                << " s, backprojection " << t.backprojection << " s = " << gups << " GUPS, writing " << writing << " s";
+      if (mpi) std::cerr << ", building rank 0's slabs " << building << " s";
+      std::cerr << "); " << s->output << ": " << human_bytes(written.file_bytes) << "\n";
       if (mpi) print_ranks(ranks);
     }
     return kExitOk;

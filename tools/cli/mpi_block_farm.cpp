@@ -3,11 +3,9 @@
 #include <mpi.h>
 
 #include <chrono>
-#include <condition_variable>
 #include <cstdlib>
 #include <cstring>
 #include <exception>
-#include <mutex>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -150,16 +148,6 @@ struct MpiBlockFarm::Impl {
   std::exception_ptr ready_error;  // a rank failed instead of getting ready
   CompressionStats stats;
 
-  // A writer thread's batch waiting for the MPI thread.
-  std::mutex mutex;
-  std::condition_variable changed;
-  const std::vector<RawBlock>* request = nullptr;
-  const WriteOptions* request_options = nullptr;
-  std::vector<EncodedBlock> answer;
-  std::exception_ptr answer_error;
-  bool answered = false;
-  bool closed = false;
-
   std::vector<EncodedBlock> encode_here(const RawBlock* blocks, std::size_t count, const WriteOptions& options) {
     const auto start = std::chrono::steady_clock::now();
     std::vector<EncodedBlock> encoded = encode_blocks(blocks, count, options);
@@ -239,18 +227,8 @@ std::size_t MpiBlockFarm::batch_blocks() const { return kBlocksPerRank * static_
 std::vector<EncodedBlock> MpiBlockFarm::encode(const std::vector<RawBlock>& batch, const WriteOptions& options) {
   Impl& m = *impl_;
   if (m.rank != 0) throw std::logic_error("only rank 0 writes");
-  if (std::this_thread::get_id() == m.mpi_thread) return m.distribute(batch, options);
-  std::unique_lock<std::mutex> lock(m.mutex);
-  if (m.closed) throw std::runtime_error("the distributed run stopped before the file was written");
-  m.request = &batch;
-  m.request_options = &options;
-  m.answered = false;
-  m.changed.notify_all();
-  m.changed.wait(lock, [&] { return m.answered || m.closed; });
-  m.request = nullptr;
-  if (!m.answered) throw std::runtime_error("the distributed run stopped before the file was written");
-  if (m.answer_error) std::rethrow_exception(m.answer_error);
-  return std::move(m.answer);
+  if (std::this_thread::get_id() != m.mpi_thread) throw std::logic_error("MPI is called from one thread only");
+  return m.distribute(batch, options);
 }
 
 void MpiBlockFarm::every_slab_received() {
@@ -261,37 +239,6 @@ void MpiBlockFarm::every_slab_received() {
     // The writer's next batch fails with the rank's message.
     m.ready_error = std::current_exception();
   }
-}
-
-void MpiBlockFarm::serve() {
-  Impl& m = *impl_;
-  every_slab_received();  // serve() begins once the reconstruction, all slabs received, is done
-  std::unique_lock<std::mutex> lock(m.mutex);
-  for (;;) {
-    m.changed.wait(lock, [&] { return m.closed || (m.request != nullptr && !m.answered); });
-    if (m.closed) return;
-    const std::vector<RawBlock>& batch = *m.request;
-    const WriteOptions& options = *m.request_options;
-    lock.unlock();
-    std::vector<EncodedBlock> answer;
-    std::exception_ptr error;
-    try {
-      answer = m.distribute(batch, options);
-    } catch (...) {
-      error = std::current_exception();
-    }
-    lock.lock();
-    m.answer = std::move(answer);
-    m.answer_error = error;
-    m.answered = true;
-    m.changed.notify_all();
-  }
-}
-
-void MpiBlockFarm::close() {
-  std::lock_guard<std::mutex> lock(impl_->mutex);
-  impl_->closed = true;
-  impl_->changed.notify_all();
 }
 
 void MpiBlockFarm::release() {

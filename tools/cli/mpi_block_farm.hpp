@@ -9,8 +9,7 @@
 // file is the same bit for bit (ivol/block_encoder.hpp).
 //
 // MPI is called from the thread that made the farm only (MPI_THREAD_FUNNELED):
-// a writer on another thread (the dense path's) hands its batches to that
-// thread, which serves them in serve() once the reconstruction is done.
+// rank 0's writer runs on that thread (the dense path's and the structures').
 #pragma once
 
 #include <cstdint>
@@ -19,7 +18,6 @@
 
 #include "ivol/block_encoder.hpp"
 #include "ivol/recon/slab_exchange.hpp"
-#include "recon_slabs.hpp"
 
 namespace ivol::cli {
 
@@ -33,7 +31,7 @@ struct CompressionStats {
   std::uint64_t bytes_received = 0;
 };
 
-class MpiBlockFarm final : public BlockEncoder, public convert::WriterService {
+class MpiBlockFarm final : public BlockEncoder {
  public:
   // `exchange` carries a failure on another rank to rank 0.
   explicit MpiBlockFarm(std::shared_ptr<recon::SlabExchange> exchange);
@@ -41,8 +39,8 @@ class MpiBlockFarm final : public BlockEncoder, public convert::WriterService {
   MpiBlockFarm(const MpiBlockFarm&) = delete;
   MpiBlockFarm& operator=(const MpiBlockFarm&) = delete;
 
-  // Rank 0, BlockEncoder: from any thread (see above). Throws "rank K: …"
-  // when a rank fails while compressing.
+  // Rank 0, BlockEncoder: on the farm's thread. Throws "rank K: …" when a
+  // rank fails while compressing.
   std::size_t batch_blocks() const override;
   std::vector<EncodedBlock> encode(const std::vector<RawBlock>& batch, const WriteOptions& options) override;
 
@@ -50,11 +48,6 @@ class MpiBlockFarm final : public BlockEncoder, public convert::WriterService {
   // slab: the other ranks are about to be ready; waits for them, so that
   // every later batch is shared by all ranks.
   void every_slab_received();
-
-  // Rank 0, WriterService: on the farm's thread, serves batches from the
-  // writer's thread until close().
-  void serve() override;
-  void close() override;
 
   // Rank 0, once the file is written: waits for every rank to be ready and
   // tells each that no more batches come.

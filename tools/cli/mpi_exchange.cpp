@@ -159,6 +159,16 @@ class MpiExchange final : public recon::SlabExchange {
     bytes_received += sizeof count + count * sizeof(float);
   }
 
+  void send_bytes(std::size_t slab, const std::vector<std::uint8_t>& data) override {
+    bytes_sent += mpi::send_bytes(data, 0, slab_tag(slab));
+    ++slabs_sent;
+  }
+
+  void receive_bytes(std::size_t slab, int from, std::vector<std::uint8_t>& data) override {
+    mpi::wait_for(from, slab_tag(slab));  // or another rank's failure
+    bytes_received += mpi::receive_bytes(data, from, slab_tag(slab));
+  }
+
   void report_failure(const std::string& message) override {
     if (rank_ == 0 || failure_reported) return;
     MPI_Send(message.data(), static_cast<int>(message.size()), MPI_CHAR, 0, mpi::kFailureTag, MPI_COMM_WORLD);
@@ -215,7 +225,6 @@ std::shared_ptr<BlockEncoder> MpiRun::block_encoder() const {
   if (rank0_only != nullptr && std::string(rank0_only) == "1") return nullptr;
   return impl_->farm;
 }
-convert::WriterService* MpiRun::writer_service() const { return impl_->farm.get(); }
 void MpiRun::every_slab_received() { impl_->farm->every_slab_received(); }
 void MpiRun::end_compression() { impl_->farm->release(); }
 void MpiRun::serve_compression() { impl_->farm->work(); }
@@ -224,6 +233,8 @@ std::vector<RankStats> MpiRun::gather(RankStats mine) {
   const CompressionStats& compression = impl_->farm->stats();
   mine.block_bytes_sent = compression.bytes_sent;
   mine.block_bytes_received = compression.bytes_received;
+  mine.slab_bytes_sent = impl_->exchange->bytes_sent;
+  mine.slab_bytes_received = impl_->exchange->bytes_received;
   mine.bytes_sent = impl_->exchange->bytes_sent + compression.bytes_sent;
   mine.bytes_received = impl_->exchange->bytes_received + compression.bytes_received;
   mine.slabs_sent = impl_->exchange->slabs_sent;
@@ -271,7 +282,6 @@ int MpiRun::rank() const { return 0; }
 int MpiRun::size() const { return 1; }
 std::shared_ptr<recon::SlabExchange> MpiRun::exchange() const { return nullptr; }
 std::shared_ptr<BlockEncoder> MpiRun::block_encoder() const { return nullptr; }
-convert::WriterService* MpiRun::writer_service() const { return nullptr; }
 void MpiRun::every_slab_received() {}
 void MpiRun::end_compression() {}
 void MpiRun::serve_compression() {}

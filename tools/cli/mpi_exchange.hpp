@@ -1,13 +1,15 @@
 // `mpirun -np N ivol recon …`: the ranks of a distributed reconstruction
 // (docs/distributed.md). recon stays free of MPI; this file gives it a
 // SlabExchange over MPI. Rank 0 receives every slab, writes the file and
-// prints the report; the other ranks reconstruct their slabs and send them,
-// then compress blocks of the file for rank 0 (mpi_block_farm.hpp).
+// prints the report; the other ranks reconstruct their slabs and send them
+// (a dense volume's as built octree subtrees, convert/recon_built_slabs.hpp;
+// a structure's as sums), then compress blocks of the file for rank 0
+// (mpi_block_farm.hpp).
 //
-// MPI is used from the main thread only (MPI_THREAD_FUNNELED): the FDK's
-// consume loop, where slabs are sent and received, runs on the calling
-// thread, and rank 0's writer runs on a thread of its own that never calls
-// MPI (its batches of blocks go to the main thread, writer_service()).
+// MPI is used from the main thread only (MPI_THREAD_FUNNELED): slabs are
+// sent and received there (the FDK's consume loop for structures, the loop of
+// convert::reconstruct_distributed for dense volumes), and rank 0's writer,
+// whose batches of blocks go to the other ranks, runs there too.
 #pragma once
 
 #include <cstdint>
@@ -17,7 +19,6 @@
 
 #include "ivol/block_encoder.hpp"
 #include "ivol/recon/slab_exchange.hpp"
-#include "recon_slabs.hpp"
 
 namespace ivol::cli {
 
@@ -29,6 +30,16 @@ struct RankStats {
   std::uint64_t bytes_sent = 0;      // slab data to rank 0 (and failures), and block_bytes_sent
   std::uint64_t bytes_received = 0;  // slab data from the other ranks (rank 0), and block_bytes_received
   std::uint64_t slabs_sent = 0;
+  // The slabs alone (float32 samples, or built subtrees in the dense path),
+  // without the blocks' traffic.
+  std::uint64_t slab_bytes_sent = 0;
+  std::uint64_t slab_bytes_received = 0;
+  // Dense path: the writer's slabs this rank reconstructed and built into
+  // octree subtrees, their slices (margins not counted), and its seconds in
+  // building them.
+  std::uint64_t slabs_built = 0;
+  std::uint64_t slices_built = 0;
+  double build_seconds = 0;
   // Compressing the file's blocks (mpi_block_farm.hpp): how many this rank
   // compressed, their bytes before and after, its seconds in zstd, and the
   // blocks' traffic (raw to the ranks, compressed back to rank 0).
@@ -63,13 +74,11 @@ class MpiRun {
   std::shared_ptr<recon::SlabExchange> exchange() const;
 
   // Distributed compression, mpi_block_farm.hpp. Rank 0: the writer's
-  // WriteOptions::encoder, the service its thread needs from the main thread
-  // (convert::reconstruct_to_ivol), every_slab_received() when its
-  // reconstruction is done (so that all ranks share the batches after it),
-  // and, once the file is written, end_compression() to let the other ranks go. The other ranks:
-  // serve_compression() once their slabs are sent, until rank 0 ends it.
+  // WriteOptions::encoder, every_slab_received() when its reconstruction is
+  // done (so that all ranks share the batches after it), and, once the file
+  // is written, end_compression() to let the other ranks go. The other
+  // ranks: serve_compression() once their slabs are sent, until rank 0 ends it.
   std::shared_ptr<BlockEncoder> block_encoder() const;
-  convert::WriterService* writer_service() const;
   void every_slab_received();
   void end_compression();
   void serve_compression();

@@ -141,10 +141,8 @@ class ProgressTicker {
 
 }  // namespace
 
-ImportReport import_to_ivol(SlabReader& source, const std::string& path, const ImportOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
-  const DenseVolume& shape = source.shape();
-  ImportReport report;
+StreamingOptions import_streaming_options(const DenseVolume& shape, const ImportOptions& options,
+                                          ImportReport& report) {
   report.encoding = options.encoding.value_or(lossless_encoding(shape.type));
   StreamingOptions streaming;
   BuildOptions& build = streaming.build;
@@ -162,6 +160,51 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
   streaming.write.byte_planes = options.byte_planes;
   streaming.write.encoder = options.encoder;
   if (options.slab_budget_bytes) streaming.slab_budget_bytes = options.slab_budget_bytes;
+  return streaming;
+}
+
+std::vector<std::uint8_t> slab_keep_mask(const float* values, const Dims& dims, std::uint32_t lo, std::uint32_t hi,
+                                         std::uint32_t z0, std::uint32_t count, float threshold, unsigned margin) {
+  const std::uint64_t slice = std::uint64_t{dims[0]} * dims[1];
+  std::vector<std::uint8_t> keep = threshold_keep_mask(values, Dims{dims[0], dims[1], hi - lo}, threshold, margin);
+  keep.erase(keep.begin(), keep.begin() + static_cast<std::ptrdiff_t>((z0 - lo) * slice));
+  keep.resize(count * slice);
+  return keep;
+}
+
+void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, const ImportOptions& options,
+                   ImportReport& report) {
+  Metadata metadata = options.metadata;
+  if (shape.has_geometry) {
+    metadata.voxel_size = shape.voxel_size;
+    metadata.origin = shape.origin;
+    metadata.unit = shape.unit;
+  }
+  // The outcome of the build is known only at the end; finish() writes the
+  // metadata after the blocks, so say it here from what the slabs reported.
+  metadata.structure["kind"] = "octree";
+  metadata.structure["source_encoding"] = sample_type_name(shape.type);
+  if (options.keep) {
+    metadata.structure["keep"] = {
+        {"rule", "threshold"}, {"threshold", report.threshold}, {"margin", options.keep->margin}};
+    if (options.keep->otsu) metadata.structure["keep"]["threshold_method"] = "otsu";
+  }
+  const StreamingResult result = writer.finish(metadata, [&](Metadata& m, const StreamingResult& r) {
+    m.structure["lossless"] = r.lossless;
+    m.structure["max_abs_error"] = r.max_abs_error;
+  });
+  report.lossless = result.lossless;
+  report.max_abs_error = result.max_abs_error;
+  report.kept_voxels = result.kept_voxels;
+  report.file_bytes = result.write.file_bytes;
+}
+
+ImportReport import_to_ivol(SlabReader& source, const std::string& path, const ImportOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  const DenseVolume& shape = source.shape();
+  ImportReport report;
+  const StreamingOptions streaming = import_streaming_options(shape, options, report);
+  const BuildOptions& build = streaming.build;
 
   StreamingOctreeWriter writer(path, shape.dims, streaming);
   const std::uint32_t slab = writer.slab_slices();
@@ -187,11 +230,7 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
     const std::uint64_t centre = (z0 - lo) * slice;
     if (!values.empty()) to_float(shape, samples.data(), (hi - lo) * slice, values.data());
     std::vector<std::uint8_t> keep;
-    if (options.keep) {
-      keep = threshold_keep_mask(values.data(), Dims{shape.dims[0], shape.dims[1], hi - lo}, report.threshold, margin);
-      keep.erase(keep.begin(), keep.begin() + static_cast<std::ptrdiff_t>(centre));
-      keep.resize(n * slice);
-    }
+    if (options.keep) keep = slab_keep_mask(values.data(), shape.dims, lo, hi, z0, n, report.threshold, margin);
     if (codes) {
       DenseVolume view;
       view.type = shape.type;
@@ -205,29 +244,7 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
     }
     ticker.update(z0 + n);
   }
-
-  Metadata metadata = options.metadata;
-  if (shape.has_geometry) {
-    metadata.voxel_size = shape.voxel_size;
-    metadata.origin = shape.origin;
-    metadata.unit = shape.unit;
-  }
-  // The outcome of the build is known only at the end; finish() writes the
-  // metadata after the blocks, so say it here from what the slabs reported.
-  metadata.structure["kind"] = "octree";
-  metadata.structure["source_encoding"] = sample_type_name(shape.type);
-  if (options.keep) {
-    metadata.structure["keep"] = {{"rule", "threshold"}, {"threshold", report.threshold}, {"margin", margin}};
-    if (options.keep->otsu) metadata.structure["keep"]["threshold_method"] = "otsu";
-  }
-  const StreamingResult result = writer.finish(metadata, [&](Metadata& m, const StreamingResult& r) {
-    m.structure["lossless"] = r.lossless;
-    m.structure["max_abs_error"] = r.max_abs_error;
-  });
-  report.lossless = result.lossless;
-  report.max_abs_error = result.max_abs_error;
-  report.kept_voxels = result.kept_voxels;
-  report.file_bytes = result.write.file_bytes;
+  finish_import(writer, shape, options, report);
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return report;
 }

@@ -6,12 +6,14 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "dense_volume.hpp"
 #include "ivol/block_encoder.hpp"
 #include "ivol/encoding.hpp"
 #include "ivol/metadata.hpp"
 #include "ivol/reader.hpp"
+#include "ivol/streaming_writer.hpp"
 #include "slab_io.hpp"
 
 namespace ivol::convert {
@@ -58,6 +60,20 @@ struct ImportReport {
 ValueEncoding lossless_encoding(SampleType type);
 
 ImportReport import_to_ivol(SlabReader& source, const std::string& path, const ImportOptions& options);
+
+// import_to_ivol's steps, for a caller whose slabs are built elsewhere
+// (recon_built_slabs.hpp), so that both write the same file. The writer's
+// options for a volume of this shape (sets report's encoding, scale, offset).
+StreamingOptions import_streaming_options(const DenseVolume& shape, const ImportOptions& options, ImportReport& report);
+// The keep mask of slices [z0, z0 + count) from float samples of slices
+// [lo, hi) of a volume `dims` (the slab and up to `margin` slices either side,
+// which the mask's growth needs).
+std::vector<std::uint8_t> slab_keep_mask(const float* values, const Dims& dims, std::uint32_t lo, std::uint32_t hi,
+                                         std::uint32_t z0, std::uint32_t count, float threshold, unsigned margin);
+// After the last slab: the metadata (geometry, keep rule, outcome) and the
+// file; fills report's outcome (lossless, error, kept voxels, bytes).
+void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, const ImportOptions& options,
+                   ImportReport& report);
 ImportReport import_to_ivol(const DenseVolume& volume, const std::string& path, const ImportOptions& options);
 
 // The shape (dims, type, geometry; no samples) of a box of an .ivol file at a

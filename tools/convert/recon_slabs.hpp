@@ -13,6 +13,10 @@
 
 namespace ivol::convert {
 
+// A reconstruction's volume as a converter's input: float32 voxels with the
+// grid's geometry, in mm (no samples).
+DenseVolume float_volume_of(const recon::VolumeGrid& grid);
+
 class ReconstructionSlabs final : public SlabReader {
  public:
   // float32 samples, the grid's voxel size and origin in mm.
@@ -38,39 +42,5 @@ class ReconstructionSlabs final : public SlabReader {
   std::uint32_t cache_first_ = 0;
   std::vector<float> cache_;  // the last read's slices
 };
-
-struct StreamedReconstruction {
-  recon::FdkReport fdk;
-  ImportReport written;  // when written
-  // Seconds the writer waited for slices; the rest of written.seconds is
-  // the writer's own work.
-  double writer_waiting = 0.0;
-};
-
-// Work the calling thread does for the writer after the reconstruction,
-// while the writer finishes the file: in a distributed run, the writer's
-// batches of blocks go to the other ranks through MPI, which only the
-// calling thread may use.
-class WriterService {
- public:
-  virtual ~WriterService() = default;
-  // On the calling thread, once the reconstruction is done: serves the
-  // writer until close().
-  virtual void serve() = 0;
-  // From any thread: serve() returns, and the writer's requests fail from now.
-  virtual void close() = 0;
-};
-
-// The whole grid in one reconstruction on the calling thread, written by
-// import_to_ivol on a second thread as the slabs arrive (in z order; the
-// writer holds its slab and margin, the FDK at most one slab ahead of it).
-// For a distributed reconstruction: every rank's slabs are cut from one
-// plan, and the exchange's messages stay on the calling thread. With
-// `write` false (the ranks other than 0), nothing is written and the sink
-// must never be called. `service` (optional) runs on the calling thread after
-// the reconstruction until the writer ends.
-StreamedReconstruction reconstruct_to_ivol(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid,
-                                           const std::string& path, const ImportOptions& options, bool write,
-                                           WriterService* service = nullptr);
 
 }  // namespace ivol::convert

@@ -10,7 +10,10 @@
 // of blocks. The temporary spill file holds the octree uncompressed.
 //
 // The result is the same file, bit for bit, as build_octree + write_octree
-// give for the same volume and options (tested).
+// give for the same volume and options, whatever the slab thickness (tested).
+// A slab's subtrees can also be built elsewhere (OctreeSlabBuilder, in
+// ivol/octree_slab_builder.hpp: on another rank of a distributed run) and
+// given as they are (add_built_slab), with the same result.
 #pragma once
 
 #include <cstdint>
@@ -23,6 +26,8 @@
 #include "ivol/writer.hpp"
 
 namespace ivol {
+
+struct BuiltSlab;  // ivol/octree_slab_builder.hpp
 
 struct StreamingOptions {
   BuildOptions build;  // its keep_mask is ignored: masks come with each slab
@@ -61,6 +66,13 @@ class StreamingOctreeWriter {
   // Either every slab has a mask or none.
   void add_slab(const float* samples, const std::uint8_t* keep = nullptr);
   void add_slab(const std::uint16_t* samples, const std::uint8_t* keep = nullptr);
+  // Adds the next slab built by an OctreeSlabBuilder (possibly in another
+  // process) with this writer's dims and options: exactly the effect of
+  // add_slab with the samples and mask it was built from. Throws
+  // ivol::Error naming both layouts for a slab of another layout (dims, slab
+  // thickness, encoding, scale, offset, sample type), and naming both
+  // indices for a slab out of order.
+  void add_built_slab(const BuiltSlab& built);
 
   // Called once the whole octree is known, before the metadata is written:
   // lets the caller record the outcome (lossless, largest error) in it.

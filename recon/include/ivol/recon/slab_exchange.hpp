@@ -40,6 +40,11 @@ class SlabExchange {
   // Throws std::runtime_error "rank K: <message>" when any rank reported a
   // failure instead.
   virtual void receive(std::size_t slab, int from, std::vector<float>& data) = 0;
+  // The same for a slab in another form, as bytes: a distributed dense
+  // reconstruction sends each slab's built octree subtrees
+  // (ivol/octree_slab_builder.hpp) instead of its float32 samples.
+  virtual void send_bytes(std::size_t slab, const std::vector<std::uint8_t>& data) = 0;
+  virtual void receive_bytes(std::size_t slab, int from, std::vector<std::uint8_t>& data) = 0;
   // A rank other than 0 that failed tells rank 0, which is waiting for its
   // slabs, so that rank 0 fails with the message and leaves nothing behind.
   virtual void report_failure(const std::string& message) = 0;

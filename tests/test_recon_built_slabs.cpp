@@ -1,0 +1,171 @@
+// A distributed dense reconstruction (convert/recon_built_slabs.hpp) with its
+// ranks as threads of one process, over an in-memory exchange: every rank
+// builds the subtrees of its own writer slabs, rank 0 writes them, and the
+// file is the one a single process writes; a rank that fails while building
+// makes rank 0 fail with its message and leave nothing. (tests/cli/run_mpi.sh
+// runs the same under mpirun.)
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <condition_variable>
+#include <cstdlib>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <stdexcept>
+#include <thread>
+
+#include "ivol/recon/fdk.hpp"
+#include "ivol/recon/phantom.hpp"
+#include "ivol_io.hpp"
+#include "recon_built_slabs.hpp"
+#include "recon_slabs.hpp"
+#include "test_support.hpp"
+
+namespace ivol {
+namespace {
+
+// The mailbox every rank's exchange shares: slabs to rank 0, and failures.
+struct Mailbox {
+  std::mutex mutex;
+  std::condition_variable changed;
+  std::map<std::size_t, std::vector<std::uint8_t>> slabs;
+  std::optional<std::pair<int, std::string>> failure;
+  std::uint64_t bytes_to_rank0 = 0;
+};
+
+class ThreadExchange final : public recon::SlabExchange {
+ public:
+  ThreadExchange(Mailbox& mailbox, int rank, int size) : mailbox_(mailbox), rank_(rank), size_(size) {}
+  int rank() const override { return rank_; }
+  int size() const override { return size_; }
+  // Every rank computes the same values here; the MPI exchange checks it.
+  std::uint64_t agree(std::uint64_t value, const std::string&) override { return value; }
+  void broadcast(std::vector<float>&) override { throw std::logic_error("no preview in these tests"); }
+  void send(std::size_t, const std::vector<float>&) override { throw std::logic_error("dense slabs go as bytes"); }
+  void receive(std::size_t, int, std::vector<float>&) override { throw std::logic_error("dense slabs go as bytes"); }
+  void send_bytes(std::size_t slab, const std::vector<std::uint8_t>& data) override {
+    std::lock_guard<std::mutex> lock(mailbox_.mutex);
+    mailbox_.slabs[slab] = data;
+    mailbox_.bytes_to_rank0 += data.size();
+    mailbox_.changed.notify_all();
+  }
+  void receive_bytes(std::size_t slab, int, std::vector<std::uint8_t>& data) override {
+    std::unique_lock<std::mutex> lock(mailbox_.mutex);
+    mailbox_.changed.wait(lock, [&] { return mailbox_.slabs.count(slab) > 0 || mailbox_.failure.has_value(); });
+    if (mailbox_.failure)
+      throw std::runtime_error("rank " + std::to_string(mailbox_.failure->first) + ": " + mailbox_.failure->second);
+    data = std::move(mailbox_.slabs[slab]);
+    mailbox_.slabs.erase(slab);
+  }
+  void report_failure(const std::string& message) override {
+    std::lock_guard<std::mutex> lock(mailbox_.mutex);
+    if (!mailbox_.failure) mailbox_.failure = std::make_pair(rank_, message);
+    mailbox_.changed.notify_all();
+  }
+
+ private:
+  Mailbox& mailbox_;
+  int rank_;
+  int size_;
+};
+
+struct Scan {
+  recon::ScanGeometry geometry = recon::circular_scan({96, 80, 1.2, 1.2}, 90, 300.0, 600.0, 2 * M_PI, 0.1, 1.5, -2.0);
+  recon::VolumeGrid grid = recon::VolumeGrid::centred({40, 36, 33}, 1.0);
+  recon::InMemoryProjections projections = recon::project_scan(recon::pencil_holder(18.0), geometry);
+};
+
+struct RankOutcome {
+  convert::DistributedBuild built;
+  std::string error;  // what it threw, if it did
+};
+
+// `ranks` threads, each with its own reconstructor, as mpirun's processes.
+// The reconstructors are made one after the other: setting up OpenCL from
+// several threads at once is not safe (PoCL crashes), and processes never do.
+std::vector<RankOutcome> run_ranks(Scan& scan, int ranks, const std::string& path,
+                                   const convert::ImportOptions& options, std::uint32_t most_slab_slices,
+                                   Mailbox& mailbox) {
+  std::vector<RankOutcome> outcomes(static_cast<std::size_t>(ranks));
+  std::vector<std::unique_ptr<recon::FdkReconstructor>> reconstructors;
+  for (int r = 0; r < ranks; ++r)
+    reconstructors.push_back(std::make_unique<recon::FdkReconstructor>(scan.projections, scan.geometry));
+  std::vector<std::thread> threads;
+  for (int r = 0; r < ranks; ++r) {
+    threads.emplace_back([&, r] {
+      RankOutcome& mine = outcomes[static_cast<std::size_t>(r)];
+      try {
+        ThreadExchange exchange(mailbox, r, ranks);
+        mine.built = convert::reconstruct_distributed(*reconstructors[static_cast<std::size_t>(r)], scan.grid, path,
+                                                      options, exchange, most_slab_slices, [] {});
+      } catch (const std::exception& e) {
+        mine.error = e.what();
+      }
+    });
+  }
+  for (auto& t : threads) t.join();
+  return outcomes;
+}
+
+TEST(ReconBuiltSlabs, SameFileAsOneProcess) {
+  Scan scan;
+  for (const bool keep : {false, true}) {
+    convert::ImportOptions options;
+    options.encoding = ValueEncoding::Binary16;
+    if (keep) options.keep = convert::KeepRule{false, 0.01F, 2};
+    const std::string one_path = test::temp_path("recon-one.ivol");
+    {
+      recon::FdkReconstructor reconstructor(scan.projections, scan.geometry);
+      convert::ReconstructionSlabs slabs(reconstructor, scan.grid);
+      convert::import_to_ivol(slabs, one_path, options);  // the writer's own slabs: one, of 64 slices
+    }
+    // Writer slabs of 4 slices (9 of them, 3 per rank), each with its margin.
+    Mailbox mailbox;
+    const std::string path = test::temp_path("recon-ranks.ivol");
+    const std::vector<RankOutcome> ranks = run_ranks(scan, 3, path, options, 4, mailbox);
+    std::uint64_t slices = 0;
+    for (std::size_t r = 0; r < ranks.size(); ++r) {
+      EXPECT_EQ(ranks[r].error, "") << "rank " << r;
+      EXPECT_EQ(ranks[r].built.slabs_built, 3U) << "rank " << r;
+      slices += ranks[r].built.slices_built;
+    }
+    EXPECT_EQ(slices, scan.grid.size[2]);
+    EXPECT_EQ(ranks[0].built.written.slab_slices, 4U);
+    EXPECT_GT(mailbox.bytes_to_rank0, 0U);
+    EXPECT_EQ(test::read_bytes(path), test::read_bytes(one_path)) << (keep ? "with" : "without") << " a keep mask";
+  }
+}
+
+TEST(ReconBuiltSlabs, WriterSlabsGiveEveryRankOne) {
+  StreamingOptions options;  // 512 MiB of budget: the writer would take the whole volume
+  EXPECT_EQ(convert::distributed_slab_slices(Dims{40, 36, 33}, options, 1, 0), 64U);
+  EXPECT_EQ(convert::distributed_slab_slices(Dims{40, 36, 33}, options, 2, 0), 32U);  // 2 slabs
+  EXPECT_EQ(convert::distributed_slab_slices(Dims{40, 36, 33}, options, 4, 0), 8U);   // 5 slabs
+  EXPECT_EQ(convert::distributed_slab_slices(Dims{40, 36, 33}, options, 2, 3), 2U);   // at most 3: 2
+  EXPECT_EQ(convert::distributed_slab_slices(Dims{4, 4, 2}, options, 8, 0), 1U);      // never below one slice
+}
+
+TEST(ReconBuiltSlabs, RankFailingWhileBuildingEndsTheRun) {
+  Scan scan;
+  convert::ImportOptions options;
+  const std::string path = test::temp_path("recon-fails.ivol");
+  std::filesystem::remove(path);
+  ::setenv("IVOL_TEST_FAIL_BUILD_RANK", "2", 1);
+  Mailbox mailbox;
+  const std::vector<RankOutcome> ranks = run_ranks(scan, 3, path, options, 4, mailbox);
+  ::unsetenv("IVOL_TEST_FAIL_BUILD_RANK");
+  EXPECT_EQ(ranks[0].error, "rank 2: building the subtrees of slab 2: failure injected (IVOL_TEST_FAIL_BUILD_RANK)");
+  EXPECT_EQ(ranks[2].error, "building the subtrees of slab 2: failure injected (IVOL_TEST_FAIL_BUILD_RANK)");
+  EXPECT_EQ(ranks[1].error, "");
+  EXPECT_FALSE(std::filesystem::exists(path));
+  const std::string directory = std::filesystem::path(path).parent_path().string();
+  for (const auto& entry : std::filesystem::directory_iterator(directory))
+    EXPECT_EQ(entry.path().filename().string().rfind(".recon-fails.ivol.tmp-", 0), std::string::npos)
+        << entry.path() << " left behind";
+}
+
+}  // namespace
+}  // namespace ivol
