@@ -124,44 +124,33 @@ sys.exit(0 if all(checks) else 1)" >>"$work/log" 2>&1; then
   fi
 done
 
-# A rank that fails while building its subtrees (a failure injected for this
-# test) ends the run with its message; rank 0 removes its temporary file.
-for mode in dense keep; do
-  for ranks in 2 4; do
-    victim=$((ranks - 1))
-    # shellcheck disable=SC2086
-    IVOL_TEST_FAIL_BUILD_RANK=$victim "$MPIEXEC" --oversubscribe -np "$ranks" "${recon[@]}" \
-      ${mode_args[$mode]} --slab-slices 3 -o "build-fails-$mode.ivol" >"$work/log" 2>&1
-    status=$?
-    if [ "$status" -eq 2 ] &&
-      grep -q "ivol recon: error: rank $victim: building the subtrees of slab $victim: failure injected" "$work/log" &&
-      nothing_left "build-fails-$mode.ivol"; then
-      ok "rank-$victim-build-fails-$mode"
-    else
-      fail "rank-$victim-build-fails-$mode (exit $status)"
-    fi
+# A rank that fails (a failure injected for this test through the variable
+# $1) ends the run with "rank K: $2: failure injected", where @ in $2 stands
+# for K; rank 0 removes its temporary file. $3 names the case, the rest are
+# the modes to try.
+injected_failure() {
+  local variable=$1 message=$2 name=$3
+  shift 3
+  for mode in "$@"; do
+    for ranks in 2 4; do
+      victim=$((ranks - 1))
+      # shellcheck disable=SC2086
+      env "$variable=$victim" "$MPIEXEC" --oversubscribe -np "$ranks" "${recon[@]}" \
+        ${mode_args[$mode]} --slab-slices 3 -o "$name-fails-$mode.ivol" >"$work/log" 2>&1
+      status=$?
+      if [ "$status" -eq 2 ] &&
+        grep -qF "ivol recon: error: rank $victim: ${message//@/$victim}: failure injected" "$work/log" &&
+        nothing_left "$name-fails-$mode.ivol"; then
+        ok "rank-$victim-$name-fails-$mode"
+      else
+        fail "rank-$victim-$name-fails-$mode (exit $status)"
+      fi
+    done
   done
-done
-
-# A rank that fails while compressing blocks for rank 0 (a failure injected
-# for this test) ends the run with its message; rank 0 removes its temporary
-# file.
-for mode in dense octree; do
-  for ranks in 2 4; do
-    victim=$((ranks - 1))
-    # shellcheck disable=SC2086
-    IVOL_TEST_FAIL_COMPRESSION_RANK=$victim "$MPIEXEC" --oversubscribe -np "$ranks" "${recon[@]}" \
-      ${mode_args[$mode]} --slab-slices 3 -o "compress-fails-$mode.ivol" >"$work/log" 2>&1
-    status=$?
-    if [ "$status" -eq 2 ] &&
-      grep -q "ivol recon: error: rank $victim: compressing blocks for rank 0: failure injected" "$work/log" &&
-      nothing_left "compress-fails-$mode.ivol"; then
-      ok "rank-$victim-compression-fails-$mode"
-    else
-      fail "rank-$victim-compression-fails-$mode (exit $status)"
-    fi
-  done
-done
+}
+# While building its subtrees, and while compressing blocks for rank 0.
+injected_failure IVOL_TEST_FAIL_BUILD_RANK "building the subtrees of slab @" build dense keep
+injected_failure IVOL_TEST_FAIL_COMPRESSION_RANK "compressing blocks for rank 0" compression dense octree
 
 # Rank 1 reads a copy of the scan whose compressed chunks are damaged: it
 # fails while reconstructing its slabs, tells rank 0, which removes its
