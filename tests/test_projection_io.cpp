@@ -292,6 +292,38 @@ TEST_F(ProjectionFiles, DxchangeUInt16WithWhiteDarkAndTheta) {
   check(*scan.projections, expected_line_integrals(1.0, 3, 2));
 }
 
+// Bytes this process has read so far (/proc/self/io rchar).
+std::uint64_t bytes_read_so_far() {
+  std::ifstream io("/proc/self/io");
+  std::string key;
+  std::uint64_t value = 0;
+  while (io >> key >> value)
+    if (key == "rchar:") return value;
+  return 0;
+}
+
+// Chunks of 32 views: read view by view, each chunk must be read (and
+// inflated) once, not once per view, which HDF5's default 1 MiB chunk cache
+// would do for these 2 MiB chunks.
+TEST_F(ProjectionFiles, DxchangeChunksSpanningViewsAreReadOnce) {
+  run_python(R"(
+import h5py
+d = sys.argv[1]
+with h5py.File(os.path.join(d, 'dx_chunked.h5'), 'w') as f:
+    data = np.random.default_rng(7).random((64, 128, 128), dtype=np.float32)
+    f.create_dataset('/exchange/data', data=data, chunks=(32, 128, 128), compression='gzip', compression_opts=1)
+)");
+  const std::string path = at("dx_chunked.h5");
+  const std::uint64_t file_bytes = std::filesystem::file_size(path);
+  const std::uint64_t before = bytes_read_so_far();
+  DxchangeProjections scan = open_dxchange_projections_in_process(path, {true, 1e-3});
+  std::vector<float> image(128 * 128);
+  for (std::size_t v = 0; v < 64; ++v) scan.projections->read_rows(v, 0, 128, image.data());
+  const std::uint64_t read = bytes_read_so_far() - before;
+  // Once: about the file's size; once per view: 32 times that.
+  EXPECT_LT(read, 2 * file_bytes) << read << " bytes read for a file of " << file_bytes;
+}
+
 TEST_F(ProjectionFiles, DxchangeInt32WithOneFlatImage) {
   DxchangeProjections scan = open_dxchange_projections(at("dx_i32.h5"));
   EXPECT_TRUE(scan.theta_deg.empty());

@@ -223,7 +223,8 @@ class Hdf5SlabReader final : public SlabReader {
     if (H5Fis_hdf5(path.c_str()) <= 0) throw Error(ErrorClass::Malformed, path + ": not an HDF5 file");
     file_ = Handle(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
     if (!file_.valid()) throw Error(ErrorClass::Io, path + ": cannot open the HDF5 file" + hdf5_reason());
-    dataset_ = Handle(H5Dopen2(file_.get(), dataset_name.c_str(), H5P_DEFAULT), H5Dclose);
+    const Handle access = hdf5::access_caching_one_image(file_.get(), dataset_name.c_str());
+    dataset_ = Handle(H5Dopen2(file_.get(), dataset_name.c_str(), access.get()), H5Dclose);
     if (!dataset_.valid())
       throw Error(ErrorClass::InvalidArgument,
                   context_ + " does not exist or is not a dataset; " + list_3d_datasets(file_.get()));

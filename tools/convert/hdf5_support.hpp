@@ -5,6 +5,9 @@
 
 #include <hdf5.h>
 
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
 #include <string>
 #include <utility>
 
@@ -58,6 +61,35 @@ class QuietErrors {
   H5E_auto2_t old_function_ = nullptr;
   void* old_data_ = nullptr;
 };
+
+// Projections are read one view at a time, and volumes a slab of slices at
+// a time. A chunk that spans several views (slices) would be read and
+// inflated again for every read unless HDF5's chunk cache (1 MiB by default)
+// holds it; so the cache is sized to hold the chunks one image (the last two
+// axes) touches, up to kMostChunkCache. Larger chunks are still read, at that
+// cost. Returns a dataset access property list for H5Dopen2.
+constexpr std::size_t kMostChunkCache = std::size_t{256} << 20;
+
+inline Handle access_caching_one_image(hid_t file, const char* name) {
+  Handle access(H5Pcreate(H5P_DATASET_ACCESS), H5Pclose);
+  Handle probe(H5Dopen2(file, name, H5P_DEFAULT), H5Dclose);
+  if (!probe.valid()) return access;
+  Handle create(H5Dget_create_plist(probe.get()), H5Pclose);
+  Handle type(H5Dget_type(probe.get()), H5Tclose);
+  Handle space(H5Dget_space(probe.get()), H5Sclose);
+  const int rank = H5Sget_simple_extent_ndims(space.get());
+  if (H5Pget_layout(create.get()) != H5D_CHUNKED || rank < 2 || rank > 8) return access;
+  hsize_t chunk[8] = {}, shape[8] = {};
+  if (H5Pget_chunk(create.get(), rank, chunk) != rank) return access;
+  H5Sget_simple_extent_dims(space.get(), shape, nullptr);
+  double bytes = static_cast<double>(H5Tget_size(type.get()));
+  for (int a = 0; a < rank; ++a) bytes *= static_cast<double>(chunk[a]);
+  for (int a = rank - 2; a < rank; ++a)
+    if (chunk[a] > 0) bytes *= std::ceil(static_cast<double>(shape[a]) / static_cast<double>(chunk[a]));
+  const double cache = std::clamp(bytes, double{1 << 20}, static_cast<double>(kMostChunkCache));
+  H5Pset_chunk_cache(access.get(), 12421, static_cast<std::size_t>(cache), 1.0);
+  return access;
+}
 
 // The most specific description on HDF5's error stack, to explain a failure.
 inline std::string reason() {

@@ -45,7 +45,8 @@ struct Dataset {
 Dataset open_dataset(hid_t file, const std::string& path, const char* name) {
   const std::string where = path + ": dataset " + name;
   Dataset d;
-  d.id = Handle(H5Dopen2(file, name, H5P_DEFAULT), H5Dclose);
+  const Handle access = hdf5::access_caching_one_image(file, name);
+  d.id = Handle(H5Dopen2(file, name, access.get()), H5Dclose);
   if (!d.id.valid()) throw Error(ErrorClass::Malformed, where + " cannot be opened" + hdf5_reason());
   Handle type(H5Dget_type(d.id.get()), H5Tclose);
   const H5T_class_t type_class = H5Tget_class(type.get());
