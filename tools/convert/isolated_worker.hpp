@@ -11,11 +11,13 @@
 //
 // The child is a fork without exec, so it starts with the parent's memory
 // and descriptors (libhdf5's own state among them, which may name files the
-// parent has open). It reads and writes nothing but the socket, is killed
-// when the parent dies (PR_SET_PDEATHSIG) or drops the worker, and leaves
-// through _exit, so none of the parent's atexit handlers or buffered output
-// runs twice. Whatever descriptor or lock it shares with the parent thus
-// ends with the parent.
+// parent has open). It reads the file it was started for and writes only to
+// the socket, is killed when the parent dies (PR_SET_PDEATHSIG) or drops the
+// worker, and leaves through _exit, so none of the parent's atexit handlers
+// or buffered output runs twice. Whatever descriptor or lock it shares with
+// the parent thus ends with the parent. Readers start their worker when they
+// are opened, before a converter or a reconstruction allocates its large
+// buffers, so the fork copies little.
 #pragma once
 
 #include <sys/types.h>
