@@ -4,13 +4,13 @@
 
 #include <chrono>
 #include <cstdlib>
-#include <cstring>
 #include <exception>
 #include <stdexcept>
 #include <string>
 #include <thread>
 
 #include "mpi_messages.hpp"
+#include "wire.hpp"
 
 namespace ivol::cli {
 namespace {
@@ -24,48 +24,8 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-// Little-endian-agnostic (both ends are the same build) packing of plain values.
-class Packer {
- public:
-  template <typename T>
-  void put(T value) {
-    const auto* p = reinterpret_cast<const std::uint8_t*>(&value);
-    bytes.insert(bytes.end(), p, p + sizeof value);
-  }
-  void put_bytes(const std::vector<std::uint8_t>& data) {
-    put<std::uint64_t>(data.size());
-    bytes.insert(bytes.end(), data.begin(), data.end());
-  }
-  std::vector<std::uint8_t> bytes;
-};
-
-class Unpacker {
- public:
-  explicit Unpacker(const std::vector<std::uint8_t>& bytes) : bytes_(bytes) {}
-  template <typename T>
-  T get() {
-    need(sizeof(T));
-    T value;
-    std::memcpy(&value, bytes_.data() + at_, sizeof value);
-    at_ += sizeof value;
-    return value;
-  }
-  std::vector<std::uint8_t> get_bytes() {
-    const auto size = get<std::uint64_t>();
-    need(size);
-    std::vector<std::uint8_t> data(bytes_.begin() + static_cast<std::ptrdiff_t>(at_),
-                                   bytes_.begin() + static_cast<std::ptrdiff_t>(at_ + size));
-    at_ += size;
-    return data;
-  }
-
- private:
-  void need(std::uint64_t size) const {
-    if (size > bytes_.size() - at_) throw std::runtime_error("a compression message is truncated");
-  }
-  const std::vector<std::uint8_t>& bytes_;
-  std::size_t at_ = 0;
-};
+using Packer = convert::BasicWireWriter<std::vector<std::uint8_t>>;
+using Unpacker = convert::BasicWireReader<std::vector<std::uint8_t>>;
 
 // Only the options encode_block's output depends on travel.
 std::vector<std::uint8_t> pack_batch(const RawBlock* blocks, std::size_t count, const WriteOptions& options) {
@@ -83,11 +43,11 @@ std::vector<std::uint8_t> pack_batch(const RawBlock* blocks, std::size_t count, 
     p.put<std::uint32_t>(b.element_count);
     p.put_bytes(b.bytes);
   }
-  return std::move(p.bytes);
+  return std::move(p.bytes());
 }
 
-std::vector<RawBlock> unpack_batch(const std::vector<std::uint8_t>& bytes, WriteOptions& options) {
-  Unpacker u(bytes);
+std::vector<RawBlock> unpack_batch(std::vector<std::uint8_t> bytes, WriteOptions& options) {
+  Unpacker u(std::move(bytes));
   std::vector<RawBlock> blocks(u.get<std::uint64_t>());
   options.zstd_level = u.get<std::int32_t>();
   options.compress = u.get<std::uint8_t>() != 0;
@@ -111,12 +71,12 @@ std::vector<std::uint8_t> pack_encoded(const std::vector<EncodedBlock>& blocks) 
     p.put<std::uint32_t>(b.crc);
     p.put_bytes(b.bytes);
   }
-  return std::move(p.bytes);
+  return std::move(p.bytes());
 }
 
 // The compressed blocks of raw[0 .. count), whose descriptions rank 0 kept.
-void unpack_encoded(const std::vector<std::uint8_t>& bytes, const RawBlock* raw, std::size_t count, EncodedBlock* out) {
-  Unpacker u(bytes);
+void unpack_encoded(std::vector<std::uint8_t> bytes, const RawBlock* raw, std::size_t count, EncodedBlock* out) {
+  Unpacker u(std::move(bytes));
   if (u.get<std::uint64_t>() != count) throw std::runtime_error("a rank returned the wrong number of blocks");
   for (std::size_t i = 0; i < count; ++i) {
     EncodedBlock& b = out[i];
@@ -206,7 +166,7 @@ struct MpiBlockFarm::Impl {
       if (share_begin(s) == share_begin(s + 1)) continue;
       mpi::wait_for(helpers[s - 1], mpi::kEncodedTag);
       stats.bytes_received += mpi::receive_bytes(message, helpers[s - 1], mpi::kEncodedTag);
-      unpack_encoded(message, batch.data() + share_begin(s), share_begin(s + 1) - share_begin(s),
+      unpack_encoded(std::move(message), batch.data() + share_begin(s), share_begin(s + 1) - share_begin(s),
                      encoded.data() + share_begin(s));
     }
     return encoded;
@@ -269,7 +229,7 @@ void MpiBlockFarm::work() {
         throw std::runtime_error("unexpected message (tag " + std::to_string(status.MPI_TAG) + ") from rank 0");
       m.stats.bytes_received += mpi::receive_bytes(message, 0, mpi::kBatchTag);
       WriteOptions options;
-      const std::vector<RawBlock> batch = unpack_batch(message, options);
+      const std::vector<RawBlock> batch = unpack_batch(std::move(message), options);
       if (failure_injected(me))
         throw std::runtime_error("failure injected for testing (IVOL_TEST_FAIL_COMPRESSION_RANK=" + std::to_string(me) +
                                  ")");

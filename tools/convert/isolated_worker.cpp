@@ -116,14 +116,6 @@ std::string describe_end(int status) {
 
 }  // namespace
 
-const char* WireReader::take(std::size_t size) {
-  if (size > bytes_.size() - position_)
-    throw Error(ErrorClass::Malformed, "isolated worker: a message is shorter than its fields");
-  const char* at = bytes_.data() + position_;
-  position_ += size;
-  return at;
-}
-
 IsolatedWorker::IsolatedWorker(std::string subject, std::string library, WorkerHandler handler)
     : subject_(std::move(subject)), library_(std::move(library)) {
   int ends[2];

@@ -23,60 +23,14 @@
 #include <sys/types.h>
 
 #include <cstdint>
-#include <cstring>
 #include <functional>
 #include <string>
 #include <string_view>
-#include <type_traits>
-#include <utility>
 #include <vector>
 
+#include "wire.hpp"
+
 namespace ivol::convert {
-
-// Appends numbers and strings to a request or a reply.
-class WireWriter {
- public:
-  template <typename T>
-  WireWriter& put(const T& value) {
-    static_assert(std::is_trivially_copyable_v<T>);
-    const auto* bytes = reinterpret_cast<const char*>(&value);
-    bytes_.append(bytes, sizeof value);
-    return *this;
-  }
-  WireWriter& put_string(const std::string& text) {
-    put<std::uint64_t>(text.size());
-    bytes_ += text;
-    return *this;
-  }
-  std::string& bytes() { return bytes_; }
-
- private:
-  std::string bytes_;
-};
-
-// Reads them back in the same order; a short message throws (the other end
-// is ivol itself, so that is a bug, not a damaged file).
-// The reader keeps its own copy: replies arrive as temporaries.
-class WireReader {
- public:
-  explicit WireReader(std::string bytes) : bytes_(std::move(bytes)) {}
-  template <typename T>
-  T get() {
-    static_assert(std::is_trivially_copyable_v<T>);
-    T value;
-    std::memcpy(&value, take(sizeof value), sizeof value);
-    return value;
-  }
-  std::string get_string() {
-    const auto size = get<std::uint64_t>();
-    return std::string(take(size), size);
-  }
-
- private:
-  const char* take(std::size_t size);
-  std::string bytes_;
-  std::size_t position_ = 0;
-};
 
 // What the child does with one request: fill `reply` (small results) and,
 // for bulk data, `bulk` (sent without a copy into the reply). An exception
