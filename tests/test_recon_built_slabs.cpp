@@ -1,4 +1,4 @@
-// A distributed dense reconstruction (convert/recon_built_slabs.hpp) with its
+// A distributed dense reconstruction (recon_io/recon_built_slabs.hpp) with its
 // ranks as threads of one process, over an in-memory exchange: every rank
 // builds the subtrees of its own writer slabs, rank 0 writes them, and the
 // file is the one a single process writes; a rank that fails while building

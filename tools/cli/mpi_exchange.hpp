@@ -2,7 +2,7 @@
 // (docs/distributed.md). recon stays free of MPI; this file gives it a
 // SlabExchange over MPI. Rank 0 receives every slab, writes the file and
 // prints the report; the other ranks reconstruct their slabs and send them
-// (a dense volume's as built octree subtrees, convert/recon_built_slabs.hpp;
+// (a dense volume's as built octree subtrees, recon_io/recon_built_slabs.hpp;
 // a structure's as sums), then compress blocks of the file for rank 0
 // (mpi_block_farm.hpp).
 //
