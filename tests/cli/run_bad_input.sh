@@ -91,6 +91,12 @@ bad phantom-detector       1 "--detector"             -- "$IVOL" phantom thin-pi
 bad slice-index            2 "--index"                -- "$IVOL" slice "$work/v.ivol" --index 99 -o "$out/x.png"
 bad extract-box            2 "box"                    -- "$IVOL" extract "$work/v.ivol" --box 0,0,0,99,99,99 -o "$out/x.raw"
 
+# More cases, one file per concern (each sources this table's helpers: bad,
+# $work, $out, $IVOL and the inputs above).
+for part in "$(dirname "$0")"/bad_input.d/*.sh; do
+  [ -e "$part" ] && source "$part"
+done
+
 # A full disk: a 256 KiB tmpfs (needs the right to mount; said when missing).
 mkdir -p "$full"
 if mount -t tmpfs -o size=256k tmpfs "$full" 2>/dev/null; then
