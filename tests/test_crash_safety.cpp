@@ -8,6 +8,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <random>
 #include <thread>
 
@@ -102,6 +103,44 @@ TEST(CrashSafety, LiveWritersKeepTheirTemporaryFiles) {
   ::close(fd);
   EXPECT_EQ(remove_abandoned_temporaries(path), 1U);
   EXPECT_FALSE(std::filesystem::exists(held));
+  std::filesystem::remove_all(dir);
+}
+
+// Without -f the command line checks that the output does not exist, then
+// works; a file that appears meanwhile (another writer) must survive the
+// final rename, and the finished temporary file must not be left behind.
+std::string read_text(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+TEST(CrashSafety, RefusedReplacementKeepsAFileThatAppearedMeanwhile) {
+  const std::string dir = test::temp_path("no_replace");
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string path = dir + "/out.raw";
+  refuse_to_replace(path);
+  std::string temp;
+  int fd = create_locked_temporary(path, temp);
+  ASSERT_EQ(::write(fd, "mine", 4), 4);
+  std::ofstream(path, std::ios::binary) << "theirs";  // appears while this writer works
+  try {
+    rename_into_place(temp, path);
+    FAIL() << "replaced a file that appeared meanwhile";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("not replaced"), std::string::npos) << e.what();
+  }
+  ::close(fd);
+  EXPECT_EQ(read_text(path), "theirs");
+  ::unlink(temp.c_str());  // as the writer's destructor does
+  // With nothing there, the protected name is still written.
+  std::filesystem::remove(path);
+  fd = create_locked_temporary(path, temp);
+  ASSERT_EQ(::write(fd, "mine", 4), 4);
+  rename_into_place(temp, path);
+  ::close(fd);
+  EXPECT_EQ(read_text(path), "mine");
+  EXPECT_FALSE(std::filesystem::exists(temp));
   std::filesystem::remove_all(dir);
 }
 

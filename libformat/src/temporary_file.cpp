@@ -7,8 +7,12 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
+#include <filesystem>
+#include <mutex>
 #include <random>
+#include <set>
 #include <vector>
 
 #include "ivol/error.hpp"
@@ -82,7 +86,41 @@ int create_unnamed_then_link(const std::string& final_path, std::string& temp_pa
 #endif
 }
 
+// The paths given to refuse_to_replace, absolute and normalised so that
+// "out.raw" and "./out.raw" are one.
+std::mutex protected_mutex;
+std::set<std::string>& protected_paths() {
+  static std::set<std::string> paths;
+  return paths;
+}
+std::string path_key(const std::string& path) {
+  std::error_code ec;
+  const auto absolute = std::filesystem::absolute(path, ec);
+  return (ec ? std::filesystem::path(path) : absolute).lexically_normal().string();
+}
+bool is_protected(const std::string& path) {
+  std::lock_guard<std::mutex> lock(protected_mutex);
+  return protected_paths().count(path_key(path)) != 0;
+}
+
+// Renames without replacing: EEXIST when something is at final_path.
+int rename_no_replace(const std::string& temp_path, const std::string& final_path) {
+#ifdef RENAME_NOREPLACE
+  if (::renameat2(AT_FDCWD, temp_path.c_str(), AT_FDCWD, final_path.c_str(), RENAME_NOREPLACE) == 0) return 0;
+  if (errno != EINVAL && errno != ENOSYS) return -1;
+#endif
+  // link() never replaces either; then the temporary name goes.
+  if (::link(temp_path.c_str(), final_path.c_str()) != 0) return -1;
+  ::unlink(temp_path.c_str());
+  return 0;
+}
+
 }  // namespace
+
+void refuse_to_replace(const std::string& final_path) {
+  std::lock_guard<std::mutex> lock(protected_mutex);
+  protected_paths().insert(path_key(final_path));
+}
 
 int create_locked_temporary(const std::string& final_path, std::string& temp_path) {
   if (final_path.empty()) throw Error(ErrorClass::InvalidArgument, "output path is empty");
@@ -109,8 +147,17 @@ int create_locked_temporary(const std::string& final_path, std::string& temp_pat
 }
 
 void rename_into_place(const std::string& temp_path, const std::string& final_path) {
-  if (::rename(temp_path.c_str(), final_path.c_str()) != 0)
+  if (is_protected(final_path)) {
+    if (rename_no_replace(temp_path, final_path) != 0) {
+      if (errno == EEXIST)
+        throw Error(ErrorClass::InvalidArgument, final_path +
+                                                     ": appeared while this file was written; not replaced (use "
+                                                     "--force to replace it)");
+      io_error(final_path, "cannot rename the finished file into place");
+    }
+  } else if (::rename(temp_path.c_str(), final_path.c_str()) != 0) {
     io_error(final_path, "cannot rename the finished file into place");
+  }
   const int dir = ::open(directory_of(final_path).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
   if (dir >= 0) {
     ::fsync(dir);

@@ -26,6 +26,14 @@ int create_locked_temporary(const std::string& final_path, std::string& temp_pat
 // directory. Throws ivol::Error naming final_path when the rename fails.
 void rename_into_place(const std::string& temp_path, const std::string& final_path);
 
+// From now on, rename_into_place never replaces a file at `final_path`: the
+// rename fails if one appeared there, atomically (renameat2 RENAME_NOREPLACE,
+// or link + unlink where the file system lacks it). For callers that checked
+// that `final_path` does not exist and were not allowed to replace it (the
+// command line without -f): the check alone would race with other writers.
+// Process-wide, as the files a process may not replace are.
+void refuse_to_replace(const std::string& final_path);
+
 // Removes the temporary files of `final_path` that no live writer holds.
 // Returns how many it removed. Never touches final_path itself, nor files
 // it cannot open.
