@@ -7,6 +7,8 @@ packages=(
   build-essential cmake ninja-build pkg-config
   libzstd-dev nlohmann-json3-dev libcli11-dev libtiff-dev libpng-dev
   libgtest-dev valgrind
+  # SHA-256 of inputs and outputs (ivol verify --json, provenance): libcrypto
+  libssl-dev
   libhdf5-dev libopenvdb-dev libboost-iostreams-dev
   hdf5-tools python3-h5py libopenvdb-tools libtiff-tools
   python3 python3-numpy python3-zstandard python3-tifffile

@@ -70,26 +70,26 @@ bad convert-garbage-vdb    2 "garbage.vdb"            -- "$IVOL" convert "$work/
 bad convert-raw-size       2 "16384"                  -- "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,17
 bad convert-truncated-ivol 2 "truncated"              -- "$IVOL" convert "$work/truncated.ivol" "$out/x.raw"
 bad convert-missing        2 "nothing.raw"            -- "$IVOL" convert "$work/nothing.raw" "$out/x.ivol" --dims 2,2,2
-bad convert-bad-dims       2 "--dims"                 -- "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16
+bad convert-bad-dims       1 "--dims"                 -- "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16
 bad recon-views-mismatch   2 "20"                     -- "$IVOL" recon "$work/p.raw" --geometry "$work/q.xml" --pitch 1.5 --detector 32,32 --views 20 --size 16 --voxel 1.5 -o "$out/x.ivol"
 bad recon-raw-too-short    2 "p.raw"                  -- "$IVOL" recon "$work/p.raw" --geometry "$work/p.xml" --pitch 1.5 --detector 32,33 --views 20 --size 16 --voxel 1.5 -o "$out/x.ivol"
 bad recon-garbage-xml      2 "garbage.xml"            -- "$IVOL" recon "$work/p.raw" --geometry "$work/garbage.xml" --pitch 1.5 --detector 32,32 --views 20 --size 16 --voxel 1.5 -o "$out/x.ivol"
 bad recon-garbage-h5       2 "garbage.h5"             -- "$IVOL" recon "$work/garbage.h5" --sid 600 --sdd 1200 --pitch 1.5 --size 16 --voxel 1.5 -o "$out/x.ivol"
 bad recon-garbage-tiff     2 "garbage.tif"            -- "$IVOL" recon "$work/garbage.tif" --sid 600 --sdd 1200 --pitch 1.5 --size 16 --voxel 1.5 -o "$out/x.ivol"
-bad recon-no-geometry      2 "--sid"                  -- "$IVOL" recon "$work/q.h5" --pitch 1.5 --size 16 --voxel 1.5 -o "$out/x.ivol"
-bad recon-sdd-below-sid    2 "SDD > SID"     -- "$IVOL" recon "$work/q.h5" --sid 600 --sdd 500 --pitch 1.5 --size 16 --voxel 1.5 -o "$out/x.ivol"
-bad recon-size-zero        2 "--size"                 -- "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 0 --voxel 1.5 -o "$out/x.ivol"
-bad recon-voxel-negative   2 "--voxel"                -- "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 16 --voxel -1 -o "$out/x.ivol"
-bad recon-pitch-text       2 "--pitch"                -- "$IVOL" recon "$work/p.raw" --geometry "$work/p.xml" --detector 32,32 --views 20 "${grid[@]}" --pitch wide -o "$out/x.ivol"
+bad recon-no-geometry      1 "--sid"                  -- "$IVOL" recon "$work/q.h5" --pitch 1.5 --size 16 --voxel 1.5 -o "$out/x.ivol"
+bad recon-sdd-below-sid    1 "SDD > SID"     -- "$IVOL" recon "$work/q.h5" --sid 600 --sdd 500 --pitch 1.5 --size 16 --voxel 1.5 -o "$out/x.ivol"
+bad recon-size-zero        1 "--size"                 -- "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 0 --voxel 1.5 -o "$out/x.ivol"
+bad recon-voxel-negative   1 "--voxel"                -- "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 16 --voxel -1 -o "$out/x.ivol"
+bad recon-pitch-text       1 "--pitch"                -- "$IVOL" recon "$work/p.raw" --geometry "$work/p.xml" --detector 32,32 --views 20 "${grid[@]}" --pitch wide -o "$out/x.ivol"
 bad recon-cutoff-range     1 "--cutoff"               -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --cutoff 1.5 -o "$out/x.ivol"
 bad recon-window           1 "--window"               -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --window box -o "$out/x.ivol"
 bad recon-preview-factor   1 "--preview-factor"       -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --structure octree --preview-factor 3 -o "$out/x.ivol"
-bad recon-threshold-text   2 "--threshold"            -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --structure octree --threshold high -o "$out/x.ivol"
-bad recon-keep-and-struct  2 "--keep and --structure" -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --structure octree --keep threshold=1 -o "$out/x.ivol"
+bad recon-threshold-text   1 "--threshold"            -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --structure octree --threshold high -o "$out/x.ivol"
+bad recon-keep-and-struct  1 "--keep and --structure" -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --structure octree --keep threshold=1 -o "$out/x.ivol"
 bad recon-device-memory    2 "device memory"          -- "$IVOL" recon "$work/p.raw" "${scan[@]}" --device-memory 1 --size 4000,4000,16 --voxel 0.01 -o "$out/x.ivol"
 bad phantom-detector       1 "--detector"             -- "$IVOL" phantom thin-pipe --detector 0 -o "$out/x.h5"
-bad slice-index            2 "--index"                -- "$IVOL" slice "$work/v.ivol" --index 99 -o "$out/x.png"
-bad extract-box            2 "box"                    -- "$IVOL" extract "$work/v.ivol" --box 0,0,0,99,99,99 -o "$out/x.raw"
+bad slice-index            1 "--index"                -- "$IVOL" slice "$work/v.ivol" --index 99 -o "$out/x.png"
+bad extract-box            1 "box"                    -- "$IVOL" extract "$work/v.ivol" --box 0,0,0,99,99,99 -o "$out/x.raw"
 
 # More cases, one file per concern (each sources this table's helpers: bad,
 # $work, $out, $IVOL and the inputs above).
@@ -103,7 +103,7 @@ if mount -t tmpfs -o size=256k tmpfs "$full" 2>/dev/null; then
   /usr/bin/python3 -c "import numpy as np; np.random.default_rng(1).random(64**3, dtype=np.float32).tofile('$work/noise.raw')"
   out="$full"
   bad full-disk-convert    2 "No space left"          -- "$IVOL" convert "$work/noise.raw" "$full/x.ivol" --dims 64,64,64
-  bad full-disk-tiff       2 "x.tif"                  -- "$IVOL" convert "$work/noise.raw" "$full/x.tif" --dims 64,64,64
+  bad full-disk-tiff       2 "No space left"             -- "$IVOL" convert "$work/noise.raw" "$full/x.tif" --dims 64,64,64
   bad full-disk-recon      2 "No space left"          -- "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 64 --voxel 0.4 --encoding float32 -o "$full/x.ivol"
   bad full-disk-phantom    2 "No space left"          -- "$IVOL" phantom shepp-logan --views 64 --detector 96 -o "$full/x.h5"
 else

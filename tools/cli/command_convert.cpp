@@ -4,10 +4,12 @@
 #include <iostream>
 
 #include "commands.hpp"
+#include "fixity.hpp"
 #include "formats.hpp"
 #include "ivol/error.hpp"
 #include "ivol_io.hpp"
 #include "option_parsing.hpp"
+#include "output_rules.hpp"
 #include "report.hpp"
 
 namespace ivol::cli {
@@ -38,21 +40,31 @@ std::string describe(const convert::DenseVolume& v) {
 Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
   auto* cmd = app.add_subcommand("convert", "Convert between .ivol and raw, TIFF stacks, HDF5 and OpenVDB");
   auto s = std::make_shared<ConvertSettings>();
-  cmd->add_option("IN", s->input, "Input file (or folder of TIFF slices)")->required();
-  cmd->add_option("OUT", s->output, "Output file")->required();
+  cmd->add_option("IN", s->input, "Input file (or folder of TIFF slices); - : raw samples on standard input")
+      ->required();
+  cmd->add_option("OUT", s->output, "Output file; - : raw samples on standard output")->required();
   cmd->add_option("--from", s->from, "Input format: ivol, raw, tiff, hdf5, vdb (default: by extension)");
   cmd->add_option("--to", s->to, "Output format (default: by extension)");
   cmd->add_flag("-f,--force", s->force, "Replace OUT if it exists");
   auto* raw = cmd->add_option_group("raw input");
-  raw->add_option("--dims", s->dims, "X,Y,Z voxels");
-  raw->add_option("--type", s->type, "Sample type of a raw input: u8, u16, i16, f16, f32")->capture_default_str();
+  raw->add_option("--dims", s->dims, "X,Y,Z voxels")->check(checked([](const std::string& v) {
+    parse_dims(v, "--dims");
+  }));
+  raw->add_option("--type", s->type, "Sample type of a raw input: u8, u16, i16, f16, f32")
+      ->check(checked([](const std::string& v) { parse_sample_type(v, "--type"); }))
+      ->capture_default_str();
   raw->add_option("--endian", s->endian, "little or big")
       ->check(CLI::IsMember({"little", "big"}))
       ->capture_default_str();
-  raw->add_option("--header-bytes", s->header_bytes, "Bytes to skip before the first sample");
+  raw->add_option("--header-bytes", s->header_bytes, "Bytes to skip before the first sample")->check(whole_number());
   auto* geometry = cmd->add_option_group("geometry");
-  geometry->add_option("--voxel-size", s->voxel_size, "S or SX,SY,SZ (overrides the input's)");
-  geometry->add_option("--origin", s->origin, "X,Y,Z of the centre of voxel 0");
+  geometry->add_option("--voxel-size", s->voxel_size, "S or SX,SY,SZ (overrides the input's)")
+      ->check(checked([](const std::string& v) {
+        convert::DenseVolume probe;
+        apply_geometry(probe, v, "", "");
+      }));
+  geometry->add_option("--origin", s->origin, "X,Y,Z of the centre of voxel 0")
+      ->check(checked([](const std::string& v) { parse_triple(v, "--origin", false); }));
   geometry->add_option("--unit", s->unit, "Length unit, e.g. mm");
   cmd->add_option("--dataset", s->dataset, "HDF5 dataset")->capture_default_str();
   cmd->add_option("--grid", s->grid, "OpenVDB grid (default: the first float grid)");
@@ -60,27 +72,31 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
   auto* into = cmd->add_option_group("into .ivol");
   into->add_option("--encoding", s->encoding, "binary16, uint16 or float32 (default: lossless for the input)")
       ->check(CLI::IsMember({"binary16", "uint16", "float32"}));
-  into->add_option("--keep", s->keep, "threshold=T|otsu,margin=M: full resolution only around the object");
-  into->add_option("--block-size", s->block_bytes, "Decoded bytes per block");
+  into->add_option("--keep", s->keep, "threshold=T|otsu,margin=M: full resolution only around the object")
+      ->check(checked([](const std::string& v) { parse_keep(v, "--keep"); }));
+  into->add_option("--block-size", s->block_bytes, "Decoded bytes per block")->check(whole_number());
   into->add_option("--codec", s->codec,
                    "zstd-planes: values over byte planes (format 1.2, smaller); zstd: format 1.0/1.1 readers read it")
       ->check(CLI::IsMember({"zstd-planes", "zstd"}))
       ->capture_default_str();
-  into->add_option("--memory", s->memory_mib, "About how many MiB the conversion may hold (default 2048)");
+  into->add_option("--memory", s->memory_mib, "About how many MiB the conversion may hold (default 2048)")
+      ->check(whole_number());
   into->add_option("--quantity", s->quantity, "What the values are, e.g. linear_attenuation");
   into->add_option("--value-unit", s->value_unit, "Unit of the values, e.g. 1/mm");
   auto* out_of = cmd->add_option_group("out of .ivol");
-  out_of->add_option("--out-type", s->out_type, "u8, u16, i16, f16, f32 (default: u16 for uint16 files, else f32)");
-  out_of->add_option("--level", s->level, "Level of detail: 1/2^K resolution");
+  out_of->add_option("--out-type", s->out_type, "u8, u16, i16, f16, f32 (default: u16 for uint16 files, else f32)")
+      ->check(checked([](const std::string& v) { parse_sample_type(v, "--out-type"); }));
+  out_of->add_option("--level", s->level, "Level of detail: 1/2^K resolution")->check(whole_number());
 
   return [s, &global]() {
     const auto start = std::chrono::steady_clock::now();
     const Format from = detect_format(s->input, s->from, "--from");
-    const Format to = detect_format(s->output, s->to, "--to");
-    if (std::filesystem::exists(s->output) && !s->force)
-      throw Error(ErrorClass::InvalidArgument, s->output + ": exists (use --force to replace it)");
-    if (from == Format::Ivol && to == Format::Ivol)
-      throw Error(ErrorClass::InvalidArgument, "ivol to ivol: nothing to convert");
+    const Format to = output_format(s->output, s->to, "OUT");
+    if (from == Format::Ivol && to == Format::Ivol) throw UsageError("OUT", "ivol to ivol: nothing to convert");
+    if (is_stdio(s->input) && from != Format::Raw) throw UsageError("IN", "'-' (standard input) takes raw input only");
+    check_output(s->output, "OUT", {s->input}, s->force, /*stdout_allowed=*/true);
+    // The summary must not mix with samples on standard output.
+    std::ostream& say = is_stdio(s->output) ? std::cerr : std::cout;
 
     ForeignOptions foreign;
     foreign.dataset = s->dataset;
@@ -91,8 +107,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       foreign.raw.dims = parse_dims(s->dims, "--dims");
       foreign.raw_dims_given = true;
     }
-    if (!convert::parse_sample_type(s->type, foreign.raw.type))
-      throw Error(ErrorClass::InvalidArgument, "--type: '" + s->type + "' is not u8, u16, i16, f16 or f32");
+    foreign.raw.type = parse_sample_type(s->type, "--type");
     foreign.raw.big_endian = s->endian == "big";
     foreign.raw.header_bytes = s->header_bytes;
 
@@ -102,16 +117,23 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       apply_geometry(shape, s->voxel_size, s->origin, s->unit);
       convert::ImportOptions options;
       if (!s->encoding.empty()) options.encoding = parse_encoding(s->encoding);
-      if (!s->keep.empty()) options.keep = convert::parse_keep_rule(s->keep);
+      if (!s->keep.empty()) options.keep = parse_keep(s->keep, "--keep");
       options.block_bytes = s->block_bytes;
       options.byte_planes = s->codec == "zstd-planes";
       // A slab's samples are held about four times over (as read, as float,
       // the keep mask, the subtrees being built): give a quarter to the slab.
       options.slab_budget_bytes = (s->memory_mib << 20) / 4;
       options.metadata.provenance = default_provenance();
-      options.metadata.provenance["command"] = "ivol convert " + s->input + " " + s->output;
-      options.metadata.provenance["sources"] = {
-          {{"path", s->input}, {"format", format_name(from)}, {"sample_type", convert::sample_type_name(shape.type)}}};
+      options.metadata.provenance["command"] = global.command_line;
+      // Hashed on a thread of its own while the conversion reads the same files.
+      // With what reads the source again (ivol verify --against).
+      nlohmann::json how = {{"format", format_name(from)}, {"sample_type", convert::sample_type_name(shape.type)}};
+      if (from == Format::Raw) how.update({{"endian", s->endian}, {"header_bytes", s->header_bytes}});
+      if (from == Format::Hdf5) how["dataset"] = s->dataset;
+      if (from == Format::Vdb && !s->grid.empty()) how["grid"] = s->grid;
+      auto digests =
+          std::make_shared<SourceDigests>(std::vector<std::string>{s->input}, std::vector<nlohmann::json>{how});
+      options.complete_metadata = SourceDigests::filler(digests);
       if (!s->quantity.empty()) options.metadata.quantity = s->quantity;
       if (!s->value_unit.empty()) options.metadata.value_unit = s->value_unit;
       if (shape.has_geometry) {
@@ -138,10 +160,10 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
                      std::to_string(r.threshold) + ")";
           std::cerr << "ivol convert: lossy: " << steps << "; largest error " << r.max_abs_error << "\n";
         }
-        std::cout << s->input << " (" << format_name(from) << " " << describe(shape) << ", " << human_bytes(bytes)
-                  << ") -> " << s->output << " (ivol " << encoding_name(r.encoding) << ", " << human_bytes(r.file_bytes)
-                  << ", " << static_cast<double>(bytes) / r.file_bytes << "x smaller"
-                  << (r.lossless ? ", lossless" : "") << ") in " << seconds << " s\n";
+        say << s->input << " (" << format_name(from) << " " << describe(shape) << ", " << human_bytes(bytes) << ") -> "
+            << s->output << " (ivol " << encoding_name(r.encoding) << ", " << human_bytes(r.file_bytes) << ", "
+            << static_cast<double>(bytes) / r.file_bytes << "x smaller" << (r.lossless ? ", lossless" : "") << ") in "
+            << seconds << " s\n";
       }
       return kExitOk;
     }
@@ -162,22 +184,21 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
         if (progress) progress(z + n, shape.dims[2]);
       }
       sink->finish();
-      if (!global.quiet) std::cout << s->input << " -> " << s->output << " (" << describe(shape) << ")\n";
+      if (!global.quiet) say << s->input << " -> " << s->output << " (" << describe(shape) << ")\n";
       return kExitOk;
     }
 
     Reader reader(s->input);
     convert::SampleType type = convert::natural_sample_type(reader);
-    if (!s->out_type.empty() && !convert::parse_sample_type(s->out_type, type))
-      throw Error(ErrorClass::InvalidArgument, "--out-type: '" + s->out_type + "' is not u8, u16, i16, f16 or f32");
+    if (!s->out_type.empty()) type = parse_sample_type(s->out_type, "--out-type");
     const Box box = full_box(reader.layout().dims, s->level);
     convert::DenseVolume shape = convert::export_shape(reader, box, s->level, type);
     apply_geometry(shape, s->voxel_size, s->origin, s->unit);
     const auto sink = create_sink(s->output, to, shape, foreign);
     convert::export_from_ivol(reader, box, s->level, type, *sink, progress_bar("ivol convert", global.quiet));
     if (!global.quiet)
-      std::cout << s->input << " -> " << s->output << " (" << format_name(to) << " " << describe(shape)
-                << (s->level ? ", level of detail " + std::to_string(s->level) : std::string()) << ")\n";
+      say << s->input << " -> " << s->output << " (" << format_name(to) << " " << describe(shape)
+          << (s->level ? ", level of detail " + std::to_string(s->level) : std::string()) << ")\n";
     return kExitOk;
   };
 }

@@ -8,8 +8,21 @@
 #include "ivol/error.hpp"
 #include "ivol_io.hpp"
 #include "option_parsing.hpp"
+#include "output_rules.hpp"
 
 namespace ivol::cli {
+namespace {
+
+// How much of the file the extraction read. The reader counts every byte it
+// read, the index and blocks read twice included, so the count can pass the
+// file's size: then say so rather than print "550 of 534 bytes".
+std::string reader_share(const Reader& reader) {
+  const std::uint64_t read = reader.io_stats().bytes_read, size = reader.info().file_size;
+  if (read <= size) return "read " + std::to_string(read) + " of " + std::to_string(size) + " bytes";
+  return "read " + std::to_string(read) + " bytes, some more than once, from a " + std::to_string(size) + "-byte file";
+}
+
+}  // namespace
 
 Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
   auto* cmd = app.add_subcommand("extract", "Write a region of an .ivol file as raw, TIFF, HDF5 or OpenVDB");
@@ -21,24 +34,27 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
   };
   auto s = std::make_shared<Settings>();
   cmd->add_option("FILE", s->file, "The .ivol file")->required();
-  cmd->add_option("--box", s->box, "x0,y0,z0,x1,y1,z1 (half-open, in voxels of the chosen level)")->required();
-  cmd->add_option("--level", s->level, "Level of detail: 1/2^K resolution");
-  cmd->add_option("-o,--output", s->output, "Output file: .raw, .tif, .h5, .vdb")->required();
+  cmd->add_option("--box", s->box, "x0,y0,z0,x1,y1,z1 (half-open, in voxels of the chosen level)")
+      ->required()
+      ->check(checked([](const std::string& v) { parse_box(v, "--box"); }));
+  cmd->add_option("--level", s->level, "Level of detail: 1/2^K resolution")->check(whole_number());
+  cmd->add_option("-o,--output", s->output, "Output file: .raw, .tif, .h5, .vdb; - : raw samples on standard output")
+      ->required();
   cmd->add_option("--to", s->to, "Output format (default: by extension)");
-  cmd->add_option("--type", s->type, "u8, u16, i16, f16, f32 (default: u16 for uint16 files, else f32)");
+  cmd->add_option("--type", s->type, "u8, u16, i16, f16, f32 (default: u16 for uint16 files, else f32)")
+      ->check(checked([](const std::string& v) { parse_sample_type(v, "--type"); }));
   cmd->add_option("--endian", s->endian, "Raw output byte order")->check(CLI::IsMember({"little", "big"}));
   cmd->add_flag("-f,--force", s->force, "Replace the output if it exists");
   cmd->add_flag("--salvage", s->salvage,
                 "Read past damaged blocks: their regions take the average of a coarser level (exit 3)");
   return [s, &global]() {
-    const Format to = detect_format(s->output, s->to, "--to");
-    if (to == Format::Ivol) throw Error(ErrorClass::InvalidArgument, "-o: extract writes dense formats, not .ivol");
-    if (std::filesystem::exists(s->output) && !s->force)
-      throw Error(ErrorClass::InvalidArgument, s->output + ": exists (use --force to replace it)");
+    const Format to = output_format(s->output, s->to, "-o");
+    if (to == Format::Ivol) throw UsageError("-o", "extract writes dense formats, not .ivol");
+    check_output(s->output, "-o", {s->file}, s->force, /*stdout_allowed=*/true);
+    std::ostream& say = is_stdio(s->output) ? std::cerr : std::cout;  // not among the samples
     Reader reader(s->file);
     convert::SampleType type = convert::natural_sample_type(reader);
-    if (!s->type.empty() && !convert::parse_sample_type(s->type, type))
-      throw Error(ErrorClass::InvalidArgument, "--type: '" + s->type + "' is not u8, u16, i16, f16 or f32");
+    if (!s->type.empty()) type = parse_sample_type(s->type, "--type");
     const Box box = parse_box(s->box, "--box");
     ForeignOptions options;
     options.big_endian = s->endian == "big";
@@ -47,10 +63,9 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
     const Dims limit = lod_dims(reader.layout().dims, s->level);
     for (int a = 0; a < 3; ++a)
       if (box.lo[a] >= box.hi[a] || box.hi[a] > limit[a])
-        throw Error(ErrorClass::InvalidArgument, "--box: " + box.to_string() + " is empty or outside the volume (" +
-                                                     std::to_string(limit[0]) + "x" + std::to_string(limit[1]) + "x" +
-                                                     std::to_string(limit[2]) + " at level " +
-                                                     std::to_string(s->level) + ")");
+        throw UsageError("--box", box.to_string() + " is empty or outside the volume (" + std::to_string(limit[0]) +
+                                      "x" + std::to_string(limit[1]) + "x" + std::to_string(limit[2]) + " at level " +
+                                      std::to_string(s->level) + ")");
     const auto sink = create_sink(s->output, to, shape, options);
     std::vector<DamagedRegion> damaged;
     convert::export_from_ivol(reader, box, s->level, type, *sink, {}, s->salvage ? &damaged : nullptr);
@@ -63,9 +78,8 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
       if (damaged.size() > 10) std::cerr << "  ... and " << damaged.size() - 10 << " more\n";
     }
     if (!global.quiet)
-      std::cout << s->output << ": " << convert::sample_type_name(type) << " " << shape.dims[0] << "x" << shape.dims[1]
-                << "x" << shape.dims[2] << " from " << s->file << " (read " << reader.io_stats().bytes_read << " of "
-                << reader.info().file_size << " bytes)\n";
+      say << s->output << ": " << convert::sample_type_name(type) << " " << shape.dims[0] << "x" << shape.dims[1] << "x"
+          << shape.dims[2] << " from " << s->file << " (" << reader_share(reader) << ")\n";
     return damaged.empty() ? kExitOk : kExitSalvaged;
   };
 }

@@ -26,6 +26,7 @@
 #include "ivol/recon/rtk_geometry_xml.hpp"
 #include "ivol_io.hpp"
 #include "option_parsing.hpp"
+#include "output_rules.hpp"
 #include "projection_io.hpp"
 #include "report.hpp"
 #include "staged_file.hpp"
@@ -73,28 +74,6 @@ std::string rounded(double value) {
   return out.str();
 }
 
-std::vector<double> parse_numbers(const std::string& text, const char* option, std::size_t least, std::size_t most) {
-  std::vector<double> values;
-  std::stringstream in(text);
-  for (std::string part; std::getline(in, part, ',');) {
-    std::size_t used = 0;
-    double v = 0.0;
-    try {
-      v = std::stod(part, &used);
-    } catch (const std::logic_error&) {
-      used = 0;
-    }
-    if (used == 0 || used != part.size() || !std::isfinite(v))
-      throw Error(ErrorClass::InvalidArgument, std::string(option) + ": '" + text + "' is not a list of numbers");
-    values.push_back(v);
-  }
-  if (values.size() < least || values.size() > most || (!text.empty() && text.back() == ','))
-    throw Error(ErrorClass::InvalidArgument, std::string(option) + ": '" + text + "' needs " + std::to_string(least) +
-                                                 (most > least ? " or " + std::to_string(most) : std::string()) +
-                                                 " comma-separated numbers");
-  return values;
-}
-
 // Rounds up to four significant digits, so that a default pitch is short to type.
 double round_up_4(double x) {
   const int e = static_cast<int>(std::floor(std::log10(x))) - 3;
@@ -126,7 +105,7 @@ bool has_extension(const std::string& path, std::initializer_list<const char*> e
   return false;
 }
 
-[[noreturn]] void usage(const std::string& what) { throw Error(ErrorClass::InvalidArgument, what); }
+[[noreturn]] void usage(const std::string& what) { throw UsageError("", what); }
 
 Plan make_plan(const PhantomSettings& s) {
   Plan plan;
@@ -150,6 +129,8 @@ Plan make_plan(const PhantomSettings& s) {
   if (!(s.photons >= 0.0) || !std::isfinite(s.photons)) usage("--photons must be positive (0: no noise)");
   if (s.truth_size && s.truth.empty()) usage("--truth-size needs --truth");
   if (!s.truth.empty() && !has_extension(s.truth, {".ivol"})) usage("--truth: " + s.truth + " is not an .ivol file");
+  if (!s.geometry_out.empty() && !has_extension(s.geometry_out, {".xml"}))
+    usage("--geometry-out: " + s.geometry_out + " is not an .xml name");
 
   const auto cells = parse_numbers(s.detector, "--detector", 1, 2);
   for (double c : cells)
@@ -339,7 +320,7 @@ Runner add_phantom_command(CLI::App& app, const GlobalOptions& global) {
   scan->add_option("--offset", s->offset, "U,V: detector offset, mm");
   scan->add_option("--radius", s->radius, "Radius of the field the phantom is sized to, mm")->capture_default_str();
   scan->add_option("--photons", s->photons, "Incident photons per pixel: Poisson noise (default: none)");
-  scan->add_option("--seed", s->seed, "Seed of the noise")->capture_default_str();
+  scan->add_option("--seed", s->seed, "Seed of the noise")->check(whole_number())->capture_default_str();
   scan->add_option("--supersampling", s->supersampling, "Rays per pixel side (and samples per truth voxel side)")
       ->check(CLI::Range(1, 16))
       ->capture_default_str();
@@ -363,9 +344,9 @@ Runner add_phantom_command(CLI::App& app, const GlobalOptions& global) {
       std::cerr << "ivol phantom: " << e.what() << "\n";
       return kExitUsage;
     }
-    for (const std::string& path : {s->output, plan.geometry_path, s->truth})
-      if (!path.empty() && std::filesystem::exists(path) && !s->force)
-        throw Error(ErrorClass::InvalidArgument, path + ": exists (use --force to replace it)");
+    std::vector<OutputFile> outputs{{s->output, "-o", false}, {plan.geometry_path, "--geometry-out", false}};
+    if (!s->truth.empty()) outputs.push_back({s->truth, "--truth", false});
+    check_outputs(outputs, {}, s->force);
 
     // Temporary files first: a missing or read-only folder fails before any work.
     convert::StagedFile projections_file(s->output);
@@ -390,7 +371,9 @@ Runner add_phantom_command(CLI::App& app, const GlobalOptions& global) {
       options.metadata.quantity = "linear_attenuation";
       options.metadata.value_unit = "1/mm";
       options.metadata.provenance = default_provenance();
-      options.metadata.provenance["command"] = command_line(*s, d);
+      options.metadata.provenance["command"] = global.command_line;
+      // The command with every default spelled out: the same scan again, whatever later versions default to.
+      options.metadata.provenance["command_resolved"] = command_line(*s, d);
       options.metadata.provenance["sources"] = {{{"phantom", s->name},
                                                  {"format", "analytic"},
                                                  {"fov_radius_mm", s->radius},

@@ -6,6 +6,7 @@
 #include <iostream>
 
 #include "commands.hpp"
+#include "fixity.hpp"
 #include "ivol/error.hpp"
 #include "ivol/metadata.hpp"
 #include "ivol/recon/fdk.hpp"
@@ -15,6 +16,7 @@
 #include "ivol_io.hpp"
 #include "mpi_exchange.hpp"
 #include "option_parsing.hpp"
+#include "output_rules.hpp"
 #include "recon_built_slabs.hpp"
 #include "recon_slabs.hpp"
 #include "report.hpp"
@@ -51,13 +53,41 @@ recon::VolumeGrid make_grid(const ReconSettings& s) {
   const std::array<double, 3> size = parse_triple(s.size, "--size", true);
   for (int a = 0; a < 3; ++a) {
     if (!(size[a] >= 1) || size[a] != std::floor(size[a]) || size[a] > 1e6)
-      throw Error(ErrorClass::InvalidArgument, "--size: '" + s.size + "' is not N or X,Y,Z voxels");
+      throw UsageError("--size", "'" + s.size + "' is not N or X,Y,Z voxels (1 to 10^6)");
     grid.size[a] = static_cast<std::uint32_t>(size[a]);
   }
-  if (!(s.voxel > 0)) throw Error(ErrorClass::InvalidArgument, "--voxel: the voxel size in mm must be positive");
+  if (!(s.voxel > 0)) throw UsageError("--voxel", "the voxel size in mm must be positive");
   grid = recon::VolumeGrid::centred(grid.size, s.voxel);
   if (!s.origin.empty()) grid.origin = parse_triple(s.origin, "--origin", false);
   return grid;
+}
+
+void check_size(const std::string& value) {
+  ReconSettings probe;
+  probe.size = value;
+  probe.voxel = 1;
+  make_grid(probe);
+}
+
+void check_voxel(const std::string& value) {
+  if (!(parse_number(value, "--voxel") > 0)) throw UsageError("--voxel", "the voxel size in mm must be positive");
+}
+
+void check_threshold(const std::string& value) {
+  if (value != "otsu") parse_number(value, "--threshold");
+}
+
+// Every file the reconstruction reads (projections, flat and dark fields, the
+// geometry), each with its role for provenance.sources.
+void scan_inputs(const ScanSettings& scan, std::vector<std::string>& inputs, std::vector<nlohmann::json>& roles) {
+  const auto add = [&](const std::string& path, const char* role) {
+    inputs.push_back(path);
+    roles.push_back(nlohmann::json{{"role", role}});
+  };
+  add(scan.projections, "projections");
+  for (const std::string& f : scan.flats) add(f, "flat");
+  for (const std::string& f : scan.darks) add(f, "dark");
+  if (!scan.geometry_xml.empty()) add(scan.geometry_xml, "geometry");
 }
 
 double seconds_since(std::chrono::steady_clock::time_point start) {
@@ -131,7 +161,8 @@ void print_ranks(const std::vector<RankStats>& ranks) {
 // lists of the slabs in flight; never the dense volume nor all the values.
 int run_structure(const ReconSettings& s, const GlobalOptions& global, const recon::VolumeGrid& grid,
                   const recon::FdkOptions& fdk_options, OpenedScan& scan, recon::FdkReconstructor& reconstructor,
-                  Metadata metadata, std::chrono::steady_clock::time_point start, MpiRun* mpi) {
+                  Metadata metadata, const std::function<void(Metadata&)>& complete_metadata,
+                  std::chrono::steady_clock::time_point start, MpiRun* mpi) {
   StructureKind kind{};
   parse_structure(s.structure, kind);
   const recon::Preview preview =
@@ -142,13 +173,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   // against 89 % with Otsu's threshold itself, for the thin pipe).
   float threshold = 0.5F * preview.otsu_threshold;
   if (s.threshold != "otsu") {
-    try {
-      std::size_t used = 0;
-      threshold = std::stof(s.threshold, &used);
-      if (used != s.threshold.size()) throw std::invalid_argument(s.threshold);
-    } catch (const std::exception&) {
-      throw Error(ErrorClass::InvalidArgument, "--threshold: '" + s.threshold + "' is not a number or otsu");
-    }
+    threshold = static_cast<float>(parse_number(s.threshold, "--threshold"));
   }
   auto generation_start = std::chrono::steady_clock::now();
   const Dims full{grid.size[0], grid.size[1], grid.size[2]};
@@ -195,6 +220,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
         writing_during_fdk += seconds_since(began);
       });
   if (mpi) mpi->every_slab_received();  // the rest of the file is compressed on every rank
+  if (complete_metadata) complete_metadata(metadata);
   const StreamingResult written = writer.finish(metadata, values);
   const double writing = written.write.seconds;
   std::vector<RankStats> ranks;
@@ -259,9 +285,10 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
   cmd->add_option("-o,--output", s->output, "Output .ivol file")->required();
   cmd->add_flag("-f,--force", s->force, "Replace the output if it exists");
   auto* volume = cmd->add_option_group("volume");
-  volume->add_option("--size", s->size, "N or X,Y,Z voxels")->required();
-  volume->add_option("--voxel", s->voxel, "Voxel size, mm")->required();
-  volume->add_option("--origin", s->origin, "X,Y,Z of voxel 0's centre, mm (default: volume centred on the axis)");
+  volume->add_option("--size", s->size, "N or X,Y,Z voxels")->required()->check(checked(check_size));
+  volume->add_option("--voxel", s->voxel, "Voxel size, mm")->required()->check(checked(check_voxel));
+  volume->add_option("--origin", s->origin, "X,Y,Z of voxel 0's centre, mm (default: volume centred on the axis)")
+      ->check(checked([](const std::string& v) { parse_triple(v, "--origin", false); }));
   auto* fdk = cmd->add_option_group("filter and devices");
   fdk->add_option("--window", s->window, "Ramp window: ram-lak, shepp-logan, cosine, hamming, hann")
       ->check(CLI::IsMember({"ram-lak", "shepp-logan", "cosine", "hamming", "hann"}))
@@ -270,17 +297,20 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::Range(1e-6, 1.0))
       ->capture_default_str();
   fdk->add_option("--device", s->devices, "OpenCL device index (see ivol devices); repeat for several");
-  fdk->add_option("--device-memory", s->device_memory_mib, "MiB of device memory to use (default: 80 % of it)");
+  fdk->add_option("--device-memory", s->device_memory_mib, "MiB of device memory to use (default: 80 % of it)")
+      ->check(whole_number());
   fdk->add_option("--slab-slices", s->slab_slices,
                   "Most slices per slab (default: as many as fit the device; under mpirun, at most the volume's "
                   "depth over the ranks; under mpirun without --structure, also the writer's slabs that the ranks "
-                  "build, a power of two)");
+                  "build, a power of two)")
+      ->check(whole_number());
   auto* out = cmd->add_option_group("output");
   out->add_option("--encoding", s->encoding, "binary16 or float32")
       ->check(CLI::IsMember({"binary16", "float32"}))
       ->capture_default_str();
   out->add_option("--keep", s->keep,
-                  "threshold=T|otsu,margin=M: full resolution only around the object (otsu: from a preview)");
+                  "threshold=T|otsu,margin=M: full resolution only around the object (otsu: from a preview)")
+      ->check(checked([](const std::string& v) { parse_keep(v, "--keep"); }));
   auto* paper = cmd->add_option_group("inhomogeneous (Betz et al.)");
   paper
       ->add_option("--structure", s->structure,
@@ -290,23 +320,41 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
   paper
       ->add_option("--threshold", s->threshold,
                    "With --structure: the object's threshold on the preview, a value or otsu (half of Otsu's)")
+      ->check(checked(check_threshold))
       ->capture_default_str();
   paper->add_option("--margin", s->margin, "With --structure: full-resolution voxels kept around the object")
+      ->check(whole_number())
       ->capture_default_str();
   paper->add_option("--nested-cell", s->nested_cell, "With --structure nested: cell edge in voxels (power of two)")
+      ->check(whole_number())
       ->capture_default_str();
   out->add_option("--preview-factor", s->preview_factor,
                   "Coarsening of the preview that finds the object (a power of two)")
       ->check(CLI::IsMember({2, 4, 8, 16, 32}))
       ->capture_default_str();
-  out->add_option("--memory", s->memory_mib, "About how many MiB the writer may hold")->capture_default_str();
+  out->add_option("--memory", s->memory_mib, "About how many MiB the writer may hold")
+      ->check(whole_number())
+      ->capture_default_str();
   cmd->add_flag("--json", s->json, "Print the report as JSON on stdout");
 
   // mpi: this process is one rank of a distributed run (mpirun), or null.
   auto run = [s, &global](MpiRun* mpi) {
     const auto start = std::chrono::steady_clock::now();
-    if (std::filesystem::exists(s->output) && !s->force)
-      throw Error(ErrorClass::InvalidArgument, s->output + ": exists (use --force to replace it)");
+    if (!s->structure.empty() && !s->keep.empty())
+      throw UsageError("--keep", "--keep and --structure: choose one (--structure uses --threshold)");
+    if (lower_extension(s->output) != ".ivol") throw UsageError("-o", "'" + s->output + "' is not an .ivol name");
+    std::vector<std::string> inputs;
+    std::vector<nlohmann::json> roles;
+    scan_inputs(s->scan, inputs, roles);
+    std::vector<std::string> input_paths = inputs;  // folders too
+    for (const std::string& i : inputs)
+      for (const std::string& f : input_files(i)) input_paths.push_back(f);
+    // Distributed, rank 0 writes the file.
+    const bool writes = !mpi || mpi->rank() == 0;
+    if (writes) check_output(s->output, "-o", input_paths, s->force);
+    // Hashed on a thread of its own while the reconstruction runs.
+    std::shared_ptr<SourceDigests> digests;
+    if (writes) digests = std::make_shared<SourceDigests>(inputs, roles);
     const recon::VolumeGrid grid = make_grid(*s);
     OpenedScan scan = open_scan(s->scan);
     recon::FdkOptions options;
@@ -332,7 +380,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     import.slab_budget_bytes = (s->memory_mib << 20) / 4;
     double preview_seconds = 0.0;
     if (!s->keep.empty()) {
-      convert::KeepRule rule = convert::parse_keep_rule(s->keep);
+      convert::KeepRule rule = parse_keep(s->keep, "--keep");
       if (rule.otsu) {
         // The paper's way: a quick low-resolution reconstruction finds the
         // object; its Otsu threshold then marks the full-resolution region.
@@ -346,7 +394,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     }
     Metadata& m = import.metadata;
     m.provenance = default_provenance();
-    m.provenance["command"] = "ivol recon";
+    m.provenance["command"] = global.command_line;
+    if (digests) import.complete_metadata = SourceDigests::filler(digests);
     m.provenance["reconstruction"] = {{"algorithm", "FDK"},
                                       {"window", s->window},
                                       {"cutoff", s->cutoff},
@@ -366,10 +415,9 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     import.progress = progress_bar("ivol recon", quiet || s->json);
 
     if (!s->structure.empty()) {
-      if (!s->keep.empty())
-        throw Error(ErrorClass::InvalidArgument, "--keep and --structure: choose one (--structure uses --threshold)");
       if (mpi && root) mpi->remove_temporaries_on_signal(s->output);
-      return run_structure(*s, global, grid, options, scan, reconstructor, import.metadata, start, mpi);
+      return run_structure(*s, global, grid, options, scan, reconstructor, import.metadata, import.complete_metadata,
+                           start, mpi);
     }
     convert::ImportReport written;
     recon::FdkTimings t;

@@ -9,6 +9,7 @@
 #include "ivol/error.hpp"
 #include "ivol/reader.hpp"
 #include "option_parsing.hpp"
+#include "output_rules.hpp"
 #include "png_image.hpp"
 #include "slice_image.hpp"
 
@@ -21,23 +22,35 @@ Runner add_slice_command(CLI::App& app, const GlobalOptions& global) {
     std::uint32_t index = 0;
     unsigned level = 0;
     bool borders = false;
+    bool force = false;
   };
   auto s = std::make_shared<Settings>();
   cmd->add_option("FILE", s->file, "The .ivol file")->required();
   cmd->add_option("--axis", s->axis, "x, y or z")->check(CLI::IsMember({"x", "y", "z"}))->capture_default_str();
-  cmd->add_option("--index", s->index, "Slice index along the axis (at the chosen level)")->required();
-  cmd->add_option("--level", s->level, "Level of detail: 1/2^K resolution");
-  cmd->add_option("--window", s->window, "LO,HI: values mapped to black and white (default: the slice's range)");
+  cmd->add_option("--index", s->index, "Slice index along the axis (at the chosen level)")
+      ->required()
+      ->check(whole_number());
+  cmd->add_option("--level", s->level, "Level of detail: 1/2^K resolution")->check(whole_number());
+  cmd->add_option("--window", s->window, "LO,HI: values mapped to black and white (default: the slice's range)")
+      ->check(checked([](const std::string& v) { parse_window(v, "--window"); }));
   cmd->add_flag("--borders", s->borders, "Draw the borders of the octree's leaves in red");
-  cmd->add_option("-o,--output", s->output, "The PNG image")->required();
+  cmd->add_option("-o,--output", s->output, "The PNG image (.png)")->required();
+  cmd->add_flag("-f,--force", s->force, "Replace the image if it exists");
   return [s, &global]() {
+    // slice writes PNG only: the name must say so (s.jpg would hold PNG bytes).
+    if (lower_extension(s->output) != ".png") throw UsageError("-o", "'" + s->output + "' is not a .png name");
+    check_output(s->output, "-o", {s->file}, s->force);
     Reader reader(s->file);
     const int axis = s->axis[0] - 'x';
     std::optional<std::array<double, 2>> window;
-    if (!s->window.empty()) {
-      const auto w = parse_triple(s->window + ",0", "--window", false);
-      window = std::array<double, 2>{w[0], w[1]};
-    }
+    if (!s->window.empty()) window = parse_window(s->window, "--window");
+    if (s->level > reader.layout().depth)
+      throw UsageError("--level", std::to_string(s->level) + " is past the file's coarsest level " +
+                                      std::to_string(reader.layout().depth));
+    const Dims extent = lod_dims(reader.layout().dims, s->level);
+    if (s->index >= extent[axis])
+      throw UsageError("--index", std::to_string(s->index) + " is outside the volume (" + std::to_string(extent[axis]) +
+                                      " slices along " + s->axis + " at level " + std::to_string(s->level) + ")");
     const SliceImage slice = render_slice(reader, axis, s->index, s->level, window, s->borders);
     const RgbImage& image = slice.image;
     const double lo = slice.low, hi = slice.high;

@@ -4,18 +4,20 @@
 
 #include <CLI/CLI.hpp>
 #include <functional>
+#include <string>
 
 namespace ivol::cli {
 
 // Exit codes of every subcommand.
 constexpr int kExitOk = 0;
-constexpr int kExitUsage = 1;    // bad command line
-constexpr int kExitFailure = 2;  // bad input file, damaged file, I/O error
+constexpr int kExitUsage = 1;     // bad command line
+constexpr int kExitFailure = 2;   // bad input file, damaged file, I/O error
 constexpr int kExitSalvaged = 3;  // output written, but parts of it came from coarser levels (--salvage)
 
 struct GlobalOptions {
   bool quiet = false;
   bool verbose = false;
+  std::string command_line;  // argv, shell-quoted: provenance.command
 };
 
 using Runner = std::function<int()>;

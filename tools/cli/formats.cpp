@@ -2,9 +2,13 @@
 
 #include <cstring>
 #include <filesystem>
+#include <optional>
 
 #include "hdf5_io.hpp"
 #include "ivol/error.hpp"
+#include "option_parsing.hpp"
+#include "output_rules.hpp"
+#include "stdio_volume.hpp"
 #include "tiff_io.hpp"
 #include "vdb_io.hpp"
 
@@ -52,18 +56,53 @@ const char* format_name(Format format) {
   return "?";
 }
 
-Format detect_format(const std::string& path, const std::string& name, const char* option) {
-  const std::string key = !name.empty() ? name : std::filesystem::path(path).extension().string();
+namespace {
+
+std::optional<Format> format_of(const std::string& key) {
   if (key == "ivol" || key == ".ivol") return Format::Ivol;
   if (key == "raw" || key == ".raw" || key == ".bin" || key == ".vol") return Format::Raw;
   if (key == "tiff" || key == "tif" || key == ".tif" || key == ".tiff") return Format::Tiff;
   if (key == "hdf5" || key == ".h5" || key == ".hdf5" || key == ".hdf") return Format::Hdf5;
   if (key == "vdb" || key == ".vdb") return Format::Vdb;
-  if (name.empty() && std::filesystem::is_directory(path)) return Format::Tiff;
-  throw Error(
-      ErrorClass::InvalidArgument,
-      std::string(option) + ": cannot tell the format of '" + path +
-          "' (extensions .ivol .raw .bin .vol .tif .tiff .h5 .hdf5 .vdb, or a folder of TIFF files; or name it)");
+  return std::nullopt;
+}
+
+const char* kKnown =
+    "(extensions .ivol .raw .bin .vol .tif .tiff .h5 .hdf5 .vdb, or a folder of TIFF files; or name it)";
+
+}  // namespace
+
+Format detect_format(const std::string& path, const std::string& name, const char* option) {
+  if (!name.empty()) {
+    if (const auto f = format_of(name)) return *f;
+    throw UsageError(option, "'" + name + "' is not ivol, raw, tiff, hdf5 or vdb");
+  }
+  if (is_stdio(path)) return Format::Raw;
+  if (const auto f = format_of(lower_extension(path))) return *f;
+  if (std::filesystem::is_directory(path)) return Format::Tiff;
+  throw UsageError(option, "cannot tell the format of '" + path + "' " + kKnown);
+}
+
+Format output_format(const std::string& path, const std::string& name, const char* option) {
+  // A plain Format and a flag, not an optional: GCC 12 warns (wrongly) that
+  // an optional enum may be read uninitialised.
+  const bool has_name = !name.empty();
+  const Format named = has_name ? detect_format(path, name, "--to") : Format::Raw;
+  if (is_stdio(path)) {
+    if (has_name && named != Format::Raw)
+      throw UsageError(option, std::string("'-' (standard output) takes raw output only, not ") + format_name(named));
+    return Format::Raw;
+  }
+  const std::optional<Format> by_extension = format_of(lower_extension(path));
+  if (!has_name) {
+    if (by_extension) return *by_extension;
+    throw UsageError(option, "cannot tell the format of '" + path + "' " + kKnown);
+  }
+  if (by_extension && *by_extension != named)
+    throw UsageError(option, "'" + path + "' is named as " + format_name(*by_extension) + " but " + format_name(named) +
+                                 " would be written; give it a ." +
+                                 (named == Format::Tiff ? "tif" : format_name(named)) + " name");
+  return named;
 }
 
 std::unique_ptr<convert::SlabReader> open_source(const std::string& path, Format format,
@@ -71,7 +110,8 @@ std::unique_ptr<convert::SlabReader> open_source(const std::string& path, Format
   switch (format) {
     case Format::Raw:
       if (!options.raw_dims_given)
-        throw Error(ErrorClass::InvalidArgument, "--dims: a raw input needs its dimensions (--dims X,Y,Z --type T)");
+        throw UsageError("--dims", "a raw input needs its dimensions (--dims X,Y,Z --type T)");
+      if (is_stdio(path)) return stdin_raw_slabs(options.raw);
       return convert::open_raw_slabs(path, options.raw);
     case Format::Tiff:
       return convert::open_tiff_slabs(path);
@@ -87,6 +127,10 @@ std::unique_ptr<convert::SlabReader> open_source(const std::string& path, Format
 
 std::unique_ptr<convert::SlabWriter> create_sink(const std::string& path, Format format,
                                                  const convert::DenseVolume& shape, const ForeignOptions& options) {
+  if (is_stdio(path)) {
+    if (format != Format::Raw) throw UsageError("-o", "'-' (standard output) takes raw output only");
+    return stdout_raw_slabs(shape, options.big_endian);
+  }
   switch (format) {
     case Format::Raw:
       return convert::create_raw_slabs(path, shape, options.big_endian);

@@ -26,10 +26,17 @@ struct ForeignOptions {
   float background = 0.0f;                 // OpenVDB output
 };
 
-// A dense input, read slab by slab (OpenVDB grids are read whole).
+// The format written to `path`: `name` (--to) or the extension, which must
+// agree: a known extension of another format is refused ("b.ivol --to raw"),
+// an unknown one needs `name`. "-" (standard output) is raw. UsageError.
+Format output_format(const std::string& path, const std::string& name, const char* option);
+
+// A dense input, read slab by slab (OpenVDB grids are read whole); "-" is
+// raw samples on standard input.
 std::unique_ptr<convert::SlabReader> open_source(const std::string& path, Format format, const ForeignOptions& options);
 // A dense output for a volume of `shape`, written slab by slab (OpenVDB
-// grids are assembled in memory and written at finish()).
+// grids are assembled in memory and written at finish()); "-" is raw samples
+// on standard output.
 std::unique_ptr<convert::SlabWriter> create_sink(const std::string& path, Format format,
                                                  const convert::DenseVolume& shape, const ForeignOptions& options);
 

@@ -3,8 +3,10 @@
 #include <map>
 
 #include "commands.hpp"
+#include "fixity.hpp"
 #include "ivol/error.hpp"
 #include "ivol/metadata.hpp"
+#include "option_parsing.hpp"
 
 namespace {
 
@@ -15,6 +17,7 @@ int run(int argc, char** argv) {
   app.fallthrough();  // -q and -v also after the subcommand
   app.set_version_flag("--version", std::string("ivol ") + ivol::library_version());
   GlobalOptions global;
+  global.command_line = quoted_command_line(argc, argv);
   app.add_flag("-q,--quiet", global.quiet, "Print nothing but errors");
   app.add_flag("-v,--verbose", global.verbose, "Print more detail");
 
@@ -58,6 +61,9 @@ int run(int argc, char** argv) {
     if (!sub->parsed()) continue;
     try {
       return run();
+    } catch (const UsageError& e) {
+      std::cerr << "ivol " << sub->get_name() << ": " << e.what() << "\n";
+      return kExitUsage;
     } catch (const ivol::Error& e) {
       std::cerr << "ivol " << sub->get_name() << ": error (" << ivol::error_class_name(e.error_class())
                 << "): " << e.what() << "\n";

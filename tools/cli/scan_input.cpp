@@ -5,34 +5,14 @@
 
 #include "ivol/error.hpp"
 #include "ivol/recon/rtk_geometry_xml.hpp"
+#include "option_parsing.hpp"
 #include "projection_io.hpp"
 
 namespace ivol::cli {
 namespace {
 
-[[noreturn]] void bad(const std::string& message) { throw Error(ErrorClass::InvalidArgument, message); }
-
-std::vector<double> parse_numbers(const std::string& text, const char* option, std::size_t low, std::size_t high) {
-  std::vector<double> values;
-  std::size_t start = 0;
-  while (start <= text.size()) {
-    const std::size_t comma = text.find(',', start);
-    const std::string item = text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-    try {
-      std::size_t used = 0;
-      values.push_back(std::stod(item, &used));
-      if (used != item.size()) throw std::invalid_argument(item);
-    } catch (const std::exception&) {
-      bad(std::string(option) + ": '" + item + "' is not a number");
-    }
-    if (comma == std::string::npos) break;
-    start = comma + 1;
-  }
-  if (values.size() < low || values.size() > high)
-    bad(std::string(option) + ": expected " + std::to_string(low) + (low == high ? "" : " or " + std::to_string(high)) +
-        " comma-separated numbers, got '" + text + "'");
-  return values;
-}
+// Every complaint here is about the command line (exit 1).
+[[noreturn]] void bad(const std::string& message) { throw UsageError("", message); }
 
 std::string lower_extension(const std::string& path) {
   std::string e = std::filesystem::path(path).extension().string();
@@ -58,10 +38,14 @@ void add_scan_options(CLI::App* cmd, ScanSettings& s) {
   cmd->add_option("--format", s.format, "raw, tiff or hdf5 (default: by extension)")
       ->check(CLI::IsMember({"raw", "tiff", "hdf5"}));
   auto* raw = cmd->add_option_group("raw projections");
-  raw->add_option("--detector", s.detector, "C,R: detector columns and rows");
-  raw->add_option("--views", s.views, "Number of projections");
+  raw->add_option("--detector", s.detector, "C,R: detector columns and rows")->check(checked([](const std::string& v) {
+    for (double c : parse_numbers(v, "--detector", 2, 2))
+      if (c < 1 || c > 65536 || c != std::floor(c)) throw UsageError("--detector", "'" + v + "' is not C,R pixels");
+  }));
+  raw->add_option("--views", s.views, "Number of projections")->check(whole_number());
   raw->add_option("--sample", s.sample, "f32 or u16")->check(CLI::IsMember({"f32", "u16"}))->capture_default_str();
-  raw->add_option("--header-bytes", s.header_bytes, "Bytes to skip at the start of each raw file");
+  raw->add_option("--header-bytes", s.header_bytes, "Bytes to skip at the start of each raw file")
+      ->check(whole_number());
   auto* intensity = cmd->add_option_group("intensities");
   intensity->add_flag("--intensities", s.intensities, "Values are intensities, not line integrals (u16 always are)");
   intensity->add_option("--flat", s.flats, "Flat (bright) field file(s), averaged");
@@ -69,14 +53,22 @@ void add_scan_options(CLI::App* cmd, ScanSettings& s) {
   intensity->add_option("--incident", s.incident, "Unattenuated intensity, when there is no flat field");
   auto* geometry = cmd->add_option_group("geometry");
   geometry->add_option("--geometry", s.geometry_xml, "RTK geometry XML (ThreeDCircularProjectionGeometry)");
-  geometry->add_option("--pitch", s.pitch, "U or U,V: detector pixel pitch in mm")->required();
-  geometry->add_option("--projection-origin", s.projection_origin,
-                       "U,V: RTK projection image origin in mm (default: centred)");
+  geometry->add_option("--pitch", s.pitch, "U or U,V: detector pixel pitch in mm")
+      ->required()
+      ->check(checked([](const std::string& v) {
+        for (double p : parse_numbers(v, "--pitch", 1, 2))
+          if (!(p > 0)) throw UsageError("--pitch", "'" + v + "' is not positive");
+      }));
+  geometry
+      ->add_option("--projection-origin", s.projection_origin,
+                   "U,V: RTK projection image origin in mm (default: centred)")
+      ->check(checked([](const std::string& v) { parse_numbers(v, "--projection-origin", 2, 2); }));
   geometry->add_option("--sid", s.sid, "Source to isocentre distance, mm (without --geometry)");
   geometry->add_option("--sdd", s.sdd, "Source to detector distance, mm (without --geometry)");
   geometry->add_option("--arc", s.arc_deg, "Degrees covered by the views (without --geometry)")->capture_default_str();
   geometry->add_option("--first-angle", s.first_angle_deg, "Angle of the first view, degrees")->capture_default_str();
-  geometry->add_option("--offset", s.offset, "U,V: detector offset in mm (without --geometry)");
+  geometry->add_option("--offset", s.offset, "U,V: detector offset in mm (without --geometry)")
+      ->check(checked([](const std::string& v) { parse_numbers(v, "--offset", 2, 2); }));
 }
 
 OpenedScan open_scan(const ScanSettings& s) {

@@ -175,6 +175,7 @@ std::vector<std::uint8_t> slab_keep_mask(const float* values, const Dims& dims, 
 void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, const ImportOptions& options,
                    ImportReport& report) {
   Metadata metadata = options.metadata;
+  if (options.complete_metadata) options.complete_metadata(metadata);
   if (shape.has_geometry) {
     metadata.voxel_size = shape.voxel_size;
     metadata.origin = shape.origin;

@@ -39,6 +39,9 @@ struct ImportOptions {
   std::uint64_t slab_budget_bytes = 0;    // 0: the library's default
   std::shared_ptr<BlockEncoder> encoder;  // where blocks are compressed; null: here (ivol/block_encoder.hpp)
   Metadata metadata;                      // provenance etc.; geometry from the volume
+  // Called after the last slab, before the metadata is written: adds what was
+  // computed meanwhile (the sources' digests, tools/cli/fixity.hpp).
+  std::function<void(Metadata&)> complete_metadata;
   Progress progress;
 };
 

@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <memory>
@@ -254,20 +255,32 @@ class TiffSlabWriter final : public SlabWriter {
         // libtiff's predictor works in place; give it a copy.
         std::vector<std::uint8_t> strip(page + std::size_t{y0} * dims_[0] * sample,
                                         page + (std::size_t{y0} + rows) * dims_[0] * sample);
+        errno = 0;
         if (TIFFWriteEncodedStrip(tif, s, strip.data(), static_cast<tmsize_t>(strip.size())) < 0)
-          fail(path_, "cannot write slice " + std::to_string(z_) + ": " + last_tiff_message);
+          write_failed("cannot write slice " + std::to_string(z_));
       }
-      if (!TIFFWriteDirectory(tif)) fail(path_, "cannot write slice " + std::to_string(z_) + ": " + last_tiff_message);
+      errno = 0;
+      if (!TIFFWriteDirectory(tif)) write_failed("cannot write slice " + std::to_string(z_));
     }
   }
 
   void finish() override {
     if (z_ != dims_[2]) fail(path_, std::to_string(z_) + " of " + std::to_string(dims_[2]) + " slices written");
+    errno = 0;
+    if (!TIFFFlush(tif_.get())) write_failed("cannot finish the file");
     tif_.reset();
     staged_.commit();
   }
 
  private:
+  // A failed write is an I/O error (a full disk, a quota), with the system's
+  // reason when libtiff's write(2) left one.
+  [[noreturn]] void write_failed(const std::string& what) const {
+    const int e = errno;
+    throw Error(ErrorClass::Io, path_ + ": " + what + ": " + last_tiff_message +
+                                    (e != 0 ? std::string(" (") + std::strerror(e) + ")" : std::string()));
+  }
+
   std::string path_;
   Dims dims_;
   SampleType type_;

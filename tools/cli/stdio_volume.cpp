@@ -1,0 +1,143 @@
+#include "stdio_volume.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <vector>
+
+#include "ivol/error.hpp"
+
+namespace ivol::cli {
+namespace {
+
+void swap_bytes(std::uint8_t* data, std::size_t size, std::size_t width) {
+  if (width == 1) return;
+  for (std::size_t i = 0; i + width <= size; i += width) std::reverse(data + i, data + i + width);
+}
+
+// Reads until `size` bytes or the end of input; returns how many came.
+std::size_t read_fully(int fd, std::uint8_t* p, std::size_t size) {
+  std::size_t done = 0;
+  while (done < size) {
+    const ssize_t n = ::read(fd, p + done, size - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) throw Error(ErrorClass::Io, std::string("standard input: read failed: ") + std::strerror(errno));
+    if (n == 0) break;
+    done += static_cast<std::size_t>(n);
+  }
+  return done;
+}
+
+class StdinRawReader final : public convert::SlabReader {
+ public:
+  explicit StdinRawReader(const convert::RawLayout& layout) : layout_(layout) {
+    shape_.dims = layout.dims;
+    shape_.type = layout.type;
+    slice_ = std::uint64_t{layout.dims[0]} * layout.dims[1] * convert::sample_size(layout.type);
+    std::vector<std::uint8_t> header(static_cast<std::size_t>(std::min<std::uint64_t>(layout.header_bytes, 1 << 20)));
+    for (std::uint64_t left = layout.header_bytes; left > 0;) {
+      const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(left, header.size()));
+      if (read_fully(STDIN_FILENO, header.data(), n) != n)
+        throw Error(ErrorClass::InvalidArgument,
+                    "standard input: ended inside the " + std::to_string(layout.header_bytes) + "-byte header");
+      left -= n;
+    }
+  }
+
+  void read(std::uint32_t z0, std::uint32_t count, void* out) override {
+    if (z0 < held_first_)
+      throw Error(ErrorClass::InvalidArgument,
+                  "standard input: this conversion reads the volume twice (--keep threshold=otsu); give a file");
+    auto* dst = static_cast<std::uint8_t*>(out);
+    // Slices still held from the previous slab (a margin's overlap).
+    const std::uint32_t held_end = held_first_ + held_count_;
+    const std::uint32_t reuse = z0 < held_end ? std::min(held_end - z0, count) : 0;
+    if (reuse) std::memcpy(dst, held_.data() + (z0 - held_first_) * slice_, reuse * slice_);
+    if (z0 + reuse > next_) skip_to(z0 + reuse);
+    const std::uint64_t want = (count - reuse) * slice_;
+    const std::size_t got = read_fully(STDIN_FILENO, dst + reuse * slice_, want);
+    next_ = z0 + count;
+    if (got != want)
+      throw Error(ErrorClass::InvalidArgument, "standard input: ended " + std::to_string((z0 + reuse) * slice_ + got) +
+                                                   " bytes into the volume; " + dims_text() + " needs " +
+                                                   std::to_string(total_bytes()));
+    if (next_ == layout_.dims[2]) {
+      std::uint8_t extra = 0;
+      if (read_fully(STDIN_FILENO, &extra, 1) != 0)
+        throw Error(ErrorClass::InvalidArgument,
+                    "standard input: more bytes than " + dims_text() + " (" + std::to_string(total_bytes()) + ")");
+    }
+    held_.assign(dst, dst + count * slice_);
+    held_first_ = z0;
+    held_count_ = count;
+    if (layout_.big_endian) swap_bytes(dst, count * slice_, convert::sample_size(layout_.type));
+  }
+
+ private:
+  void skip_to(std::uint32_t z) {
+    std::vector<std::uint8_t> sink(slice_);
+    for (; next_ < z; ++next_)
+      if (read_fully(STDIN_FILENO, sink.data(), slice_) != slice_)
+        throw Error(ErrorClass::InvalidArgument, "standard input: ended before slice " + std::to_string(z));
+  }
+  std::uint64_t total_bytes() const { return slice_ * layout_.dims[2]; }
+  std::string dims_text() const {
+    return std::to_string(layout_.dims[0]) + "x" + std::to_string(layout_.dims[1]) + "x" +
+           std::to_string(layout_.dims[2]) + " " + convert::sample_type_name(layout_.type);
+  }
+
+  convert::RawLayout layout_;
+  std::uint64_t slice_ = 0;
+  std::uint32_t next_ = 0;          // the next slice standard input gives
+  std::vector<std::uint8_t> held_;  // the last slab, as read (before any byte swap)
+  std::uint32_t held_first_ = 0, held_count_ = 0;
+};
+
+class StdoutRawWriter final : public convert::SlabWriter {
+ public:
+  StdoutRawWriter(const convert::DenseVolume& shape, bool big_endian) : shape_(shape), big_endian_(big_endian) {}
+  void write(const void* samples, std::uint32_t count) override {
+    const std::size_t width = convert::sample_size(shape_.type);
+    const std::size_t bytes = std::size_t{count} * shape_.dims[0] * shape_.dims[1] * width;
+    const auto* p = static_cast<const std::uint8_t*>(samples);
+    std::vector<std::uint8_t> swapped;
+    if (big_endian_) {
+      swapped.assign(p, p + bytes);
+      swap_bytes(swapped.data(), bytes, width);
+      p = swapped.data();
+    }
+    for (std::size_t done = 0; done < bytes;) {
+      const ssize_t n = ::write(STDOUT_FILENO, p + done, bytes - done);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) throw Error(ErrorClass::Io, std::string("standard output: write failed: ") + std::strerror(errno));
+      done += static_cast<std::size_t>(n);
+    }
+    slices_ += count;
+  }
+  void finish() override {
+    if (slices_ != shape_.dims[2])
+      throw Error(ErrorClass::Io, "standard output: " + std::to_string(slices_) + " of " +
+                                      std::to_string(shape_.dims[2]) + " slices written");
+  }
+
+ private:
+  convert::DenseVolume shape_;
+  bool big_endian_;
+  std::uint32_t slices_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<convert::SlabReader> stdin_raw_slabs(const convert::RawLayout& layout) {
+  for (auto n : layout.dims)
+    if (n == 0) throw Error(ErrorClass::InvalidArgument, "--dims must give three positive sizes");
+  return std::make_unique<StdinRawReader>(layout);
+}
+
+std::unique_ptr<convert::SlabWriter> stdout_raw_slabs(const convert::DenseVolume& shape, bool big_endian) {
+  return std::make_unique<StdoutRawWriter>(shape, big_endian);
+}
+
+}  // namespace ivol::cli
