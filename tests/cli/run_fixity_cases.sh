@@ -79,6 +79,23 @@ for z, e in enumerate(t):  # natural order, as the TIFF reader reads them
     assert e["path"] == p and e["sha256"] == sums[p] and e["bytes"] == os.path.getsize(p), e
 PY
 
+# A reconstruction records its projections and geometry with their roles.
+"$IVOL" -q phantom thin-pipe --views 12 --detector 24 --radius 10 -o "$work/scan.raw"
+check recon "$IVOL" -q recon "$work/scan.raw" --geometry "$work/scan.xml" --detector 24,24 --views 12 --pitch 1.5 --size 8 --voxel 2 -o "$work/r.ivol"
+"$IVOL" info --json "$work/r.ivol" > "$work/r.json"
+sha256sum "$work/scan.raw" "$work/scan.xml" > "$work/sums3.txt"
+check recon-provenance $py - "$work" <<'PY'
+import sys, json
+d = sys.argv[1]
+sums = {p: h for h, p in (l.rstrip("\n").split("  ", 1) for l in open(d + "/sums3.txt"))}
+p = json.load(open(d + "/r.json"))["metadata"]["provenance"]
+roles = {e["role"]: e for e in p["sources"]}
+assert set(roles) == {"projections", "geometry"}, roles
+assert roles["projections"]["sha256"] == sums[d + "/scan.raw"] and roles["geometry"]["sha256"] == sums[d + "/scan.xml"]
+assert p["command"].startswith("ivol -q recon ") and "--size 8 --voxel 2" in p["command"], p["command"]
+PY
+expect_exit against-recon 0 "source digests match" -- "$IVOL" verify --against "$work/scan.raw" "$work/r.ivol"
+
 # verify --json: statuses, classes, size and sha256 of the whole file.
 cp "$work/v.ivol" "$work/damaged.ivol"
 size=$(stat -c %s "$work/damaged.ivol")
@@ -150,6 +167,12 @@ check stdin-convert bash -c "cat '$work/big.raw' | '$IVOL' -v convert - '$work/b
 "$IVOL" -q convert "$work/big-file.ivol" "$work/big-file.raw"
 "$IVOL" -q convert "$work/big-in.ivol" "$work/big-in.raw"
 check stdin-same-values cmp "$work/big-in.raw" "$work/big-file.raw"
+check stdin-digest $py -c "
+import json, subprocess, hashlib
+m = json.loads(subprocess.run(['$IVOL', 'info', '--json', '$work/big-in.ivol'], capture_output=True, check=True).stdout)
+[src] = m['metadata']['provenance']['sources']
+data = open('$work/big.raw', 'rb').read()
+assert src['path'] == '-' and src['bytes'] == len(data) and src['sha256'] == hashlib.sha256(data).hexdigest(), src"
 check stdin-lossless-same bash -c "cat '$raw' | '$IVOL' -q convert - '$work/in.ivol' --dims 24,20,16 --type u16 && '$IVOL' convert '$work/in.ivol' - | cmp - '$raw'"
 expect_exit stdin-short 2 "standard input: ended" -- bash -c "head -c 1000 '$raw' | '$IVOL' convert - '$work/short.ivol' --dims 24,20,16 --type u16"
 expect_exit stdin-otsu  2 "give a file" -- bash -c "cat '$work/big.raw' | '$IVOL' convert - '$work/otsu.ivol' ${big[*]} --keep threshold=otsu"

@@ -118,10 +118,14 @@ void print_text(const FileResult& r, bool quiet) {
     const AgainstReport& a = *r.against;
     for (const std::string& p : a.source_problems) std::cout << "  source: " << p << "\n";
     if (!a.values_skipped.empty()) std::cout << "  values not compared: " << a.values_skipped << "\n";
-    if (a.values_compared && !quiet && a.differing == 0)
-      std::cout << "  against " << a.source << ": " << a.voxels << " voxels "
-                << (a.tolerance > 0 ? "within the recorded largest error " + std::to_string(a.tolerance) : "equal")
-                << ", source digests match\n";
+    if (a.ok() && !quiet) {
+      std::cout << "  against " << a.source << ": ";
+      if (a.values_compared)
+        std::cout << a.voxels << " voxels "
+                  << (a.tolerance > 0 ? "within the recorded largest error " + std::to_string(a.tolerance) : "equal")
+                  << ", ";
+      std::cout << "source digests match\n";
+    }
     if (a.differing) {
       std::cout << "  values: " << a.differing << " of " << a.voxels << " voxels differ"
                 << (a.tolerance > 0 ? " by more than the recorded largest error" : "") << "; first:\n";

@@ -5,6 +5,7 @@
 #include <filesystem>
 
 #include "ivol/error.hpp"
+#include "stdio_volume.hpp"
 #include "tiff_io.hpp"
 
 namespace ivol::cli {
@@ -59,7 +60,10 @@ nlohmann::json SourceDigests::sources() {
   for (std::size_t i = 0; i < inputs_.size(); ++i) {
     const nlohmann::json& extra = i < fields_.size() ? fields_[i] : nlohmann::json::object();
     if (inputs_[i] == "-") {
+      // Hashed by the reader as it read (no second pass over a stream).
+      const StdinDigest d = stdin_digest();
       nlohmann::json entry = {{"path", "-"}};
+      if (!d.sha256.empty()) entry.update({{"bytes", d.bytes}, {"sha256", d.sha256}});
       entry.update(extra);
       list.push_back(entry);
       continue;

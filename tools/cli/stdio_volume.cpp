@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "ivol/error.hpp"
+#include "sha256.hpp"
 
 namespace ivol::cli {
 namespace {
@@ -16,6 +17,8 @@ void swap_bytes(std::uint8_t* data, std::size_t size, std::size_t width) {
   if (width == 1) return;
   for (std::size_t i = 0; i + width <= size; i += width) std::reverse(data + i, data + i + width);
 }
+
+StdinDigest finished_digest;  // standard input is one per process
 
 // Reads until `size` bytes or the end of input; returns how many came.
 std::size_t read_fully(int fd, std::uint8_t* p, std::size_t size) {
@@ -39,7 +42,7 @@ class StdinRawReader final : public convert::SlabReader {
     std::vector<std::uint8_t> header(static_cast<std::size_t>(std::min<std::uint64_t>(layout.header_bytes, 1 << 20)));
     for (std::uint64_t left = layout.header_bytes; left > 0;) {
       const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(left, header.size()));
-      if (read_fully(STDIN_FILENO, header.data(), n) != n)
+      if (take(header.data(), n) != n)
         throw Error(ErrorClass::InvalidArgument,
                     "standard input: ended inside the " + std::to_string(layout.header_bytes) + "-byte header");
       left -= n;
@@ -57,7 +60,7 @@ class StdinRawReader final : public convert::SlabReader {
     if (reuse) std::memcpy(dst, held_.data() + (z0 - held_first_) * slice_, reuse * slice_);
     if (z0 + reuse > next_) skip_to(z0 + reuse);
     const std::uint64_t want = (count - reuse) * slice_;
-    const std::size_t got = read_fully(STDIN_FILENO, dst + reuse * slice_, want);
+    const std::size_t got = take(dst + reuse * slice_, want);
     next_ = z0 + count;
     if (got != want)
       throw Error(ErrorClass::InvalidArgument, "standard input: ended " + std::to_string((z0 + reuse) * slice_ + got) +
@@ -65,9 +68,10 @@ class StdinRawReader final : public convert::SlabReader {
                                                    std::to_string(total_bytes()));
     if (next_ == layout_.dims[2]) {
       std::uint8_t extra = 0;
-      if (read_fully(STDIN_FILENO, &extra, 1) != 0)
+      if (take(&extra, 1) != 0)
         throw Error(ErrorClass::InvalidArgument,
                     "standard input: more bytes than " + dims_text() + " (" + std::to_string(total_bytes()) + ")");
+      finished_digest = {bytes_, sha_.hex()};
     }
     held_.assign(dst, dst + count * slice_);
     held_first_ = z0;
@@ -79,8 +83,15 @@ class StdinRawReader final : public convert::SlabReader {
   void skip_to(std::uint32_t z) {
     std::vector<std::uint8_t> sink(slice_);
     for (; next_ < z; ++next_)
-      if (read_fully(STDIN_FILENO, sink.data(), slice_) != slice_)
+      if (take(sink.data(), slice_) != slice_)
         throw Error(ErrorClass::InvalidArgument, "standard input: ended before slice " + std::to_string(z));
+  }
+  // Every byte of standard input goes through here, into the digest.
+  std::size_t take(std::uint8_t* p, std::size_t size) {
+    const std::size_t got = read_fully(STDIN_FILENO, p, size);
+    sha_.update(p, got);
+    bytes_ += got;
+    return got;
   }
   std::uint64_t total_bytes() const { return slice_ * layout_.dims[2]; }
   std::string dims_text() const {
@@ -93,6 +104,8 @@ class StdinRawReader final : public convert::SlabReader {
   std::uint32_t next_ = 0;          // the next slice standard input gives
   std::vector<std::uint8_t> held_;  // the last slab, as read (before any byte swap)
   std::uint32_t held_first_ = 0, held_count_ = 0;
+  Sha256 sha_;
+  std::uint64_t bytes_ = 0;
 };
 
 class StdoutRawWriter final : public convert::SlabWriter {
@@ -135,6 +148,8 @@ std::unique_ptr<convert::SlabReader> stdin_raw_slabs(const convert::RawLayout& l
     if (n == 0) throw Error(ErrorClass::InvalidArgument, "--dims must give three positive sizes");
   return std::make_unique<StdinRawReader>(layout);
 }
+
+StdinDigest stdin_digest() { return finished_digest; }
 
 std::unique_ptr<convert::SlabWriter> stdout_raw_slabs(const convert::DenseVolume& shape, bool big_endian) {
   return std::make_unique<StdoutRawWriter>(shape, big_endian);

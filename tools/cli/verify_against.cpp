@@ -108,9 +108,10 @@ void compare_values(const std::string& source, const nlohmann::json& how, Reader
   const auto volume = open_source(source, detect_format(source, format, "--against"), foreign);
   const convert::DenseVolume& shape = volume->shape();
   if (shape.dims != dims) {
-    r.values_skipped = "the source has " + std::to_string(shape.dims[0]) + "x" + std::to_string(shape.dims[1]) + "x" +
-                       std::to_string(shape.dims[2]) + " voxels, the file " + std::to_string(dims[0]) + "x" +
-                       std::to_string(dims[1]) + "x" + std::to_string(dims[2]);
+    r.source_problems.push_back(source + ": has " + std::to_string(shape.dims[0]) + "x" +
+                                std::to_string(shape.dims[1]) + "x" + std::to_string(shape.dims[2]) +
+                                " voxels, the file " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
+                                std::to_string(dims[2]));
     return;
   }
   const nlohmann::json& built = reader.metadata().structure;
@@ -167,11 +168,15 @@ AgainstReport verify_against(const std::string& source, const std::string& file)
   const nlohmann::json recorded = provenance.contains("sources") && provenance["sources"].is_array()
                                       ? provenance["sources"]
                                       : nlohmann::json::array();
-  const nlohmann::json* how = compare_digests(source, recorded, r.source_problems);
-  if (how)
-    compare_values(source, *how, reader, r);
-  else
-    r.values_skipped = "no recorded source says how to read " + source;
+  try {
+    const nlohmann::json* how = compare_digests(source, recorded, r.source_problems);
+    if (how)
+      compare_values(source, *how, reader, r);
+    else
+      r.values_skipped = "no recorded volume source says how to read " + source;
+  } catch (const std::exception& e) {
+    r.source_problems.push_back(e.what());
+  }
   return r;
 }
 
