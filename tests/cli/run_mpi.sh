@@ -36,22 +36,23 @@ nothing_left() { ! ls -A "$work" | grep -q -e "^$1\$" -e "^\.$1\.tmp-"; }
   echo "FAIL phantom"
   exit 1
 }
-recon=("$IVOL" -q recon p.h5 --geometry "$work/p.xml" --pitch 1.835 --size 24 --voxel 1.6)
+recon=("$IVOL" -q recon "$work/p.h5" --geometry "$work/p.xml" --pitch 1.835 --size 24 --voxel 1.6)
 cd "$work" || exit 1
+# A file records the command that wrote it (provenance.command): the single
+# process's reference runs the very same command, in a folder of its own.
+mkdir "$work/single"
+reference() { (cd "$work/single" && "$@" >/dev/null); }
 modes=(dense keep octree nested)
 declare -A mode_args=([dense]="" [keep]="--keep threshold=otsu,margin=2" [octree]="--structure octree"
   [nested]="--structure nested --nested-cell 8")
-for mode in "${modes[@]}"; do
-  # shellcheck disable=SC2086
-  "${recon[@]}" ${mode_args[$mode]} -o "one-$mode.ivol" || fail "single-$mode"
-done
-# Thin slabs (several per rank) on the ranks; the single process cuts its own.
+# Thin slabs (several per rank) on the ranks.
 for ranks in 2 4; do
   for mode in "${modes[@]}"; do
     name="mpi$ranks-$mode"
-    # shellcheck disable=SC2086
-    if "$MPIEXEC" --oversubscribe -np "$ranks" "${recon[@]}" ${mode_args[$mode]} --slab-slices 3 -o "$name.ivol" \
-      >"$work/log" 2>&1 && cmp "one-$mode.ivol" "$name.ivol" >>"$work/log" 2>&1; then
+    # shellcheck disable=SC2206
+    args=("${recon[@]}" ${mode_args[$mode]} --slab-slices 3 -o "$name.ivol")
+    if reference "${args[@]}" && "$MPIEXEC" --oversubscribe -np "$ranks" "${args[@]}" >"$work/log" 2>&1 &&
+      cmp "single/$name.ivol" "$name.ivol" >>"$work/log" 2>&1; then
       ok "$name same bytes as one process"
     else
       fail "$name same bytes as one process"
@@ -107,10 +108,11 @@ done
 # slabs (16 slices here, two of them): with thin slabs of tiny subtrees the
 # subtrees' records would outweigh their voxels.
 for mode in dense keep; do
-  # shellcheck disable=SC2086
-  "$MPIEXEC" --oversubscribe -np 2 "${recon[@]}" ${mode_args[$mode]} --json -o "bytes-$mode.ivol" \
-    >"$work/report.json" 2>"$work/log"
-  if cmp "one-$mode.ivol" "bytes-$mode.ivol" >>"$work/log" 2>&1 && /usr/bin/python3 -c "
+  # shellcheck disable=SC2206
+  args=("${recon[@]}" ${mode_args[$mode]} --json -o "bytes-$mode.ivol")
+  reference "${args[@]}"
+  "$MPIEXEC" --oversubscribe -np 2 "${args[@]}" >"$work/report.json" 2>"$work/log"
+  if cmp "single/bytes-$mode.ivol" "bytes-$mode.ivol" >>"$work/log" 2>&1 && /usr/bin/python3 -c "
 import json, sys
 r = json.load(open('$work/report.json'))['ranks']
 float32 = 24 * 24 * 4 * r[1]['slices_built']

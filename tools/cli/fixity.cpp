@@ -42,7 +42,10 @@ SourceDigests::SourceDigests(const std::vector<std::string>& inputs, const std::
     try {
       for (std::size_t i = 0; i < inputs_.size(); ++i)
         if (inputs_[i] != "-")  // standard input is read once, by the conversion
-          for (const std::string& file : input_files(inputs_[i])) digests_[i].push_back(digest_file(file));
+          for (const std::string& file : input_files(inputs_[i])) {
+            if (cancel_) return;
+            digests_[i].push_back(digest_file(file, &cancel_));
+          }
     } catch (...) {
       failure_ = std::current_exception();
     }
@@ -50,6 +53,7 @@ SourceDigests::SourceDigests(const std::vector<std::string>& inputs, const std::
 }
 
 SourceDigests::~SourceDigests() {
+  cancel_ = true;
   if (thread_.joinable()) thread_.join();
 }
 

@@ -38,14 +38,14 @@ std::string Sha256::hex() {
   return text;
 }
 
-FileDigest digest_file(const std::string& path) {
+FileDigest digest_file(const std::string& path, const std::atomic<bool>* cancel) {
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) throw Error(ErrorClass::Io, path + ": cannot open: " + std::strerror(errno));
   ::posix_fadvise(fd, 0, 0, POSIX_FADV_SEQUENTIAL);
   Sha256 sha;
   FileDigest d{path, 0, {}};
   std::vector<unsigned char> buffer(1 << 20);
-  while (true) {
+  while (!(cancel && cancel->load(std::memory_order_relaxed))) {
     const ssize_t n = ::read(fd, buffer.data(), buffer.size());
     if (n < 0 && errno == EINTR) continue;
     if (n < 0) {

@@ -2,6 +2,7 @@
 // ivol records and checks are the ones `sha256sum` prints.
 #pragma once
 
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -29,7 +30,8 @@ struct FileDigest {
   std::string sha256;
 };
 
-// Reads the whole file once. Throws ivol::Error (Io) naming the file.
-FileDigest digest_file(const std::string& path);
+// Reads the whole file once. Throws ivol::Error (Io) naming the file. With
+// `cancel`, stops early (the digest is then meaningless) once it is set.
+FileDigest digest_file(const std::string& path, const std::atomic<bool>* cancel = nullptr);
 
 }  // namespace ivol::cli
