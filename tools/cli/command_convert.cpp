@@ -68,7 +68,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
   geometry->add_option("--unit", s->unit, "Length unit, e.g. mm");
   cmd->add_option("--dataset", s->dataset, "HDF5 dataset")->capture_default_str();
   cmd->add_option("--grid", s->grid, "OpenVDB grid (default: the first float grid)");
-  cmd->add_option("--background", s->background, "OpenVDB output: background value");
+  cmd->add_option("--background", s->background, "OpenVDB output: background value")->check(number_in(-3.4e38, 3.4e38));
   auto* into = cmd->add_option_group("into .ivol");
   into->add_option("--encoding", s->encoding, "binary16, uint16 or float32 (default: lossless for the input)")
       ->check(CLI::IsMember({"binary16", "uint16", "float32"}));

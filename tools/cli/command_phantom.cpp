@@ -310,16 +310,22 @@ Runner add_phantom_command(CLI::App& app, const GlobalOptions& global) {
   auto* scan = cmd->add_option_group("scan");
   scan->add_option("--views", s->views, "Number of projections")->check(CLI::Range(1, 1 << 20))->capture_default_str();
   scan->add_option("--arc", s->arc, "Degrees the views span (360: full circle, first view not repeated)")
+      ->check(number_in(0, 360, true))
       ->capture_default_str();
-  scan->add_option("--first-angle", s->first_angle, "Gantry angle of the first view, degrees")->capture_default_str();
+  scan->add_option("--first-angle", s->first_angle, "Gantry angle of the first view, degrees")
+      ->check(number_in(-1e6, 1e6))
+      ->capture_default_str();
   scan->add_option("--detector", s->detector, "C[,R]: detector columns and rows")->capture_default_str();
   scan->add_option("--pitch", s->pitch,
                    "U[,V] mm per pixel (default: the detector sees the field's cylinder at SDD/SID, 10 % spare)");
-  scan->add_option("--sid", s->sid, "Source to isocentre, mm")->capture_default_str();
-  scan->add_option("--sdd", s->sdd, "Source to detector, mm")->capture_default_str();
+  scan->add_option("--sid", s->sid, "Source to isocentre, mm")->check(number_in(0, 1e9, true))->capture_default_str();
+  scan->add_option("--sdd", s->sdd, "Source to detector, mm")->check(number_in(0, 1e9, true))->capture_default_str();
   scan->add_option("--offset", s->offset, "U,V: detector offset, mm");
-  scan->add_option("--radius", s->radius, "Radius of the field the phantom is sized to, mm")->capture_default_str();
-  scan->add_option("--photons", s->photons, "Incident photons per pixel: Poisson noise (default: none)");
+  scan->add_option("--radius", s->radius, "Radius of the field the phantom is sized to, mm")
+      ->check(number_in(0, 1e9, true))
+      ->capture_default_str();
+  scan->add_option("--photons", s->photons, "Incident photons per pixel: Poisson noise (default: none)")
+      ->check(number_in(0, 1e30));
   scan->add_option("--seed", s->seed, "Seed of the noise")->check(whole_number())->capture_default_str();
   scan->add_option("--supersampling", s->supersampling, "Rays per pixel side (and samples per truth voxel side)")
       ->check(CLI::Range(1, 16))

@@ -294,7 +294,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember({"ram-lak", "shepp-logan", "cosine", "hamming", "hann"}))
       ->capture_default_str();
   fdk->add_option("--cutoff", s->cutoff, "Cut-off frequency as a fraction of Nyquist, (0, 1]")
-      ->check(CLI::Range(1e-6, 1.0))
+      ->check(number_in(0, 1, true))
       ->capture_default_str();
   fdk->add_option("--device", s->devices, "OpenCL device index (see ivol devices); repeat for several");
   fdk->add_option("--device-memory", s->device_memory_mib, "MiB of device memory to use (default: 80 % of it)")

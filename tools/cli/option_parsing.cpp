@@ -2,6 +2,8 @@
 
 #include <charconv>
 #include <cmath>
+#include <limits>
+#include <sstream>
 
 namespace ivol::cli {
 namespace {
@@ -145,6 +147,17 @@ CLI::Validator checked(const std::function<void(const std::string&)>& parse, con
 
 CLI::Validator whole_number() {
   return checked([](const std::string& v) { parse_count(v, ""); });
+}
+
+CLI::Validator number_in(double low, double high, bool open_low) {
+  return checked([=](const std::string& v) {
+    const double x = parse_number(v, "");
+    if (x < low || x > high || (open_low && x == low)) {
+      std::ostringstream range;
+      range << (open_low ? "(" : "[") << low << ", " << high << "]";
+      throw UsageError("", "'" + v + "' is not in " + range.str());
+    }
+  });
 }
 
 void apply_geometry(convert::DenseVolume& volume, const std::string& voxel_size, const std::string& origin,

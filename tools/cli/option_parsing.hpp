@@ -51,6 +51,9 @@ CLI::Validator checked(const std::function<void(const std::string&)>& parse, con
 // Digits only, for CLI11's unsigned options: CLI11 itself turns "-4" into
 // 2^64 - 4 for a 64-bit one.
 CLI::Validator whole_number();
+// A finite number within [low, high] (open at low when `open_low`): CLI11
+// itself takes "nan" and "inf" for a double, and NaN passes CLI::Range.
+CLI::Validator number_in(double low, double high, bool open_low = false);
 
 // Overrides a volume's geometry with the options given (empty: keep).
 void apply_geometry(convert::DenseVolume& volume, const std::string& voxel_size, const std::string& origin,

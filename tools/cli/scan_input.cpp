@@ -50,7 +50,8 @@ void add_scan_options(CLI::App* cmd, ScanSettings& s) {
   intensity->add_flag("--intensities", s.intensities, "Values are intensities, not line integrals (u16 always are)");
   intensity->add_option("--flat", s.flats, "Flat (bright) field file(s), averaged");
   intensity->add_option("--dark", s.darks, "Dark field file(s), averaged");
-  intensity->add_option("--incident", s.incident, "Unattenuated intensity, when there is no flat field");
+  intensity->add_option("--incident", s.incident, "Unattenuated intensity, when there is no flat field")
+      ->check(number_in(0, 1e30));
   auto* geometry = cmd->add_option_group("geometry");
   geometry->add_option("--geometry", s.geometry_xml, "RTK geometry XML (ThreeDCircularProjectionGeometry)");
   geometry->add_option("--pitch", s.pitch, "U or U,V: detector pixel pitch in mm")
@@ -63,10 +64,16 @@ void add_scan_options(CLI::App* cmd, ScanSettings& s) {
       ->add_option("--projection-origin", s.projection_origin,
                    "U,V: RTK projection image origin in mm (default: centred)")
       ->check(checked([](const std::string& v) { parse_numbers(v, "--projection-origin", 2, 2); }));
-  geometry->add_option("--sid", s.sid, "Source to isocentre distance, mm (without --geometry)");
-  geometry->add_option("--sdd", s.sdd, "Source to detector distance, mm (without --geometry)");
-  geometry->add_option("--arc", s.arc_deg, "Degrees covered by the views (without --geometry)")->capture_default_str();
-  geometry->add_option("--first-angle", s.first_angle_deg, "Angle of the first view, degrees")->capture_default_str();
+  geometry->add_option("--sid", s.sid, "Source to isocentre distance, mm (without --geometry)")
+      ->check(number_in(0, 1e9, true));
+  geometry->add_option("--sdd", s.sdd, "Source to detector distance, mm (without --geometry)")
+      ->check(number_in(0, 1e9, true));
+  geometry->add_option("--arc", s.arc_deg, "Degrees covered by the views (without --geometry)")
+      ->check(number_in(0, 360, true))
+      ->capture_default_str();
+  geometry->add_option("--first-angle", s.first_angle_deg, "Angle of the first view, degrees")
+      ->check(number_in(-1e6, 1e6))
+      ->capture_default_str();
   geometry->add_option("--offset", s.offset, "U,V: detector offset in mm (without --geometry)")
       ->check(checked([](const std::string& v) { parse_numbers(v, "--offset", 2, 2); }));
 }

@@ -38,3 +38,9 @@ bad opt-recon-memory-neg   1 "--memory"               -- "$IVOL" recon "$work/p.
 bad opt-recon-keep         1 "--keep"                 -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --keep threshold=otsu,margin=x -o "$out/x.ivol"
 bad opt-phantom-pitch      1 "--pitch"                -- "$IVOL" phantom thin-pipe --views 4 --detector 8 --pitch 1,2,3 -o "$out/x.h5"
 bad opt-phantom-geometry   1 "--geometry-out"         -- "$IVOL" phantom thin-pipe --views 4 --detector 8 --geometry-out "$out/g.txt" -o "$out/x.h5"
+bad opt-recon-arc-zero     1 "--arc"                  -- "$IVOL" recon "$work/q.h5" --sid 600 --sdd 1200 --arc 0 --pitch 1.5 "${grid[@]}" -o "$out/x.ivol"
+bad opt-recon-angle-nan    1 "--first-angle"          -- "$IVOL" recon "$work/q.h5" --sid 600 --sdd 1200 --first-angle nan --pitch 1.5 "${grid[@]}" -o "$out/x.ivol"
+bad opt-recon-cutoff-nan   1 "--cutoff"               -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --cutoff nan -o "$out/x.ivol"
+bad opt-recon-incident     1 "--incident"             -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --incident -1 -o "$out/x.ivol"
+bad opt-background-inf     1 "--background"           -- "$IVOL" convert "$work/v.ivol" "$out/x.vdb" --background inf
+bad opt-phantom-arc        1 "--arc"                  -- "$IVOL" phantom thin-pipe --views 4 --detector 8 --arc 400 -o "$out/x.h5"

@@ -15,6 +15,12 @@ mkdir "$o/dir.raw"
 mkfifo "$o/fifo.raw"
 ln "$work/v.ivol" "$o/hard.raw"  # a hard link of the input, named as raw output
 ln "$work/p.raw" "$o/p.ivol"     # a hard link of recon's input, named as its output
+# A device: a null device node of our own where we may make one (root), so
+# that a binary that gets this wrong replaces that node, not the system's
+# /dev/null (which an older ivol, run as root, did); else /dev/null itself,
+# which a user without that right cannot replace either.
+device=/dev/null
+mknod "$o/null.raw" c 1 3 2>/dev/null && device="$o/null.raw"
 # Every name in $o with its type, size and link target, and every file's digest.
 outputs_state() {
   find "$o" -mindepth 1 -printf '%P %y %s %l\n' | sort
@@ -41,7 +47,7 @@ keeps out-symlink          1 "is a symbolic link"  -- "$IVOL" convert "$work/v.i
 keeps out-dangling-symlink 1 "is a symbolic link"  -- "$IVOL" extract "$work/v.ivol" --box 0,0,0,4,4,4 -o "$o/dangling.raw" -f
 keeps out-directory-force  1 "is a directory"      -- "$IVOL" convert "$work/v.ivol" "$o/dir.raw" -f
 keeps out-fifo             1 "is a FIFO"           -- timeout 20 "$IVOL" convert "$work/v.ivol" "$o/fifo.raw" -f
-keeps out-device           1 "is a device"         -- "$IVOL" extract "$work/v.ivol" --box 0,0,0,4,4,4 -o /dev/null --to raw -f
+keeps out-device           1 "is a device"         -- "$IVOL" extract "$work/v.ivol" --box 0,0,0,4,4,4 -o "$device" --to raw -f
 keeps out-same-file        1 "is the input"        -- "$IVOL" convert "$o/target.raw" "$o/target.raw" --dims 16,16,16 -f
 keeps out-hard-link        1 "is the input"        -- "$IVOL" extract "$work/v.ivol" --box 0,0,0,4,4,4 -o "$o/hard.raw" -f
 keeps out-archive-as-raw   1 "named as ivol"       -- "$IVOL" convert "$o/b.ivol" "$o/b.ivol" --to raw -f
