@@ -31,6 +31,10 @@ run verify          verify "$work/v.ivol" "$work/t.ivol" "$work/h.ivol"
 run info            info --json "$work/v.ivol"
 run extract         extract "$work/v.ivol" --box 1,2,3,20,20,12 --level 0 -o "$work/e.raw"
 run slice           slice "$work/v.ivol" --axis y --index 5 --borders -o "$work/s.png"
+run verify-json     verify --json --manifest "$work/m.txt" "$work/v.ivol" "$work/t.ivol"
+run verify-against  verify --against "$work/v.raw" "$work/v.ivol"
+run stdout-raw      convert "$work/v.ivol" - --to raw
+run stdin-raw       convert - "$work/i.ivol" --dims 32,24,16 --keep threshold=50,margin=1 < "$work/v.raw"
 # Simulating a scan needs no OpenCL; reconstructing does, and PoCL's LLVM
 # compiler under memcheck takes minutes, so recon is covered by the
 # sanitizer build instead.
