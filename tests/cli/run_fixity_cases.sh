@@ -175,8 +175,9 @@ data = open('$work/big.raw', 'rb').read()
 assert src['path'] == '-' and src['bytes'] == len(data) and src['sha256'] == hashlib.sha256(data).hexdigest(), src"
 check stdin-lossless-same bash -c "cat '$raw' | '$IVOL' -q convert - '$work/in.ivol' --dims 24,20,16 --type u16 && '$IVOL' convert '$work/in.ivol' - | cmp - '$raw'"
 expect_exit stdin-short 2 "standard input: ended" -- bash -c "head -c 1000 '$raw' | '$IVOL' convert - '$work/short.ivol' --dims 24,20,16 --type u16"
+expect_exit stdin-long  2 "more bytes than" -- bash -c "cat '$raw' '$raw' | '$IVOL' convert - '$work/long.ivol' --dims 24,20,16 --type u16"
 expect_exit stdin-otsu  2 "give a file" -- bash -c "cat '$work/big.raw' | '$IVOL' convert - '$work/otsu.ivol' ${big[*]} --keep threshold=otsu"
-check stdin-failures-leave-nothing bash -c "! ls -A '$work' | grep -E 'short|otsu'"
+check stdin-failures-leave-nothing bash -c "! ls -A '$work' | grep -E 'short|long|otsu'"
 
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]

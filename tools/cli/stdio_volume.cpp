@@ -50,28 +50,32 @@ class StdinRawReader final : public convert::SlabReader {
   }
 
   void read(std::uint32_t z0, std::uint32_t count, void* out) override {
-    if (z0 < held_first_)
-      throw Error(ErrorClass::InvalidArgument,
-                  "standard input: this conversion reads the volume twice (--keep threshold=otsu); give a file");
     auto* dst = static_cast<std::uint8_t*>(out);
     // Slices still held from the previous slab (a margin's overlap).
     const std::uint32_t held_end = held_first_ + held_count_;
-    const std::uint32_t reuse = z0 < held_end ? std::min(held_end - z0, count) : 0;
+    const std::uint32_t reuse = z0 >= held_first_ && z0 < held_end ? std::min(held_end - z0, count) : 0;
+    const std::uint32_t first_new = z0 + reuse;
+    // Anything else already read is gone: a stream cannot be read twice.
+    if (reuse < count && first_new < next_)
+      throw Error(ErrorClass::InvalidArgument,
+                  "standard input: this conversion reads the volume twice (--keep threshold=otsu); give a file");
     if (reuse) std::memcpy(dst, held_.data() + (z0 - held_first_) * slice_, reuse * slice_);
-    if (z0 + reuse > next_) skip_to(z0 + reuse);
-    const std::uint64_t want = (count - reuse) * slice_;
-    const std::size_t got = take(dst + reuse * slice_, want);
-    next_ = z0 + count;
-    if (got != want)
-      throw Error(ErrorClass::InvalidArgument, "standard input: ended " + std::to_string((z0 + reuse) * slice_ + got) +
-                                                   " bytes into the volume; " + dims_text() + " needs " +
-                                                   std::to_string(total_bytes()));
-    if (next_ == layout_.dims[2]) {
-      std::uint8_t extra = 0;
-      if (take(&extra, 1) != 0)
-        throw Error(ErrorClass::InvalidArgument,
-                    "standard input: more bytes than " + dims_text() + " (" + std::to_string(total_bytes()) + ")");
-      finished_digest = {bytes_, sha_.hex()};
+    if (reuse < count) {
+      if (first_new > next_) skip_to(first_new);
+      const std::uint64_t want = (count - reuse) * slice_;
+      const std::size_t got = take(dst + reuse * slice_, want);
+      if (got != want)
+        throw Error(ErrorClass::InvalidArgument, "standard input: ended " + std::to_string(first_new * slice_ + got) +
+                                                     " bytes into the volume; " + dims_text() + " needs " +
+                                                     std::to_string(total_bytes()));
+      next_ = z0 + count;
+      if (next_ == layout_.dims[2]) {
+        std::uint8_t extra = 0;
+        if (take(&extra, 1) != 0)
+          throw Error(ErrorClass::InvalidArgument,
+                      "standard input: more bytes than " + dims_text() + " (" + std::to_string(total_bytes()) + ")");
+        finished_digest = {bytes_, sha_.hex()};
+      }
     }
     held_.assign(dst, dst + count * slice_);
     held_first_ = z0;
