@@ -96,6 +96,30 @@ assert p["command"].startswith("ivol -q recon ") and "--size 8 --voxel 2" in p["
 PY
 expect_exit against-recon 0 "source digests match" -- "$IVOL" verify --against "$work/scan.raw" "$work/r.ivol"
 
+# A folder of more than 10 000 slices: one entry (count, bytes, the SHA-256
+# of its "<sha256>  <name>" lines in natural order), checked by --against.
+$py - "$work" <<'PY'
+import sys, os, numpy as np, tifffile
+d = sys.argv[1] + "/many"
+os.mkdir(d)
+for z in range(10001):
+    tifffile.imwrite(f"{d}/s{z}.tif", np.array([[z % 65536]], np.uint16))
+PY
+check convert-many "$IVOL" -q convert "$work/many" "$work/many.ivol"
+"$IVOL" info --json "$work/many.ivol" > "$work/many.json"
+check provenance-many $py - "$work" <<'PY'
+import sys, json, os, hashlib
+d = sys.argv[1]
+[e] = json.load(open(d + "/many.json"))["metadata"]["provenance"]["sources"]
+names = [f"s{z}.tif" for z in range(10001)]
+lines = "".join(hashlib.sha256(open(f"{d}/many/{n}", "rb").read()).hexdigest() + "  " + n + "\n" for n in names)
+assert e["files"] == 10001 and e["bytes"] == sum(os.path.getsize(f"{d}/many/{n}") for n in names), e
+assert e["manifest_sha256"] == hashlib.sha256(lines.encode()).hexdigest() and e["path"] == d + "/many", e
+PY
+expect_exit against-many 0 "10001 voxels equal" -- "$IVOL" verify --against "$work/many" "$work/many.ivol"
+printf '\x07' | dd of="$work/many/s5000.tif" bs=1 seek=$(($(stat -c %s "$work/many/s5000.tif") - 1)) conv=notrunc status=none
+expect_exit against-many-changed 2 "differ from the recorded" -- "$IVOL" verify --against "$work/many" "$work/many.ivol"
+
 # verify --json: statuses, classes, size and sha256 of the whole file.
 cp "$work/v.ivol" "$work/damaged.ivol"
 size=$(stat -c %s "$work/damaged.ivol")
