@@ -296,7 +296,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
   fdk->add_option("--cutoff", s->cutoff, "Cut-off frequency as a fraction of Nyquist, (0, 1]")
       ->check(number_in(0, 1, true))
       ->capture_default_str();
-  fdk->add_option("--device", s->devices, "OpenCL device index (see ivol devices); repeat for several");
+  fdk->add_option("--device", s->devices, "OpenCL device index (see ivol devices); repeat for several")
+      ->check(whole_number());
   fdk->add_option("--device-memory", s->device_memory_mib, "MiB of device memory to use (default: 80 % of it)")
       ->check(whole_number());
   fdk->add_option("--slab-slices", s->slab_slices,

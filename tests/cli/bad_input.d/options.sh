@@ -44,3 +44,4 @@ bad opt-recon-cutoff-nan   1 "--cutoff"               -- "$IVOL" recon "$work/p.
 bad opt-recon-incident     1 "--incident"             -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --incident -1 -o "$out/x.ivol"
 bad opt-background-inf     1 "--background"           -- "$IVOL" convert "$work/v.ivol" "$out/x.vdb" --background inf
 bad opt-phantom-arc        1 "--arc"                  -- "$IVOL" phantom thin-pipe --views 4 --detector 8 --arc 400 -o "$out/x.h5"
+bad opt-recon-device-neg   1 "--device"               -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --device -1 -o "$out/x.ivol"
