@@ -17,6 +17,8 @@ packages=(
   libopenmpi-dev openmpi-bin
   # bench/run_peers.sh: HDF5's blosc filter, the zstd CLI, plots
   hdf5-filter-plugin-blosc-serial zstd python3-matplotlib
+  # cli_bad_input: OpenVDB grids at the edges of the index space
+  python3-openvdb
 )
 
 missing=()

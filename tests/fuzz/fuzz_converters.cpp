@@ -90,7 +90,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         reader = isolated ? open_hdf5_slabs(path) : open_hdf5_slabs_in_process(path);
         break;
       case 3:
-        (void)ivol::convert::read_vdb(path);
+        // A budget well inside libFuzzer's 2 GB RSS limit: a grid whose
+        // dense box exceeds it must be refused, not allocated.
+        (void)ivol::convert::read_vdb(path, "", std::uint64_t{256} << 20);
         return 0;
     }
     const ivol::convert::DenseVolume& shape = reader->shape();

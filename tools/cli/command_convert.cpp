@@ -11,6 +11,7 @@
 #include "option_parsing.hpp"
 #include "output_rules.hpp"
 #include "report.hpp"
+#include "sizes.hpp"
 
 namespace ivol::cli {
 namespace {
@@ -103,6 +104,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     foreign.grid = s->grid;
     foreign.background = s->background;
     foreign.big_endian = s->endian == "big";
+    foreign.memory_bytes = convert::checked_mul(s->memory_mib, std::uint64_t{1} << 20, "--memory");
     if (!s->dims.empty()) {
       foreign.raw.dims = parse_dims(s->dims, "--dims");
       foreign.raw_dims_given = true;
@@ -122,7 +124,8 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       options.byte_planes = s->codec == "zstd-planes";
       // A slab's samples are held about four times over (as read, as float,
       // the keep mask, the subtrees being built): give a quarter to the slab.
-      options.slab_budget_bytes = (s->memory_mib << 20) / 4;
+      options.slab_budget_bytes = foreign.memory_bytes / 4;
+      options.memory_bytes = foreign.memory_bytes;
       options.metadata.provenance = default_provenance();
       options.metadata.provenance["command"] = global.command_line;
       // Hashed on a thread of its own while the conversion reads the same files.
@@ -150,7 +153,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
                   << " voxels at full resolution\n";
       if (!global.quiet) {
         const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-        const std::uint64_t bytes = shape.voxel_count() * convert::sample_size(shape.type);
+        const std::uint64_t bytes = convert::slab_bytes(shape.dims, shape.dims[2], shape.type, s->input);
         if (!r.lossless) {
           std::string steps;
           if (r.encoding != convert::lossless_encoding(shape.type))
@@ -172,10 +175,16 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       const auto source = open_source(s->input, from, foreign);
       convert::DenseVolume shape = source->shape();
       apply_geometry(shape, s->voxel_size, s->origin, s->unit);
+      // Sized before the output exists: a refusal leaves nothing behind.
+      const std::uint64_t slice = convert::slab_bytes(shape.dims, 1, shape.type, s->input);
+      const std::uint64_t budget = convert::memory_budget(foreign.memory_bytes);
+      convert::require_within_budget(slice, budget, s->input + ": one slice of " + describe(shape));
+      const auto slab = static_cast<std::uint32_t>(
+          std::clamp<std::uint64_t>(std::min<std::uint64_t>(64ull << 20, budget) / slice, 1, shape.dims[2]));
+      std::vector<std::uint8_t> buffer;
+      convert::checked_resize(buffer, std::uint64_t{slab} * slice,
+                              s->input + ": a slab of " + std::to_string(slab) + " slices");
       const auto sink = create_sink(s->output, to, shape, foreign);
-      const std::uint64_t slice = std::uint64_t{shape.dims[0]} * shape.dims[1] * convert::sample_size(shape.type);
-      const auto slab = static_cast<std::uint32_t>(std::max<std::uint64_t>(1, (64ull << 20) / slice));
-      std::vector<std::uint8_t> buffer(std::min<std::uint64_t>(slab, shape.dims[2]) * slice);
       const auto progress = progress_bar("ivol convert", global.quiet);
       for (std::uint32_t z = 0; z < shape.dims[2]; z += slab) {
         const std::uint32_t n = std::min(slab, shape.dims[2] - z);

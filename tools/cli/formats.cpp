@@ -8,6 +8,7 @@
 #include "ivol/error.hpp"
 #include "option_parsing.hpp"
 #include "output_rules.hpp"
+#include "sizes.hpp"
 #include "stdio_volume.hpp"
 #include "tiff_io.hpp"
 #include "vdb_io.hpp"
@@ -18,14 +19,20 @@ namespace {
 // OpenVDB writes a whole grid: gather the slabs, write at the end.
 class VdbSink final : public convert::SlabWriter {
  public:
-  VdbSink(const std::string& path, const convert::DenseVolume& shape, float background)
+  VdbSink(const std::string& path, const convert::DenseVolume& shape, float background, std::uint64_t memory_bytes)
       : path_(path), volume_(shape), background_(background) {
     if (volume_.type != convert::SampleType::Float32)
       throw Error(ErrorClass::InvalidArgument, path + ": OpenVDB grids hold float32 values (--type f32)");
-    volume_.data.assign(volume_.voxel_count() * 4, 0);
+    // The whole volume is held, and once more as the floats write_vdb builds
+    // the grid from.
+    const std::string what = path + ": an OpenVDB grid of " + convert::dims_text(shape.dims);
+    const std::uint64_t bytes = convert::slab_bytes(shape.dims, shape.dims[2], shape.type, what);
+    convert::require_within_budget(convert::checked_mul(bytes, 2, what), convert::memory_budget(memory_bytes),
+                                   what + " (OpenVDB grids are written whole)");
+    convert::checked_resize(volume_.data, bytes, what);
   }
   void write(const void* samples, std::uint32_t count) override {
-    const std::size_t bytes = std::size_t{count} * volume_.dims[0] * volume_.dims[1] * 4;
+    const std::uint64_t bytes = convert::slab_bytes(volume_.dims, count, volume_.type, path_);
     std::memcpy(volume_.data.data() + at_, samples, bytes);
     at_ += bytes;
   }
@@ -116,9 +123,9 @@ std::unique_ptr<convert::SlabReader> open_source(const std::string& path, Format
     case Format::Tiff:
       return convert::open_tiff_slabs(path);
     case Format::Hdf5:
-      return convert::open_hdf5_slabs(path, options.dataset);
+      return convert::open_hdf5_slabs(path, options.dataset, nullptr, options.memory_bytes);
     case Format::Vdb:
-      return convert::memory_slabs(convert::read_vdb(path, options.grid).volume);
+      return convert::memory_slabs(convert::read_vdb(path, options.grid, options.memory_bytes).volume);
     case Format::Ivol:
       break;
   }
@@ -139,7 +146,7 @@ std::unique_ptr<convert::SlabWriter> create_sink(const std::string& path, Format
     case Format::Hdf5:
       return convert::create_hdf5_slabs(path, shape, options.dataset);
     case Format::Vdb:
-      return std::make_unique<VdbSink>(path, shape, options.background);
+      return std::make_unique<VdbSink>(path, shape, options.background, options.memory_bytes);
     case Format::Ivol:
       break;
   }

@@ -24,6 +24,7 @@ struct ForeignOptions {
   std::string dataset = "/exchange/data";  // HDF5
   std::string grid;                        // OpenVDB; empty: the first float grid
   float background = 0.0f;                 // OpenVDB output
+  std::uint64_t memory_bytes = 0;          // --memory; 0: the default (convert/sizes.hpp)
 };
 
 // The format written to `path`: `name` (--to) or the extension, which must

@@ -1,6 +1,7 @@
 // ivol: the command line of the ivol toolkit. Uses libformat's public API only.
 #include <iostream>
 #include <map>
+#include <new>
 
 #include "commands.hpp"
 #include "fixity.hpp"
@@ -67,6 +68,12 @@ int run(int argc, char** argv) {
     } catch (const ivol::Error& e) {
       std::cerr << "ivol " << sub->get_name() << ": error (" << ivol::error_class_name(e.error_class())
                 << "): " << e.what() << "\n";
+      return kExitFailure;
+    } catch (const std::bad_alloc&) {
+      // A last resort: sizes are weighed before they are allocated
+      // (tools/convert/sizes.hpp), so this is an allocation nobody foresaw.
+      std::cerr << "ivol " << sub->get_name() << ": error (" << ivol::error_class_name(ivol::ErrorClass::LimitExceeded)
+                << "): out of memory (std::bad_alloc) while running the command; --memory may bound it\n";
       return kExitFailure;
     } catch (const std::exception& e) {
       std::cerr << "ivol " << sub->get_name() << ": error: " << e.what() << "\n";

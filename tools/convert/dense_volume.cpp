@@ -3,6 +3,7 @@
 #include <cstring>
 
 #include "ivol/binary16.hpp"
+#include "sizes.hpp"
 
 namespace ivol::convert {
 
@@ -89,7 +90,8 @@ DenseVolume make_dense(const Dims& dims, SampleType type) {
   DenseVolume v;
   v.dims = dims;
   v.type = type;
-  v.data.resize(ivol::voxel_count(dims) * sample_size(type));
+  checked_resize(v.data, slab_bytes(dims, dims[2], type, "a dense volume of " + dims_text(dims)),
+                 "a dense volume of " + dims_text(dims) + " " + sample_type_name(type));
   return v;
 }
 

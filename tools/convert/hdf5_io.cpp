@@ -215,7 +215,8 @@ namespace {
 // Reads a dataset slab by slab with hyperslab selections.
 class Hdf5SlabReader final : public SlabReader {
  public:
-  Hdf5SlabReader(const std::string& path, const std::string& dataset_name, Hdf5SourceInfo* source)
+  Hdf5SlabReader(const std::string& path, const std::string& dataset_name, Hdf5SourceInfo* source,
+                 std::uint64_t memory_bytes)
       : context_(where(path, dataset_name)) {
     QuietHdf5Errors quiet;
     std::error_code ec;
@@ -223,7 +224,8 @@ class Hdf5SlabReader final : public SlabReader {
     if (H5Fis_hdf5(path.c_str()) <= 0) throw Error(ErrorClass::Malformed, path + ": not an HDF5 file");
     file_ = Handle(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
     if (!file_.valid()) throw Error(ErrorClass::Io, path + ": cannot open the HDF5 file" + hdf5_reason());
-    const Handle access = hdf5::access_caching_one_image(file_.get(), dataset_name.c_str());
+    const Handle access = hdf5::access_caching_one_image(
+        file_.get(), dataset_name.c_str(), static_cast<std::size_t>((memory_bytes ? memory_bytes : 1ull << 30) / 4));
     dataset_ = Handle(H5Dopen2(file_.get(), dataset_name.c_str(), access.get()), H5Dclose);
     if (!dataset_.valid())
       throw Error(ErrorClass::InvalidArgument,
@@ -261,8 +263,9 @@ class Hdf5SlabReader final : public SlabReader {
     H5Sselect_hyperslab(space_.get(), H5S_SELECT_SET, start, nullptr, extent, nullptr);
     Handle memory(H5Screate_simple(3, extent, nullptr), H5Sclose);
     if (H5Dread(dataset_.get(), mapping_.memory_type.get(), memory.get(), space_.get(), H5P_DEFAULT, out) < 0)
-      throw Error(ErrorClass::Malformed, context_ + ": cannot read slices " + std::to_string(z0) + " .. " +
-                                             std::to_string(z0 + count) + hdf5_reason());
+      throw Error(hdf5::out_of_memory() ? ErrorClass::LimitExceeded : ErrorClass::Malformed,
+                  context_ + ": cannot read slices " + std::to_string(z0) + " .. " + std::to_string(z0 + count) +
+                      hdf5_reason());
   }
 
  private:
@@ -276,8 +279,8 @@ class Hdf5SlabReader final : public SlabReader {
 }  // namespace
 
 std::unique_ptr<SlabReader> open_hdf5_slabs_in_process(const std::string& path, const std::string& dataset,
-                                                       Hdf5SourceInfo* source) {
-  return std::make_unique<Hdf5SlabReader>(path, dataset, source);
+                                                       Hdf5SourceInfo* source, std::uint64_t memory_bytes) {
+  return std::make_unique<Hdf5SlabReader>(path, dataset, source, memory_bytes);
 }
 
 DenseVolume read_hdf5(const std::string& path, const std::string& dataset_name, Hdf5SourceInfo* source) {
@@ -362,6 +365,11 @@ class Hdf5SlabWriter final : public SlabWriter {
       throw Error(ErrorClass::InvalidArgument, context_ + ": deflate level must be 0 to 9");
     for (std::uint32_t extent : shape.dims)
       if (extent == 0) throw Error(ErrorClass::InvalidArgument, context_ + ": the volume is empty");
+    // libhdf5's exit handler closes what is still open, and on a file whose
+    // flush failed (a full disk) it crashed after our error was printed.
+    // Every file is closed here, so the handler has nothing to do; this
+    // only takes effect before the library's first call.
+    H5dont_atexit();
     QuietHdf5Errors quiet;
     file_ = Handle(H5Fcreate(staged_.temp_path().c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose);
     if (!file_.valid()) throw Error(ErrorClass::Io, path + ": cannot create the HDF5 file" + hdf5_reason());
@@ -412,8 +420,14 @@ class Hdf5SlabWriter final : public SlabWriter {
       write_numbers(dataset_.get(), "origin", {o[2], o[1], o[0]}, context_);
       write_string(dataset_.get(), "unit", shape_.unit, context_);
     }
-    dataset_.reset();
+    // Chunks are compressed and written when the dataset closes and the
+    // file flushes, not in H5Dwrite: on a full disk these are the calls
+    // that fail, and unchecked they gave exit 0 and a file of zeros.
+    if (H5Dclose(dataset_.release()) < 0)
+      throw Error(ErrorClass::Io, context_ + ": cannot write the samples" + hdf5_reason());
     space_.reset();
+    if (H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0)
+      throw Error(ErrorClass::Io, path_ + ": cannot write the HDF5 file" + hdf5_reason());
     if (H5Fclose(file_.release()) < 0)
       throw Error(ErrorClass::Io, path_ + ": cannot finish the HDF5 file" + hdf5_reason());
     staged_.commit();

@@ -47,13 +47,18 @@ DenseVolume read_hdf5(const std::string& path, const std::string& dataset = "/ex
 // libhdf5 runs in a child process of its own (isolated_worker.hpp): a crash
 // of the library on a damaged file is an ivol::Error(Malformed) naming it,
 // not the end of ivol. read_hdf5 reads through it too.
+// The child may allocate `memory_bytes` (0: kDefaultChildMemory, 1 GiB)
+// besides the slab it returns; a file that needs more (a small dataset in
+// one huge compressed chunk) is ivol::Error(LimitExceeded).
 std::unique_ptr<SlabReader> open_hdf5_slabs(const std::string& path, const std::string& dataset = "/exchange/data",
-                                            Hdf5SourceInfo* source = nullptr);
+                                            Hdf5SourceInfo* source = nullptr, std::uint64_t memory_bytes = 0);
 // The same in this process, as the child runs it; for the fuzz harness,
-// which must see the library's crashes to tell them from ivol's.
+// which must see the library's crashes to tell them from ivol's. HDF5's
+// chunk cache takes at most a quarter of `memory_bytes` (0: 1 GiB).
 std::unique_ptr<SlabReader> open_hdf5_slabs_in_process(const std::string& path,
                                                        const std::string& dataset = "/exchange/data",
-                                                       Hdf5SourceInfo* source = nullptr);
+                                                       Hdf5SourceInfo* source = nullptr,
+                                                       std::uint64_t memory_bytes = 0);
 
 // Writes a chunked (64^3, clipped to the volume) dataset with the shuffle and
 // deflate filters (deflate_level 0: chunked, no filters), creating the groups

@@ -70,7 +70,7 @@ class QuietErrors {
 // cost. Returns a dataset access property list for H5Dopen2.
 constexpr std::size_t kMostChunkCache = std::size_t{256} << 20;
 
-inline Handle access_caching_one_image(hid_t file, const char* name) {
+inline Handle access_caching_one_image(hid_t file, const char* name, std::size_t most = kMostChunkCache) {
   Handle access(H5Pcreate(H5P_DATASET_ACCESS), H5Pclose);
   Handle probe(H5Dopen2(file, name, H5P_DEFAULT), H5Dclose);
   if (!probe.valid()) return access;
@@ -86,9 +86,26 @@ inline Handle access_caching_one_image(hid_t file, const char* name) {
   for (int a = 0; a < rank; ++a) bytes *= static_cast<double>(chunk[a]);
   for (int a = rank - 2; a < rank; ++a)
     if (chunk[a] > 0) bytes *= std::ceil(static_cast<double>(shape[a]) / static_cast<double>(chunk[a]));
-  const double cache = std::clamp(bytes, double{1 << 20}, static_cast<double>(kMostChunkCache));
+  const double cache = std::clamp(bytes, double{1 << 20},
+                                  std::max(double{1 << 20}, static_cast<double>(std::min(most, kMostChunkCache))));
   H5Pset_chunk_cache(access.get(), 12421, static_cast<std::size_t>(cache), 1.0);
   return access;
+}
+
+// Whether the failure on HDF5's error stack is a refused allocation (the
+// library's "memory allocation failed"), which is a limit, not a damaged
+// file.
+inline bool out_of_memory() {
+  bool found = false;
+  H5Ewalk2(
+      H5E_DEFAULT, H5E_WALK_UPWARD,
+      [](unsigned, const H5E_error2_t* error, void* out) -> herr_t {
+        if (error->maj_num == H5E_RESOURCE && (error->min_num == H5E_NOSPACE || error->min_num == H5E_CANTALLOC))
+          *static_cast<bool*>(out) = true;
+        return 0;
+      },
+      &found);
+  return found;
 }
 
 // The most specific description on HDF5's error stack, to explain a failure.

@@ -11,6 +11,7 @@
 #include "ivol/keep_mask.hpp"
 #include "ivol/streaming_writer.hpp"
 #include "ivol/writer.hpp"
+#include "sizes.hpp"
 
 namespace ivol::convert {
 
@@ -97,9 +98,12 @@ void to_float(const DenseVolume& shape, const std::uint8_t* samples, std::uint64
 // for the histogram.
 float streamed_otsu(SlabReader& source, std::uint32_t slab) {
   const DenseVolume& shape = source.shape();
-  const std::uint64_t slice = std::uint64_t{shape.dims[0]} * shape.dims[1];
-  std::vector<std::uint8_t> samples(slab * slice * sample_size(shape.type));
-  std::vector<float> values(slab * slice);
+  const std::uint64_t slice = slice_voxels(shape.dims, "Otsu's threshold");
+  const std::uint64_t held = std::uint64_t{std::min(slab, shape.dims[2])} * slice;
+  std::vector<std::uint8_t> samples;
+  checked_resize(samples, held * sample_size(shape.type), "Otsu's threshold: a slab of samples");
+  std::vector<float> values;
+  checked_resize(values, held, "Otsu's threshold: a slab as float32");
   double lo = INFINITY, hi = -INFINITY;
   std::vector<double> histogram(256, 0.0);
   for (int pass = 0; pass < 2; ++pass) {
@@ -121,6 +125,31 @@ float streamed_otsu(SlabReader& source, std::uint32_t slab) {
   }
   return otsu_threshold_from_histogram(histogram, lo, hi);
 }
+
+// Integer samples as the uint16 encoding's codes (sample - offset).
+void to_codes(SampleType type, const std::uint8_t* samples, std::uint64_t count, double offset, std::uint16_t* out) {
+  for (std::uint64_t i = 0; i < count; ++i) {
+    const std::uint8_t* p = samples + i * sample_size(type);
+    double v = 0;
+    if (type == SampleType::UInt8) {
+      v = *p;
+    } else if (type == SampleType::UInt16) {
+      std::uint16_t u;
+      std::memcpy(&u, p, 2);
+      v = u;
+    } else {
+      std::int16_t t;
+      std::memcpy(&t, p, 2);
+      v = t;
+    }
+    out[i] = static_cast<std::uint16_t>(v - offset);
+  }
+}
+
+// Bytes per voxel of a slab that the streaming writer holds besides the
+// samples given to it (its stored values and the subtrees it builds): about
+// 2 measured on a 16384^2 uint16 slice (1.39 GB peak in all); 4 leaves room.
+constexpr std::uint64_t kWriterBytesPerVoxel = 4;
 
 class ProgressTicker {
  public:
@@ -210,17 +239,32 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
   StreamingOctreeWriter writer(path, shape.dims, streaming);
   const std::uint32_t slab = writer.slab_slices();
   report.slab_slices = slab;
-  if (options.keep) report.threshold = options.keep->otsu ? streamed_otsu(source, slab) : options.keep->threshold;
   const unsigned margin = options.keep ? options.keep->margin : 0;
   const bool codes = build.encoding == ValueEncoding::UInt16;
 
   // One slab and the `margin` slices on either side, which the keep mask's
-  // growth needs.
-  const std::uint64_t slice = std::uint64_t{shape.dims[0]} * shape.dims[1];
-  const std::uint64_t most = std::uint64_t{std::min(slab + 2 * margin, shape.dims[2])} * slice;
-  std::vector<std::uint8_t> samples(most * sample_size(shape.type));
-  std::vector<float> values(codes && !options.keep ? 0 : most);
-  std::vector<std::uint16_t> code_values(codes ? slab * slice : 0);
+  // growth needs. The writer takes slabs of at least 8 slices whatever
+  // their size, so a huge slice (a 16384^2 TIFF page of a few hundred KB
+  // of deflate) is weighed against the budget before anything is read.
+  const std::string what = path + ": a slab of " + std::to_string(std::min(slab, shape.dims[2])) + " slices of " +
+                           std::to_string(shape.dims[0]) + "x" + std::to_string(shape.dims[1]) + " " +
+                           sample_type_name(shape.type);
+  const std::uint64_t slice = slice_voxels(shape.dims, what);
+  const std::uint64_t most =
+      checked_mul(std::min<std::uint64_t>(std::uint64_t{slab} + 2ull * margin, shape.dims[2]), slice, what);
+  const std::uint64_t slab_voxels = checked_mul(std::min(slab, shape.dims[2]), slice, what);
+  const bool need_values = !codes || options.keep;
+  std::uint64_t needed =
+      checked_mul(most, sample_size(shape.type) + (need_values ? 4 : 0) + (options.keep ? 1 : 0), what);
+  needed = checked_add(needed, checked_mul(slab_voxels, (codes ? 2 : 0) + kWriterBytesPerVoxel, what), what);
+  require_within_budget(needed, memory_budget(options.memory_bytes), what);
+  if (options.keep) report.threshold = options.keep->otsu ? streamed_otsu(source, slab) : options.keep->threshold;
+  std::vector<std::uint8_t> samples;
+  checked_resize(samples, most * sample_size(shape.type), what + " (samples)");
+  std::vector<float> values;
+  checked_resize(values, need_values ? most : 0, what + " (as float32)");
+  std::vector<std::uint16_t> code_values;
+  checked_resize(code_values, codes ? slab_voxels : 0, what + " (as uint16 codes)");
   ProgressTicker ticker(options.progress, shape.dims[2]);
   while (writer.next_slab_count() > 0) {
     const std::uint32_t z0 = writer.next_slab_first();
@@ -233,12 +277,8 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
     std::vector<std::uint8_t> keep;
     if (options.keep) keep = slab_keep_mask(values.data(), shape.dims, lo, hi, z0, n, report.threshold, margin);
     if (codes) {
-      DenseVolume view;
-      view.type = shape.type;
-      view.data.assign(samples.begin() + static_cast<std::ptrdiff_t>(centre * sample_size(shape.type)),
-                       samples.begin() + static_cast<std::ptrdiff_t>((centre + n * slice) * sample_size(shape.type)));
-      for (std::uint64_t i = 0; i < n * slice; ++i)
-        code_values[i] = static_cast<std::uint16_t>(view.value(i) - build.value_offset);
+      to_codes(shape.type, samples.data() + centre * sample_size(shape.type), n * slice, build.value_offset,
+               code_values.data());
       writer.add_slab(code_values.data(), options.keep ? keep.data() : nullptr);
     } else {
       writer.add_slab(values.data() + centre, options.keep ? keep.data() : nullptr);
@@ -315,7 +355,7 @@ class MemorySink final : public SlabWriter {
  public:
   explicit MemorySink(DenseVolume& volume) : volume_(volume) {}
   void write(const void* samples, std::uint32_t count) override {
-    const std::size_t bytes = std::size_t{count} * volume_.dims[0] * volume_.dims[1] * sample_size(volume_.type);
+    const std::uint64_t bytes = slab_bytes(volume_.dims, count, volume_.type, "an exported volume");
     std::memcpy(volume_.data.data() + at_, samples, bytes);
     at_ += bytes;
   }
@@ -331,9 +371,15 @@ class MemorySink final : public SlabWriter {
 void export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type, SlabWriter& sink,
                       const Progress& progress, std::vector<DamagedRegion>* damaged) {
   if (box.empty()) box = full_box(reader.layout().dims, lod);
-  const std::uint64_t slice = std::uint64_t{box.hi[0] - box.lo[0]} * (box.hi[1] - box.lo[1]);
-  // Slabs of about 64 MiB of float32, whole slices.
-  const auto slab = static_cast<std::uint32_t>(std::max<std::uint64_t>(1, (64ull << 20) / (4 * slice)));
+  // Slabs of about 64 MiB of float32, whole slices; a slice that alone
+  // exceeds the budget (a one-leaf file of 2^31 per side) is refused.
+  const Dims box_dims{box.hi[0] - box.lo[0], box.hi[1] - box.lo[1], box.hi[2] - box.lo[2]};
+  const std::string what =
+      "exporting " + dims_text(box_dims) + " voxels at level " + std::to_string(lod) + ": one slice";
+  const std::uint64_t slice = slice_voxels(box_dims, what);
+  const std::uint64_t slice_bytes = checked_mul(slice, 4 + sample_size(type), what);
+  require_within_budget(slice_bytes, kDefaultMemoryBytes, what + " as float32 and " + sample_type_name(type));
+  const auto slab = static_cast<std::uint32_t>(std::max<std::uint64_t>(1, (64ull << 20) / slice_bytes));
   ProgressTicker ticker(progress, box.hi[2] - box.lo[2]);
   std::vector<std::uint8_t> samples;
   for (std::uint32_t z = box.lo[2]; z < box.hi[2]; z += slab) {
@@ -352,7 +398,8 @@ void export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type, Sl
 DenseVolume export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type) {
   if (box.empty()) box = full_box(reader.layout().dims, lod);
   DenseVolume out = export_shape(reader, box, lod, type);
-  out.data.resize(out.voxel_count() * sample_size(type));
+  checked_resize(out.data, slab_bytes(out.dims, out.dims[2], type, "an exported volume"),
+                 "exporting " + dims_text(out.dims) + " voxels into memory");
   MemorySink sink(out);
   export_from_ivol(reader, box, lod, type, sink);
   return out;

@@ -9,6 +9,7 @@
 #include <fstream>
 
 #include "ivol/error.hpp"
+#include "sizes.hpp"
 #include "slab_io.hpp"
 #include "staged_file.hpp"
 
@@ -32,7 +33,10 @@ class RawSlabReader final : public SlabReader {
       if (n == 0) throw Error(ErrorClass::InvalidArgument, path + ": --dims must give three positive sizes");
     struct stat st {};
     if (::stat(path.c_str(), &st) != 0) throw Error(ErrorClass::Io, path + ": cannot open: " + std::strerror(errno));
-    const std::uint64_t expected = layout.header_bytes + voxel_count(layout.dims) * sample_size(layout.type);
+    // Checked: 2^31 x 2^31 x 4 bytes wraps to 0 and would match an empty file.
+    const std::uint64_t expected = checked_add(
+        layout.header_bytes, slab_bytes(layout.dims, layout.dims[2], layout.type, path + ": --dims and --type"),
+        path + ": --header-bytes and the samples");
     if (static_cast<std::uint64_t>(st.st_size) != expected)
       throw Error(ErrorClass::InvalidArgument,
                   path + ": the file has " + std::to_string(st.st_size) + " bytes, but " +
@@ -46,7 +50,7 @@ class RawSlabReader final : public SlabReader {
   }
 
   void read(std::uint32_t z0, std::uint32_t count, void* out) override {
-    const std::uint64_t slice = std::uint64_t{layout_.dims[0]} * layout_.dims[1] * sample_size(layout_.type);
+    const std::uint64_t slice = slab_bytes(layout_.dims, 1, layout_.type, path_);
     in_.seekg(static_cast<std::streamoff>(layout_.header_bytes + z0 * slice));
     in_.read(static_cast<char*>(out), static_cast<std::streamsize>(count * slice));
     if (!in_) throw Error(ErrorClass::Io, path_ + ": read failed at slice " + std::to_string(z0));
@@ -70,7 +74,7 @@ class RawSlabWriter final : public SlabWriter {
     if (fd_ >= 0) ::close(fd_);
   }
   void write(const void* samples, std::uint32_t count) override {
-    const std::size_t bytes = std::size_t{count} * shape_.dims[0] * shape_.dims[1] * sample_size(shape_.type);
+    const std::uint64_t bytes = slab_bytes(shape_.dims, count, shape_.type, path_);
     std::vector<std::uint8_t> swapped;
     const auto* p = static_cast<const std::uint8_t*>(samples);
     if (big_endian_) {
@@ -117,7 +121,7 @@ class MemorySlabReader final : public SlabReader {
     shape_.has_geometry = volume_.has_geometry;
   }
   void read(std::uint32_t z0, std::uint32_t count, void* out) override {
-    const std::size_t slice = std::size_t{volume_.dims[0]} * volume_.dims[1] * sample_size(volume_.type);
+    const std::uint64_t slice = slab_bytes(volume_.dims, 1, volume_.type, "a volume in memory");
     std::memcpy(out, volume_.data.data() + z0 * slice, count * slice);
   }
 

@@ -10,6 +10,7 @@
 #include <memory>
 
 #include "ivol/error.hpp"
+#include "sizes.hpp"
 #include "slab_io.hpp"
 #include "staged_file.hpp"
 
@@ -83,7 +84,18 @@ void read_page(TIFF* tif, const PageFormat& f, std::uint8_t* out, const std::str
     std::uint32_t tw = 0, th = 0;
     TIFFGetField(tif, TIFFTAG_TILEWIDTH, &tw);
     TIFFGetField(tif, TIFFTAG_TILELENGTH, &th);
-    std::vector<std::uint8_t> tile(static_cast<std::size_t>(TIFFTileSize(tif)));
+    if (tw == 0 || th == 0) fail(where, "a tile of " + std::to_string(tw) + "x" + std::to_string(th) + " pixels");
+    // One tile at a time, copied into the rows it covers; the tile's size
+    // comes from the file, so it is weighed before it is allocated.
+    const std::string what = where + ": a tile of " + std::to_string(tw) + "x" + std::to_string(th) + " " +
+                             sample_type_name(f.type) + " samples";
+    const std::uint64_t tile_bytes = slab_bytes(Dims{tw, th, 1}, 1, f.type, what);
+    require_within_budget(tile_bytes, kDefaultMemoryBytes, what);
+    if (static_cast<std::uint64_t>(TIFFTileSize64(tif)) != tile_bytes)
+      fail(where, "the tile size " + std::to_string(TIFFTileSize64(tif)) + " does not match " + std::to_string(tw) +
+                      "x" + std::to_string(th) + " samples of " + sample_type_name(f.type));
+    std::vector<std::uint8_t> tile;
+    checked_resize(tile, tile_bytes, what);
     for (std::uint32_t y0 = 0; y0 < f.height; y0 += th)
       for (std::uint32_t x0 = 0; x0 < f.width; x0 += tw) {
         if (TIFFReadTile(tif, tile.data(), x0, y0, 0, 0) < 0) fail(where, "cannot read a tile: " + last_tiff_message);
@@ -108,7 +120,11 @@ void read_page(TIFF* tif, const PageFormat& f, std::uint8_t* out, const std::str
 
 TiffHandle open_tiff(const std::string& path, const char* mode) {
   install_handlers();
-  TiffHandle tif(TIFFOpen(path.c_str(), mode));
+  // libtiff allocates what a file's tags ask for (strip and tag buffers);
+  // no single allocation may exceed what a conversion holds by default.
+  std::unique_ptr<TIFFOpenOptions, void (*)(TIFFOpenOptions*)> options(TIFFOpenOptionsAlloc(), TIFFOpenOptionsFree);
+  if (options) TIFFOpenOptionsSetMaxSingleMemAlloc(options.get(), static_cast<tmsize_t>(kDefaultMemoryBytes));
+  TiffHandle tif(TIFFOpenExt(path.c_str(), mode, options.get()));
   if (!tif) fail(path, "not a readable TIFF file (" + last_tiff_message + ")");
   return tif;
 }
@@ -183,15 +199,25 @@ class TiffSlabReader final : public SlabReader {
   }
 
   void read(std::uint32_t z0, std::uint32_t count, void* out) override {
-    const std::size_t page_bytes = std::size_t{format_.width} * format_.height * sample_size(format_.type);
+    const std::uint64_t page_bytes =
+        slab_bytes(Dims{format_.width, format_.height, 1}, 1, format_.type, files_.front() + ": a page");
     for (std::uint32_t z = z0; z < z0 + count; ++z) {
       const Page& page = pages_.at(z);
       if (!open_ || open_file_ != page.file) {
         open_ = open_tiff(files_[page.file], "r");
         open_file_ = page.file;
       }
-      if (TIFFCurrentDirectory(open_.get()) != page.directory && !TIFFSetDirectory(open_.get(), page.directory))
-        fail(files_[page.file], "cannot find page " + std::to_string(page.directory));
+      // Pages are read in order: the next one is the next directory in the
+      // chain. TIFFSetDirectory walks the chain from the first page, so it
+      // is kept for going back (a slab's halo); with it for every page, a
+      // file of 100 000 pages took minutes.
+      const tdir_t current = TIFFCurrentDirectory(open_.get());
+      if (current != page.directory) {
+        const bool next = page.directory == current + 1 && TIFFReadDirectory(open_.get()) &&
+                          TIFFCurrentDirectory(open_.get()) == page.directory;
+        if (!next && !TIFFSetDirectory(open_.get(), page.directory))
+          fail(files_[page.file], "cannot find page " + std::to_string(page.directory));
+      }
       read_page(open_.get(), format_, static_cast<std::uint8_t*>(out) + (z - z0) * page_bytes,
                 files_[page.file] + " page " + std::to_string(z));
     }
@@ -215,7 +241,7 @@ class TiffSlabWriter final : public SlabWriter {
       : path_(path), dims_(shape.dims), type_(shape.type), compress_(compress), staged_(path) {
     install_handlers();
     // BigTIFF well before the 4 GiB limit of classic TIFF.
-    const bool big = voxel_count(dims_) * sample_size(type_) > (3ull << 30);
+    const bool big = slab_bytes(dims_, dims_[2], type_, path) > (3ull << 30);
     tif_.reset(TIFFOpen(staged_.temp_path().c_str(), big ? "w8" : "w"));
     if (!tif_) fail(path, "cannot write: " + last_tiff_message);
   }
@@ -226,8 +252,8 @@ class TiffSlabWriter final : public SlabWriter {
     std::uint16_t format = SAMPLEFORMAT_UINT;
     if (type_ == SampleType::Int16) format = SAMPLEFORMAT_INT;
     if (type_ == SampleType::Float16 || type_ == SampleType::Float32) format = SAMPLEFORMAT_IEEEFP;
-    const std::uint32_t rows_per_strip =
-        std::max<std::uint32_t>(1, static_cast<std::uint32_t>((64u << 10) / (dims_[0] * sample)));
+    const auto rows_per_strip =
+        static_cast<std::uint32_t>(std::max<std::uint64_t>(1, (64u << 10) / (std::uint64_t{dims_[0]} * sample)));
     for (std::uint32_t n = 0; n < count; ++n, ++z_) {
       TIFF* tif = tif_.get();
       TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, dims_[0]);
@@ -266,6 +292,8 @@ class TiffSlabWriter final : public SlabWriter {
 
   void finish() override {
     if (z_ != dims_[2]) fail(path_, std::to_string(z_) + " of " + std::to_string(dims_[2]) + " slices written");
+    // TIFFClose reports nothing; whatever is still buffered is written here,
+    // where a failure can still be seen.
     errno = 0;
     if (!TIFFFlush(tif_.get())) write_failed("cannot finish the file");
     tif_.reset();

@@ -1,16 +1,22 @@
 #include "vdb_io.hpp"
 
+#include <openvdb/io/Archive.h>
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Dense.h>
 #include <openvdb/tools/Prune.h>
+#include <sys/stat.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 
 #include "ivol/error.hpp"
+#include "sizes.hpp"
 #include "staged_file.hpp"
 
 namespace ivol::convert {
@@ -103,36 +109,64 @@ openvdb::FloatGrid::Ptr choose_float_grid(openvdb::io::File& file, const std::st
   }
 }
 
-// Marks active voxels, and which of them an active tile covers, over the
-// dense box.
-void mark_active(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& box, VdbVolume& out) {
-  const openvdb::Coord min = box.min();
-  const std::uint64_t nx = out.volume.dims[0], ny = out.volume.dims[1];
-  auto index = [&](const openvdb::Coord& c) {
-    return (static_cast<std::uint64_t>(c.z() - min.z()) * ny + static_cast<std::uint64_t>(c.y() - min.y())) * nx +
-           static_cast<std::uint64_t>(c.x() - min.x());
+// Copies the grid's values over the dense box (the background where the
+// tree holds nothing) and marks the active voxels, and which of them an
+// active tile covers. Coordinates are widened to 64 bits: a grid may sit
+// anywhere in OpenVDB's 32-bit index space, and tools::copyToDense loops
+// forever near INT_MIN and writes out of bounds when the box spans 2^31.
+void copy_values(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& box, VdbVolume& out) {
+  const std::int64_t min[3] = {box.min().x(), box.min().y(), box.min().z()};
+  const std::int64_t max[3] = {box.max().x(), box.max().y(), box.max().z()};
+  const std::int64_t nx = out.volume.dims[0], ny = out.volume.dims[1];
+  auto index = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
+    return static_cast<std::uint64_t>(((z - min[2]) * ny + (y - min[1])) * nx + (x - min[0]));
   };
-  for (auto value = grid.cbeginValueOn(); value; ++value) {
+  auto* dense = reinterpret_cast<float*>(out.volume.data.data());
+  std::fill_n(dense, out.volume.voxel_count(), grid.background());
+  for (auto value = grid.cbeginValueAll(); value; ++value) {
+    const bool on = value.isValueOn();
     if (value.isVoxelValue()) {
-      out.active[index(value.getCoord())] = 1;
+      const openvdb::Coord c = value.getCoord();
+      if (!box.isInside(c)) continue;
+      const std::uint64_t i = index(c.x(), c.y(), c.z());
+      dense[i] = *value;
+      out.active[i] = on;
       continue;
     }
     openvdb::CoordBBox tile;
     value.getBoundingBox(tile);
-    tile.intersect(box);
-    for (int z = tile.min().z(); z <= tile.max().z(); ++z)
-      for (int y = tile.min().y(); y <= tile.max().y(); ++y) {
-        const std::uint64_t row = index(openvdb::Coord(tile.min().x(), y, z));
-        const std::uint64_t length = static_cast<std::uint64_t>(tile.max().x() - tile.min().x() + 1);
-        std::fill_n(out.active.begin() + static_cast<std::ptrdiff_t>(row), length, 1);
-        std::fill_n(out.from_tile.begin() + static_cast<std::ptrdiff_t>(row), length, 1);
+    std::int64_t lo[3], hi[3];
+    bool inside = true;
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::max<std::int64_t>(tile.min()[a], min[a]);
+      hi[a] = std::min<std::int64_t>(tile.max()[a], max[a]);
+      inside = inside && lo[a] <= hi[a];
+    }
+    if (!inside) continue;
+    const auto length = static_cast<std::ptrdiff_t>(hi[0] - lo[0] + 1);
+    for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
+      for (std::int64_t y = lo[1]; y <= hi[1]; ++y) {
+        const auto row = static_cast<std::ptrdiff_t>(index(lo[0], y, z));
+        std::fill_n(dense + row, length, *value);
+        std::fill_n(out.active.begin() + row, length, on);
+        std::fill_n(out.from_tile.begin() + row, length, on);
       }
   }
 }
 
+// Writes as io::File::write does, the same bytes, but to a stream of ours
+// whose state is checked: File::write ignores write errors, and on a full
+// disk left a truncated file that was then renamed into place.
+class CheckedArchive final : public openvdb::io::Archive {
+ public:
+  void write_to(std::ostream& stream, const openvdb::GridCPtrVec& grids) const {
+    Archive::write(stream, grids, /*seekable=*/true);
+  }
+};
+
 }  // namespace
 
-VdbVolume read_vdb(const std::string& path, const std::string& grid_name) {
+VdbVolume read_vdb(const std::string& path, const std::string& grid_name, std::uint64_t memory_bytes) {
   openvdb::initialize();
   openvdb::io::File file(path);
   open_vdb(file, path);
@@ -147,32 +181,37 @@ VdbVolume read_vdb(const std::string& path, const std::string& grid_name) {
 
   const openvdb::CoordBBox box = grid->evalActiveVoxelBoundingBox();
   if (box.empty()) throw Error(ErrorClass::InvalidArgument, context + " has no active voxel: nothing to convert");
-  const openvdb::Coord extent = box.dim();
-  const Dims dims{static_cast<std::uint32_t>(extent.x()), static_cast<std::uint32_t>(extent.y()),
-                  static_cast<std::uint32_t>(extent.z())};
+  // Extents in 64 bits: Coord's 32-bit dim() wraps to 0 for a box spanning
+  // 2^32 voxels.
+  Dims dims{};
+  std::string span;
+  for (int a = 0; a < 3; ++a) {
+    const std::int64_t extent = std::int64_t{box.max()[a]} - std::int64_t{box.min()[a]} + 1;
+    span += std::string(a ? ", " : "") + std::to_string(box.min()[a]) + ".." + std::to_string(box.max()[a]);
+    if (extent > std::numeric_limits<std::uint32_t>::max())
+      throw Error(ErrorClass::LimitExceeded, context + ": the active voxels span " + std::to_string(extent) +
+                                                 " voxels along " + std::string(1, "xyz"[a]) +
+                                                 "; a dense volume holds at most 2^32 - 1 per axis");
+    dims[a] = static_cast<std::uint32_t>(extent);
+  }
   // Geometry first: a refused transform should not cost a large allocation.
   DenseVolume geometry;
   read_geometry(grid->transform(), box.min(), context, geometry);
   if (const auto unit = grid->getMetadata<openvdb::StringMetadata>("unit")) geometry.unit = unit->value();
 
-  try {
-    out.volume = make_dense(dims, SampleType::Float32);
-    out.active.assign(out.volume.voxel_count(), 0);
-    out.from_tile.assign(out.volume.voxel_count(), 0);
-  } catch (const std::exception&) {  // bad_alloc, or length_error past the address space
-    throw Error(ErrorClass::LimitExceeded, context + ": the active bounding box, " + std::to_string(dims[0]) + "x" +
-                                               std::to_string(dims[1]) + "x" + std::to_string(dims[2]) +
-                                               " voxels, does not fit in memory as a dense volume");
-  }
+  // The grid is read whole: float32 samples and two flags per voxel.
+  const std::string what = context + ": the active bounding box (" + span + "), " + dims_text(dims) + " voxels,";
+  const std::uint64_t voxels = volume_voxels(dims, what);
+  require_within_budget(checked_mul(voxels, 6, what), memory_budget(memory_bytes), what + " as a dense volume");
+  out.volume = make_dense(dims, SampleType::Float32);
+  checked_resize(out.active, voxels, what + " (active flags)");
+  checked_resize(out.from_tile, voxels, what + " (tile flags)");
   out.volume.voxel_size = geometry.voxel_size;
   out.volume.origin = geometry.origin;
   out.volume.unit = geometry.unit;
   out.volume.has_geometry = true;
-  // The byte buffer comes from operator new, aligned for float; OpenVDB
-  // writes the samples straight into it.
-  DenseFloats dense(box, reinterpret_cast<float*>(out.volume.data.data()));
-  openvdb::tools::copyToDense(*grid, dense);
-  mark_active(*grid, box, out);
+  // The byte buffer comes from operator new, aligned for float.
+  copy_values(*grid, box, out);
   return out;
 }
 
@@ -220,13 +259,30 @@ void write_vdb(const DenseVolume& volume, const std::string& path, float backgro
   values = {};
 
   StagedFile staged(path);
+  std::ofstream stream(staged.temp_path(), std::ios::binary | std::ios::trunc);
+  if (!stream) throw Error(ErrorClass::Io, context + ": cannot open a temporary file: " + std::strerror(errno));
   try {
-    openvdb::io::File file(staged.temp_path());
-    file.write({grid});
-    file.close();
+    CheckedArchive().write_to(stream, {grid});
   } catch (const openvdb::Exception& e) {
     throw Error(ErrorClass::Io, context + ": cannot write (OpenVDB: " + e.what() + ")");
   }
+  // A stream that failed makes no more system calls, so errno still holds
+  // the reason of the write that failed (ENOSPC on a full disk).
+  int failure = stream ? 0 : errno;
+  if (stream) {
+    errno = 0;
+    stream.flush();
+    if (!stream) failure = errno;
+  }
+  if (!stream) throw Error(ErrorClass::Io, context + ": cannot write: " + std::strerror(failure ? failure : EIO));
+  const std::streamoff written = stream.tellp();
+  stream.close();
+  if (stream.fail()) throw Error(ErrorClass::Io, context + ": cannot close the file: " + std::strerror(errno));
+  // The file must hold every byte the archive wrote.
+  struct stat st {};
+  if (::stat(staged.temp_path().c_str(), &st) != 0 || st.st_size != written)
+    throw Error(ErrorClass::Io, context + ": the file holds " + std::to_string(st.st_size) + " bytes of the " +
+                                    std::to_string(written) + " written");
   staged.commit();
 }
 

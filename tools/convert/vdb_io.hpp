@@ -37,8 +37,10 @@ struct VdbVolume {
 // grid), InvalidArgument (no such grid or no float grid: the message lists
 // the grids and their types; a grid that is not float; a transform that is
 // not an axis-aligned linear one; a grid with no active voxel), LimitExceeded
-// (the bounding box is too large for memory).
-VdbVolume read_vdb(const std::string& path, const std::string& grid_name = "");
+// (the active voxels span more than 2^32 - 1 along an axis, or their
+// bounding box, held densely at 6 bytes a voxel, exceeds `memory_bytes`;
+// 0: kDefaultMemoryBytes of sizes.hpp).
+VdbVolume read_vdb(const std::string& path, const std::string& grid_name = "", std::uint64_t memory_bytes = 0);
 
 // Writes a FloatGrid named grid_name: the voxels whose value differs from
 // `background` become active (tolerance 0), uniform 8^3 blocks become tiles

@@ -19,14 +19,14 @@ constexpr char kRead = 'r';
 
 // --- Volumes ----------------------------------------------------------------
 
-WorkerHandler volume_handler(const std::string& path, const std::string& dataset) {
+WorkerHandler volume_handler(const std::string& path, const std::string& dataset, std::uint64_t memory_bytes) {
   auto reader = std::make_shared<std::unique_ptr<SlabReader>>();
-  return [path, dataset, reader](std::string_view request, WorkerReply& out) {
+  return [path, dataset, memory_bytes, reader](std::string_view request, WorkerReply& out) {
     WireReader in{std::string(request)};
     const char operation = in.get<char>();
     if (operation == kOpen) {
       Hdf5SourceInfo source;
-      *reader = open_hdf5_slabs_in_process(path, dataset, &source);
+      *reader = open_hdf5_slabs_in_process(path, dataset, &source, memory_bytes);
       const DenseVolume& shape = (*reader)->shape();
       WireWriter reply;
       reply.put(shape.dims).put(shape.type).put(shape.voxel_size).put(shape.origin).put_string(shape.unit);
@@ -47,8 +47,11 @@ WorkerHandler volume_handler(const std::string& path, const std::string& dataset
 
 class IsolatedHdf5SlabReader final : public SlabReader {
  public:
-  IsolatedHdf5SlabReader(const std::string& path, const std::string& dataset, Hdf5SourceInfo* source)
-      : dataset_(dataset), worker_(path, kLibrary, volume_handler(path, dataset)) {
+  IsolatedHdf5SlabReader(const std::string& path, const std::string& dataset, Hdf5SourceInfo* source,
+                         std::uint64_t memory_bytes)
+      : dataset_(dataset),
+        worker_(path, kLibrary, volume_handler(path, dataset, memory_bytes ? memory_bytes : kDefaultChildMemory),
+                memory_bytes) {
     WireWriter request;
     request.put(kOpen);
     WireReader reply(worker_.call(request.bytes(), "opening dataset " + dataset));
@@ -157,9 +160,9 @@ class IsolatedDxchangeReader final : public ProjectionReader {
 
 }  // namespace
 
-std::unique_ptr<SlabReader> open_hdf5_slabs(const std::string& path, const std::string& dataset,
-                                            Hdf5SourceInfo* source) {
-  return std::make_unique<IsolatedHdf5SlabReader>(path, dataset, source);
+std::unique_ptr<SlabReader> open_hdf5_slabs(const std::string& path, const std::string& dataset, Hdf5SourceInfo* source,
+                                            std::uint64_t memory_bytes) {
+  return std::make_unique<IsolatedHdf5SlabReader>(path, dataset, source, memory_bytes);
 }
 
 DxchangeProjections open_dxchange_projections(const std::string& path, const DxchangeOptions& options) {

@@ -1,14 +1,23 @@
 #include "isolated_worker.hpp"
 
 #include <sys/prctl.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <csignal>
 #include <cstring>
+#include <fstream>
 #include <new>
+
+#if defined(__has_include)
+#if __has_include(<valgrind/valgrind.h>)
+#include <valgrind/valgrind.h>
+#endif
+#endif
 
 #include "ivol/error.hpp"
 
@@ -69,10 +78,53 @@ void detach_from_parent(pid_t parent) {
   for (int signal_number : {SIGTERM, SIGINT, SIGHUP, SIGPIPE}) std::signal(signal_number, SIG_DFL);
 }
 
-[[noreturn]] void serve(int fd, const WorkerHandler& handler) {
+// Sanitizers and valgrind reserve address space of their own as they go;
+// a limit on it would stop them, not the library.
+bool address_space_is_ours() {
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+  return false;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer) || __has_feature(memory_sanitizer)
+  return false;
+#endif
+#endif
+#ifdef RUNNING_ON_VALGRIND
+  if (RUNNING_ON_VALGRIND) return false;
+#endif
+  return true;
+}
+
+// The process's address space and resident memory now (a child: what it
+// inherited from the parent).
+std::uint64_t address_space_bytes() {
+  std::ifstream statm("/proc/self/statm");
+  std::uint64_t pages = 0;
+  statm >> pages;
+  return pages * static_cast<std::uint64_t>(sysconf(_SC_PAGESIZE));
+}
+std::uint64_t resident_bytes() {
+  std::ifstream statm("/proc/self/statm");
+  std::uint64_t size = 0, resident = 0;
+  statm >> size >> resident;
+  return resident * static_cast<std::uint64_t>(sysconf(_SC_PAGESIZE));
+}
+
+// The soft limit only: the next request may need more and raises it again.
+void limit_address_space(std::uint64_t bytes) {
+  rlimit limit{};
+  if (getrlimit(RLIMIT_AS, &limit) != 0) return;
+  limit.rlim_cur = limit.rlim_max == RLIM_INFINITY ? bytes : std::min<rlim_t>(bytes, limit.rlim_max);
+  setrlimit(RLIMIT_AS, &limit);
+}
+
+[[noreturn]] void serve(int fd, const WorkerHandler& handler, std::uint64_t memory_limit) {
+  const bool limited = address_space_is_ours();
+  const std::uint64_t inherited = limited ? address_space_bytes() : 0;
   std::string request;
   WorkerReply out;
-  while (receive_text(fd, request)) {
+  std::uint64_t bulk_expected = 0;
+  while (receive_all(fd, &bulk_expected, sizeof bulk_expected) && receive_text(fd, request)) {
+    if (limited) limit_address_space(inherited + memory_limit + 2 * bulk_expected);
     out.reply.clear();
     out.bulk.clear();
     std::uint8_t error_class = 0;
@@ -89,6 +141,9 @@ void detach_from_parent(pid_t parent) {
       error_class = static_cast<std::uint8_t>(ErrorClass::Malformed);
       error = e.what();
     }
+    if (error_class == static_cast<std::uint8_t>(ErrorClass::LimitExceeded) && limited)
+      error += " (the process that runs the library may allocate " + std::to_string(memory_limit >> 20) +
+               " MiB; --memory MiB raises it)";
     bool sent;
     if (error.empty()) {
       const std::uint64_t bulk = out.bulk.size();
@@ -116,12 +171,16 @@ std::string describe_end(int status) {
 
 }  // namespace
 
-IsolatedWorker::IsolatedWorker(std::string subject, std::string library, WorkerHandler handler)
-    : subject_(std::move(subject)), library_(std::move(library)) {
+IsolatedWorker::IsolatedWorker(std::string subject, std::string library, WorkerHandler handler,
+                               std::uint64_t memory_limit)
+    : subject_(std::move(subject)),
+      library_(std::move(library)),
+      memory_limit_(memory_limit ? memory_limit : kDefaultChildMemory) {
   int ends[2];
   if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, ends) != 0)
     throw Error(ErrorClass::Io, subject_ + ": cannot start a process for " + library_ + ": " + std::strerror(errno));
   const pid_t parent = getpid();
+  resident_at_start_ = resident_bytes();
   child_ = fork();
   if (child_ < 0) {
     const int saved = errno;
@@ -132,7 +191,7 @@ IsolatedWorker::IsolatedWorker(std::string subject, std::string library, WorkerH
   if (child_ == 0) {
     close(ends[0]);
     detach_from_parent(parent);
-    serve(ends[1], handler);
+    serve(ends[1], handler, memory_limit_);
   }
   close(ends[1]);
   socket_ = ends[0];
@@ -152,12 +211,23 @@ IsolatedWorker::~IsolatedWorker() {
 void IsolatedWorker::fail(const std::string& doing) {
   int status = 0;
   pid_t ended = -1;
-  do ended = waitpid(child_, &status, 0);
+  rusage usage{};
+  do ended = wait4(child_, &status, 0, &usage);
   while (ended < 0 && errno == EINTR);
   child_ = -1;
   close(socket_);
   socket_ = -1;
   const std::string how = ended > 0 ? describe_end(status) : "stopped answering";
+  // A library that dies when an allocation is refused (a null pointer it
+  // did not check) or that the kernel kills for memory ran out of its
+  // limit, which is not a damaged file: tell them apart by the child's peak.
+  const std::uint64_t peak = static_cast<std::uint64_t>(usage.ru_maxrss) * 1024;
+  const std::uint64_t grew = peak > resident_at_start_ ? peak - resident_at_start_ : 0;
+  if (ended > 0 && WIFSIGNALED(status) && address_space_is_ours() && grew >= memory_limit_ / 4 * 3)
+    throw Error(ErrorClass::LimitExceeded, subject_ + ": " + library_ + " " + how + " while " + doing +
+                                               " after allocating " + std::to_string(grew >> 20) + " MiB, near the " +
+                                               std::to_string(memory_limit_ >> 20) +
+                                               " MiB its process may allocate (--memory MiB raises it)");
   throw Error(ErrorClass::Malformed, subject_ + ": " + library_ + " " + how + " while " + doing +
                                          ": the file is damaged or not what it claims to be (" + library_ +
                                          " ran in a process of its own; nothing else was affected)");
@@ -167,7 +237,8 @@ std::string IsolatedWorker::call(const std::string& request, const std::string& 
                                  std::size_t bulk_bytes) {
   if (socket_ < 0)
     throw Error(ErrorClass::InvalidArgument, subject_ + ": " + library_ + " was stopped by an earlier failure");
-  if (!send_text(socket_, request)) fail(doing);
+  const std::uint64_t bulk_expected = bulk_bytes;
+  if (!send_all(socket_, &bulk_expected, sizeof bulk_expected) || !send_text(socket_, request)) fail(doing);
   std::uint8_t status = 0;
   if (!receive_all(socket_, &status, 1)) fail(doing);
   if (status == kReplyError) {

@@ -41,11 +41,21 @@ struct WorkerReply {
 };
 using WorkerHandler = std::function<void(std::string_view request, WorkerReply& out)>;
 
+// What a library in a child process may allocate when the caller gives no
+// budget: a damaged file can ask for gigabytes (a 4x4x4 dataset in one
+// 4 GiB gzip chunk).
+constexpr std::uint64_t kDefaultChildMemory = std::uint64_t{1} << 30;
+
 class IsolatedWorker {
  public:
   // Starts the child. `subject` names what it works on, for messages (the
-  // file's path); `library` names what runs there ("libhdf5").
-  IsolatedWorker(std::string subject, std::string library, WorkerHandler handler);
+  // file's path); `library` names what runs there ("libhdf5"). The child
+  // may allocate `memory_limit` bytes (0: kDefaultChildMemory) beyond what
+  // it inherited, plus twice each request's bulk reply (RLIMIT_AS, set
+  // before each request; not in sanitizer builds or under valgrind, whose
+  // own reservations it would count). An allocation refused there is
+  // ivol::Error(LimitExceeded) naming the file and the limit.
+  IsolatedWorker(std::string subject, std::string library, WorkerHandler handler, std::uint64_t memory_limit = 0);
   ~IsolatedWorker();  // closes the socket and reaps the child
   IsolatedWorker(const IsolatedWorker&) = delete;
   IsolatedWorker& operator=(const IsolatedWorker&) = delete;
@@ -58,12 +68,15 @@ class IsolatedWorker {
                    std::size_t bulk_bytes = 0);
 
   pid_t child() const { return child_; }
+  std::uint64_t memory_limit() const { return memory_limit_; }
 
  private:
   [[noreturn]] void fail(const std::string& doing);
 
   std::string subject_;
   std::string library_;
+  std::uint64_t memory_limit_ = 0;
+  std::uint64_t resident_at_start_ = 0;  // the child's share of the parent's memory
   int socket_ = -1;
   pid_t child_ = -1;
 };

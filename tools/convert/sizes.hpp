@@ -1,0 +1,88 @@
+// Size arithmetic and allocation for the converters. Dimensions come from
+// input files and options that may be hostile (2^31 per side, an empty file
+// claiming 2^64 bytes), so every product of sizes is checked for overflow,
+// every large buffer is weighed against the memory budget before it is
+// allocated, and an allocation that still fails becomes an ivol::Error
+// naming what was being allocated, not a bare std::bad_alloc.
+#pragma once
+
+#include <cstdint>
+#include <new>
+#include <stdexcept>
+#include <string>
+
+#include "dense_volume.hpp"
+#include "ivol/error.hpp"
+
+namespace ivol::convert {
+
+// What a conversion may hold when --memory is not given.
+constexpr std::uint64_t kDefaultMemoryBytes = std::uint64_t{2048} << 20;
+
+inline std::uint64_t memory_budget(std::uint64_t bytes) { return bytes ? bytes : kDefaultMemoryBytes; }
+
+inline std::string dims_text(const Dims& dims) {
+  return std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]);
+}
+
+inline std::string mib_text(std::uint64_t bytes) {
+  return std::to_string((bytes + (std::uint64_t{1} << 20) - 1) >> 20) + " MiB";
+}
+
+// a * b, or Error(LimitExceeded) naming `what` and both factors.
+inline std::uint64_t checked_mul(std::uint64_t a, std::uint64_t b, const std::string& what) {
+  std::uint64_t product = 0;
+  if (__builtin_mul_overflow(a, b, &product))
+    throw Error(ErrorClass::LimitExceeded, what + ": " + std::to_string(a) + " x " + std::to_string(b) +
+                                               " exceeds 2^64 (the sizes are impossible)");
+  return product;
+}
+
+inline std::uint64_t checked_add(std::uint64_t a, std::uint64_t b, const std::string& what) {
+  std::uint64_t sum = 0;
+  if (__builtin_add_overflow(a, b, &sum))
+    throw Error(ErrorClass::LimitExceeded, what + ": " + std::to_string(a) + " + " + std::to_string(b) +
+                                               " exceeds 2^64 (the sizes are impossible)");
+  return sum;
+}
+
+// Voxels of one z slice, and of the volume.
+inline std::uint64_t slice_voxels(const Dims& dims, const std::string& what) {
+  return checked_mul(dims[0], dims[1],
+                     what + " (voxels of a " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + " slice)");
+}
+inline std::uint64_t volume_voxels(const Dims& dims, const std::string& what) {
+  return checked_mul(slice_voxels(dims, what), dims[2], what + " (voxels of " + dims_text(dims) + ")");
+}
+// Bytes of `slices` slices of samples of `type`.
+inline std::uint64_t slab_bytes(const Dims& dims, std::uint64_t slices, SampleType type, const std::string& what) {
+  const std::uint64_t voxels = checked_mul(slice_voxels(dims, what), slices,
+                                           what + " (voxels of " + std::to_string(slices) + " slices of " +
+                                               std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + ")");
+  return checked_mul(voxels, sample_size(type), what + " (bytes of " + sample_type_name(type) + " samples)");
+}
+
+// Refuses `bytes` above `budget` before anything is allocated; `what` says
+// what needs them ("one slice of 16384x16384 u8 as float32").
+inline void require_within_budget(std::uint64_t bytes, std::uint64_t budget, const std::string& what) {
+  if (bytes > budget)
+    throw Error(ErrorClass::LimitExceeded, what + " needs " + mib_text(bytes) + ", more than the " + mib_text(budget) +
+                                               " this conversion may hold (--memory MiB raises it)");
+}
+
+// v.resize(count), turning an allocation failure (or a size past the address
+// space) into Error(LimitExceeded) naming `what` and the bytes asked for.
+template <typename Vector>
+void checked_resize(Vector& v, std::uint64_t count, const std::string& what) {
+  const std::uint64_t bytes = checked_mul(count, sizeof(typename Vector::value_type), what);
+  try {
+    if (count > v.max_size()) throw std::length_error("");
+    v.resize(static_cast<std::size_t>(count));
+  } catch (const std::bad_alloc&) {
+    throw Error(ErrorClass::LimitExceeded, what + ": cannot allocate " + mib_text(bytes) + " (out of memory)");
+  } catch (const std::length_error&) {
+    throw Error(ErrorClass::LimitExceeded, what + ": cannot allocate " + mib_text(bytes) + " (out of memory)");
+  }
+}
+
+}  // namespace ivol::convert
