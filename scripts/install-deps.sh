@@ -19,6 +19,8 @@ packages=(
   hdf5-filter-plugin-blosc-serial zstd python3-matplotlib
   # cli_bad_input: OpenVDB grids at the edges of the index space
   python3-openvdb
+  # the Python package (python/): ivol._ivol
+  pybind11-dev python3-dev
 )
 
 missing=()
