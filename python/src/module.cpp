@@ -35,6 +35,14 @@ py::array owning_array(std::vector<T>&& data, const std::vector<py::ssize_t>& sh
   return py::array(dtype, shape, {}, held->data(), owner);
 }
 
+// Messages quote bytes of the file (a metadata block that is not UTF-8):
+// such bytes become \xNN escapes rather than a UnicodeDecodeError.
+py::str text(const std::string& s) {
+  PyObject* o = PyUnicode_DecodeUTF8(s.data(), static_cast<Py_ssize_t>(s.size()), "backslashreplace");
+  if (!o) throw py::error_already_set();
+  return py::reinterpret_steal<py::str>(o);
+}
+
 ivol::Box make_box(const std::array<std::uint32_t, 3>& lo, const std::array<std::uint32_t, 3>& hi) {
   ivol::Box box;
   box.lo = lo;
@@ -91,7 +99,7 @@ class PyReader {
     d["version"] = py::make_tuple(f.version_major, f.version_minor);
     d["file_size"] = f.file_size;
     d["block_count"] = f.blocks.size();
-    d["metadata_json"] = reader_->metadata().to_json().dump();
+    d["metadata_json"] = reader_->metadata().to_json().dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
     return d;
   }
 
@@ -135,7 +143,7 @@ py::dict check(const std::string& path) {
   for (const ivol::CheckProblem& p : report.problems) {
     py::dict e;
     e["error_class"] = ivol::error_class_name(p.error_class);
-    e["message"] = p.message;
+    e["message"] = text(p.message);
     problems.append(e);
   }
   py::dict d;
@@ -285,7 +293,7 @@ PYBIND11_MODULE(_ivol, m) {
     } catch (const ivol::Error& e) {
       const char* name = ivol::error_class_name(e.error_class());
       py::object cls = py::module_::import("ivol._errors").attr("error_for")(name);
-      PyErr_SetObject(cls.ptr(), py::make_tuple(e.what(), name).ptr());
+      PyErr_SetObject(cls.ptr(), py::make_tuple(text(e.what()), name).ptr());
     } catch (const nlohmann::json::exception& e) {
       PyErr_SetString(PyExc_ValueError, e.what());
     }
