@@ -69,17 +69,29 @@ class Level:
         lo, hi, local, empty_shape = _plan(key, self.shape)
         if empty_shape is not None:
             return np.empty(empty_shape, dtype=self.dtype)
+        z_at = next(i for i, k in enumerate(local) if k is not None)
+        z_key = local[z_at]
+        if isinstance(z_key, slice) and abs(z_key.step) > 1:
+            # Slices of z one by one: a box spanning the skipped ones would
+            # read and decode their blocks too.
+            planes = range(lo[0], hi[0])[z_key]
+            block = np.concatenate([self._read([z, lo[1], lo[2]], [z + 1, hi[1], hi[2]]) for z in planes])
+            local = local[:z_at] + (slice(None),) + local[z_at + 1 :]
+        else:
+            block = self._read(lo, hi)
+        out = block[local]
+        # A view of a larger box would keep the whole box alive.
+        return out.copy() if isinstance(out, np.ndarray) and out.size < block.size else out
+
+    def _read(self, lo, hi):
+        """The box [lo, hi) (z, y, x) of this level, as an array."""
         # libformat takes boxes as (x, y, z).
         box_lo, box_hi = lo[::-1], hi[::-1]
         reader = self._file._reader()
         if self._stored:
             bits = reader.read_bits(box_lo, box_hi, self.lod)
-            block = bits.view(self.dtype).reshape([h - l for l, h in zip(lo, hi)])
-        else:
-            block = reader.read(box_lo, box_hi, self.lod)
-        out = block[local]
-        # A view of a larger box would keep the whole box alive.
-        return out.copy() if isinstance(out, np.ndarray) and out.size < block.size else out
+            return bits.view(self.dtype).reshape([h - l for l, h in zip(lo, hi)])
+        return reader.read(box_lo, box_hi, self.lod)
 
     def __array__(self, dtype=None):
         a = self[...]

@@ -347,6 +347,15 @@ class Writing(unittest.TestCase):
             small = f.io_stats["bytes_read"]
             self.assertGreater(small, 0)
             self.assertLess(small, os.path.getsize(path) / 20)
+            # A step in z reads the planes it selects, not the box around them.
+            bytes_for = {}
+            for key in [np.s_[::63, 5], np.s_[0:64, 5]]:
+                g = ivol.open(path)
+                g.reset_io_stats()
+                self.assertTrue(same_bits(g[key], a[key]))
+                bytes_for[key[0].step] = g.io_stats["bytes_read"]
+            self.assertLess(bytes_for[63], 0.75 * bytes_for[None])
+            f.reset_io_stats()
             self.assertTrue(same_bits(f[...], a))
             self.assertGreater(f.io_stats["bytes_read"], os.path.getsize(path) / 2)
 
