@@ -93,9 +93,14 @@ class Level:
             return bits.view(self.dtype).reshape([h - l for l, h in zip(lo, hi)])
         return reader.read(box_lo, box_hi, self.lod)
 
-    def __array__(self, dtype=None):
+    @property
+    def stored(self):
+        """The same level's stored bits: uint16, float16 (binary16) or float32."""
+        return Level(self._file, self.lod, stored=True)
+
+    def __array__(self, dtype=None, copy=None):
         a = self[...]
-        return a if dtype is None else a.astype(dtype)
+        return a if dtype is None else a.astype(dtype, copy=False)
 
     def __repr__(self):
         kind = "stored bits" if self._stored else "values"
@@ -126,7 +131,6 @@ class File(Level):
         self.origin = tuple(float(v) for v in m["origin"][::-1])
         self.unit = m["unit"]
         super().__init__(self, 0)
-        self.stored = Level(self, 0, stored=True)
 
     def _reader(self):
         # libformat's Reader is not thread-safe: one per thread.
