@@ -9,6 +9,8 @@ advanced indexing, which would read arbitrary voxels.
 
 import operator
 
+import numpy as np
+
 
 def _expand(key, ndim):
     if not isinstance(key, tuple):
@@ -62,6 +64,9 @@ def plan(key, shape):
                 local.append(slice(r[0] - first, stop if stop >= 0 else None, r.step))
         else:
             try:
+                # numpy reads a bool as a mask (advanced indexing), not as 0 or 1.
+                if isinstance(k, (bool, np.bool_)):
+                    raise TypeError
                 i = operator.index(k)
             except TypeError:
                 raise IndexError(

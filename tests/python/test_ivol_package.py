@@ -139,7 +139,8 @@ class ValidVectors(unittest.TestCase):
 
     def test_bad_indices(self):
         f = ivol.open(vec("valid/odd_3x5x7_uint16.ivol"))
-        for key in [7, -8, (0, 5), (0, 0, 3), (0, 0, 0, 0), 1.0, "a", [0, 1], np.array([True]),
+        for key in [7, -8, (0, 5), (0, 0, 3), (0, 0, 0, 0), 1.0, "a", [0, 1], np.array([True]), True,
+                    (0, np.False_),
                     (Ellipsis, Ellipsis)]:
             with self.subTest(key=key):
                 with self.assertRaises(IndexError):
