@@ -170,6 +170,14 @@ class File(Level):
         for r in readers:
             r.reset_io_stats()
 
+    # Pickled by path (dask's process and distributed schedulers send the
+    # array-likes to other processes): the copy opens the file anew.
+    def __getstate__(self):
+        return {"path": self.path, "cache_bytes": self._cache_bytes}
+
+    def __setstate__(self, state):
+        self.__init__(state["path"], state["cache_bytes"])
+
     def close(self):
         with self._lock:
             self._readers.clear()

@@ -150,6 +150,15 @@ class ValidVectors(unittest.TestCase):
                 f.level(k)
             self.assertEqual(e.exception.error_class, "invalid-argument")
 
+    def test_pickled_by_path(self):
+        import pickle
+
+        f = ivol.open(vec("valid/codec2_nested_37x21x10_uint16_c8.ivol"))
+        for arr in (f, f.level(2), f.level(1).stored):
+            copy = pickle.loads(pickle.dumps(arr))
+            self.assertEqual((copy.shape, copy.dtype, copy.lod), (arr.shape, arr.dtype, arr.lod))
+            self.assertEqual(copy[1:, ::-2].tobytes(), arr[1:, ::-2].tobytes())
+
     def test_levels_against_the_command_line(self):
         with tempfile.TemporaryDirectory() as tmp:
             for name in ["valid/odd_3x5x7_uint16.ivol", "valid/codec2_nested_37x21x10_uint16_c8.ivol",
