@@ -13,6 +13,8 @@ import os
 import shutil
 import subprocess
 import tempfile
+import threading
+import time
 import unittest
 
 import numpy as np
@@ -283,6 +285,33 @@ class Threads(unittest.TestCase):
             for (k, key), got in zip(jobs, results):
                 self.assertTrue(same_bits(got, full[k][key]), (k, key))
             self.assertGreater(f.io_stats["blocks_decoded"], len(jobs))
+
+
+    def test_reads_release_the_gil(self):
+        a = np.random.default_rng(11).normal(size=(160, 160, 160)).astype(np.float32)
+        with tempfile.TemporaryDirectory() as tmp:
+            path = os.path.join(tmp, "gil.ivol")
+            ivol.write(path, a)
+            start = time.perf_counter()
+            ivol.open(path, cache_bytes=0)[...]
+            alone = time.perf_counter() - start
+            done = threading.Event()
+            f = ivol.open(path, cache_bytes=0)
+
+            def read():
+                f[...]
+                done.set()
+
+            stamps = []
+            thread = threading.Thread(target=read)
+            thread.start()
+            while not done.is_set():
+                stamps.append(time.perf_counter())
+            thread.join()
+            # Holding the GIL, the read would stop this loop for all of its
+            # time; released, the loop waits only for switches.
+            longest = max(np.diff(stamps)) if len(stamps) > 1 else alone
+            self.assertLess(longest, alone / 2, f"read alone {alone:.3f} s")
 
 
 class Writing(unittest.TestCase):
