@@ -17,7 +17,7 @@ Runner add_info_command(CLI::App& app, const GlobalOptions& /*global*/) {
     Reader reader(*file);
     const nlohmann::json d = describe_file(reader);
     if (*json) {
-      std::cout << d.dump(2) << "\n";
+      std::cout << d.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
       return kExitOk;
     }
     const auto& dims = d["dimensions"];

@@ -193,7 +193,9 @@ Runner add_verify_command(CLI::App& app, const GlobalOptions& global) {
     if (s->json) {
       nlohmann::json list = nlohmann::json::array();
       for (const FileResult& r : results) list.push_back(to_json(r));
-      std::cout << list.dump(2) << "\n";
+      // A problem message may quote the bytes of damaged metadata: replace
+      // what is not UTF-8 rather than fail to report it.
+      std::cout << list.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
     }
     if (!s->manifest.empty()) {
       if (!all_ok) {
