@@ -17,7 +17,7 @@ packages=(
   libopenmpi-dev openmpi-bin
   # bench/run_peers.sh: HDF5's blosc filter, the zstd CLI, plots
   hdf5-filter-plugin-blosc-serial zstd python3-matplotlib
-  # cli_bad_input: OpenVDB grids at the edges of the index space
+  # cli_bad_input: OpenVDB grids at the edges of the index space; roundtrip_matrix
   python3-openvdb
   # the Python package (python/): ivol._ivol
   pybind11-dev python3-dev

@@ -63,6 +63,14 @@ std::uint16_t float_to_binary16(float value) {
   return static_cast<std::uint16_t>(out | (sign >> 16));
 }
 
+std::uint16_t float_to_binary16_keep_nan(float value) {
+  const std::uint32_t x = float_bits(value);
+  if ((x & 0x7FFFFFFFu) <= 0x7F800000u) return float_to_binary16(value);
+  std::uint32_t payload = (x >> 13) & 0x3FFu;
+  if (payload == 0) payload = 0x200u;
+  return static_cast<std::uint16_t>(((x >> 16) & 0x8000u) | 0x7C00u | payload);
+}
+
 std::uint16_t double_to_binary16(double value) {
   if (std::isnan(value)) return kCanonicalNan;
   const std::uint16_t sign = std::signbit(value) ? 0x8000 : 0;

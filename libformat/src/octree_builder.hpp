@@ -39,24 +39,30 @@ struct BuildStats {
   }
 };
 
+// Minimum and maximum order -0 below +0, so that a region holding both is
+// not taken for uniform (its leaf would give every voxel one sign).
 struct RegionStats {
   double sum = 0.0;
   double min = INFINITY;
   double max = -INFINITY;
   bool has_nan = false;
+  static bool below(double a, double b) { return a < b || (a == b && std::signbit(a) && !std::signbit(b)); }
   void add(double v) {
     sum = sum + v;
-    if (std::isnan(v))
+    if (std::isnan(v)) {
       has_nan = true;
-    else
-      min = std::min(min, v), max = std::max(max, v);
+      return;
+    }
+    if (below(v, min)) min = v;
+    if (below(max, v)) max = v;
   }
   void merge(const RegionStats& o) {
     sum = sum + o.sum;
-    min = std::min(min, o.min);
-    max = std::max(max, o.max);
+    if (below(o.min, min)) min = o.min;
+    if (below(max, o.max)) max = o.max;
     has_nan = has_nan || o.has_nan;
   }
+  bool uniform() const { return !has_nan && min == max && std::signbit(min) == std::signbit(max); }
 };
 
 // keep.any(level, i, j, k): does node (i, j, k) of `level` hold a voxel whose
@@ -182,7 +188,7 @@ class Builder {
   NodeResult leaf_from_stats(const RegionStats& region, std::uint64_t weight, BuildStats& stats) const {
     NodeResult r;
     r.weight = weight;
-    const bool uniform = !region.has_nan && region.min == region.max;
+    const bool uniform = region.uniform();
     r.bits = uniform ? encode_source(static_cast<Source>(region.min))
                      : encode_value(layout_.encoding, to_stored_domain(region.sum / static_cast<double>(weight)));
     r.mean = decode_value(layout_.encoding, r.bits);
@@ -249,7 +255,8 @@ class Builder {
 
   std::uint32_t encode_source(Source v) const {
     if constexpr (std::is_same_v<Source, float>) {
-      if (identity_ && layout_.encoding == ValueEncoding::Binary16) return float_to_binary16(v);
+      // A leaf keeps a NaN's payload (what a binary16 source held survives).
+      if (identity_ && layout_.encoding == ValueEncoding::Binary16) return float_to_binary16_keep_nan(v);
       if (identity_ && layout_.encoding == ValueEncoding::Float32) {
         std::uint32_t bits;
         std::memcpy(&bits, &v, 4);

@@ -72,7 +72,7 @@ case_ convert-raw-size   2 "need 126976"             -- "$IVOL" convert "$work/v
 test ! -e "$work/x.ivol" && case_ no-partial-output 0 "" -- true
 case_ convert-raw-ivol   0 "lossless"                -- "$IVOL" convert "$work/v.raw" "$work/v.ivol" --dims 32,32,32 --type f32 --voxel-size 0.5
 /usr/bin/python3 -c "import struct; open('$work/f.raw','wb').write(struct.pack('<4096f', *[i * 0.001 for i in range(4096)]))"
-case_ convert-lossy      0 "lossy: f32 rounded to binary16" -- "$IVOL" convert "$work/f.raw" "$work/h.ivol" --dims 16,16,16 --encoding binary16
+case_ convert-lossy      0 "lossy: f32 rounded to binary16" -- "$IVOL" convert "$work/f.raw" "$work/h.ivol" --dims 16,16,16 --encoding binary16 --allow-lossy
 case_ convert-keep       0 "coarsened"               -- "$IVOL" convert "$work/v.raw" "$work/k.ivol" --dims 32,32,32 --keep threshold=otsu,margin=1
 case_ convert-bad-keep   1 "--keep"                  -- "$IVOL" convert "$work/v.raw" "$work/k2.ivol" --dims 32,32,32 --keep margin=1
 case_ convert-to-tiff    0 "tiff f32"                -- "$IVOL" convert "$work/v.ivol" "$work/v.tif"

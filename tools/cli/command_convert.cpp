@@ -29,6 +29,7 @@ struct ConvertSettings {
   std::string out_type;
   unsigned level = 0;
   bool force = false;
+  bool allow_lossy = false;
 };
 
 std::string describe(const convert::DenseVolume& v) {
@@ -47,6 +48,8 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
   cmd->add_option("--from", s->from, "Input format: ivol, raw, tiff, hdf5, vdb (default: by extension)");
   cmd->add_option("--to", s->to, "Output format (default: by extension)");
   cmd->add_flag("-f,--force", s->force, "Replace OUT if it exists");
+  cmd->add_flag("--allow-lossy", s->allow_lossy,
+                "Convert even where the output does not hold every value exactly (the summary reports the loss)");
   auto* raw = cmd->add_option_group("raw input");
   raw->add_option("--dims", s->dims, "X,Y,Z voxels")->check(checked([](const std::string& v) {
     parse_dims(v, "--dims");
@@ -85,7 +88,10 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
   into->add_option("--quantity", s->quantity, "What the values are, e.g. linear_attenuation");
   into->add_option("--value-unit", s->value_unit, "Unit of the values, e.g. 1/mm");
   auto* out_of = cmd->add_option_group("out of .ivol");
-  out_of->add_option("--out-type", s->out_type, "u8, u16, i16, f16, f32 (default: u16 for uint16 files, else f32)")
+  out_of
+      ->add_option("--out-type", s->out_type,
+                   "u8, u16, i16, f16, f32 (default: the type that holds the file's values; OpenVDB: f32, or f16 "
+                   "for binary16 files)")
       ->check(checked([](const std::string& v) { parse_sample_type(v, "--out-type"); }));
   out_of->add_option("--level", s->level, "Level of detail: 1/2^K resolution")->check(whole_number());
 
@@ -105,6 +111,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     foreign.background = s->background;
     foreign.big_endian = s->endian == "big";
     foreign.memory_bytes = convert::checked_mul(s->memory_mib, std::uint64_t{1} << 20, "--memory");
+    foreign.allow_lossy = s->allow_lossy;
     if (!s->dims.empty()) {
       foreign.raw.dims = parse_dims(s->dims, "--dims");
       foreign.raw_dims_given = true;
@@ -114,7 +121,8 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     foreign.raw.header_bytes = s->header_bytes;
 
     if (to == Format::Ivol) {
-      const auto source = open_source(s->input, from, foreign);
+      bool rounded = false;  // by the reader (HDF5 float64), already said
+      const auto source = open_source(s->input, from, foreign, &rounded);
       convert::DenseVolume shape = source->shape();
       apply_geometry(shape, s->voxel_size, s->origin, s->unit);
       convert::ImportOptions options;
@@ -145,6 +153,8 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
         options.metadata.unit = shape.unit;
       }
       options.progress = progress_bar("ivol convert", global.quiet);
+      options.allow_lossy = s->allow_lossy;
+      options.what = s->input + " -> " + s->output;
       const convert::ImportReport r = convert::import_to_ivol(*source, s->output, options);
       if (global.verbose)
         std::cerr << "ivol convert: " << encoding_name(r.encoding) << " (physical = " << r.value_offset << " + "
@@ -156,8 +166,10 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
         const std::uint64_t bytes = convert::slab_bytes(shape.dims, shape.dims[2], shape.type, s->input);
         if (!r.lossless) {
           std::string steps;
-          if (r.encoding != convert::lossless_encoding(shape.type))
-            steps = std::string(convert::sample_type_name(shape.type)) + " rounded to " + encoding_name(r.encoding);
+          if (!r.encoding_loss.exact())
+            steps = std::string(convert::sample_type_name(shape.type)) + " rounded to " + encoding_name(r.encoding) +
+                    " in " + std::to_string(r.encoding_loss.voxels) + " of " + std::to_string(shape.voxel_count()) +
+                    " voxels";
           if (options.keep)
             steps += std::string(steps.empty() ? "" : ", ") + "coarsened outside the kept region (threshold " +
                      std::to_string(r.threshold) + ")";
@@ -165,8 +177,8 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
         }
         say << s->input << " (" << format_name(from) << " " << describe(shape) << ", " << human_bytes(bytes) << ") -> "
             << s->output << " (ivol " << encoding_name(r.encoding) << ", " << human_bytes(r.file_bytes) << ", "
-            << static_cast<double>(bytes) / r.file_bytes << "x smaller" << (r.lossless ? ", lossless" : "") << ") in "
-            << seconds << " s\n";
+            << static_cast<double>(bytes) / r.file_bytes << "x smaller" << (r.lossless && !rounded ? ", lossless" : "")
+            << ") in " << seconds << " s\n";
       }
       return kExitOk;
     }
@@ -198,16 +210,26 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     }
 
     Reader reader(s->input);
-    convert::SampleType type = convert::natural_sample_type(reader);
-    if (!s->out_type.empty()) type = parse_sample_type(s->out_type, "--out-type");
+    const convert::SampleType natural =
+        to == Format::Vdb ? convert::natural_float_type(reader) : convert::natural_sample_type(reader);
+    const convert::SampleType type = s->out_type.empty() ? natural : parse_sample_type(s->out_type, "--out-type");
+    check_vdb_type(to, type, "--out-type");
     const Box box = full_box(reader.layout().dims, s->level);
     convert::DenseVolume shape = convert::export_shape(reader, box, s->level, type);
     apply_geometry(shape, s->voxel_size, s->origin, s->unit);
+    const std::string what = s->input + " -> " + s->output + " as " + convert::sample_type_name(type);
+    const convert::LossCheck check = exactness_check(s->allow_lossy, what, type, natural, "--out-type");
+    check_before_streaming(s->output, reader, box, s->level, type, check, false);
     const auto sink = create_sink(s->output, to, shape, foreign);
-    convert::export_from_ivol(reader, box, s->level, type, *sink, progress_bar("ivol convert", global.quiet));
+    const convert::LossTally loss = convert::export_from_ivol(
+        reader, box, s->level, type, *sink, progress_bar("ivol convert", global.quiet), nullptr, check);
+    if (!loss.exact() && !global.quiet)
+      std::cerr << "ivol convert: lossy: " << what << ": "
+                << convert::describe_loss(loss, shape.voxel_count(), convert::sample_type_name(type)) << "\n";
     if (!global.quiet)
       say << s->input << " -> " << s->output << " (" << format_name(to) << " " << describe(shape)
-          << (s->level ? ", level of detail " + std::to_string(s->level) : std::string()) << ")\n";
+          << (s->level ? ", level of detail " + std::to_string(s->level) : std::string())
+          << (loss.exact() ? "" : ", lossy") << ")\n";
     return kExitOk;
   };
 }

@@ -31,6 +31,7 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
     unsigned level = 0;
     bool force = false;
     bool salvage = false;
+    bool allow_lossy = false;
   };
   auto s = std::make_shared<Settings>();
   cmd->add_option("FILE", s->file, "The .ivol file")->required();
@@ -41,8 +42,12 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
   cmd->add_option("-o,--output", s->output, "Output file: .raw, .tif, .h5, .vdb; - : raw samples on standard output")
       ->required();
   cmd->add_option("--to", s->to, "Output format (default: by extension)");
-  cmd->add_option("--type", s->type, "u8, u16, i16, f16, f32 (default: u16 for uint16 files, else f32)")
+  cmd->add_option("--type", s->type,
+                  "u8, u16, i16, f16, f32 (default: the type that holds the file's values; OpenVDB: f32, or f16 for "
+                  "binary16 files)")
       ->check(checked([](const std::string& v) { parse_sample_type(v, "--type"); }));
+  cmd->add_flag("--allow-lossy", s->allow_lossy,
+                "Write even where the type does not hold every value exactly (the summary reports the loss)");
   cmd->add_option("--endian", s->endian, "Raw output byte order")->check(CLI::IsMember({"little", "big"}));
   cmd->add_flag("-f,--force", s->force, "Replace the output if it exists");
   cmd->add_flag("--salvage", s->salvage,
@@ -53,11 +58,14 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
     check_output(s->output, "-o", {s->file}, s->force, /*stdout_allowed=*/true);
     std::ostream& say = is_stdio(s->output) ? std::cerr : std::cout;  // not among the samples
     Reader reader(s->file);
-    convert::SampleType type = convert::natural_sample_type(reader);
-    if (!s->type.empty()) type = parse_sample_type(s->type, "--type");
+    const convert::SampleType natural =
+        to == Format::Vdb ? convert::natural_float_type(reader) : convert::natural_sample_type(reader);
+    const convert::SampleType type = s->type.empty() ? natural : parse_sample_type(s->type, "--type");
+    check_vdb_type(to, type, "--type");
     const Box box = parse_box(s->box, "--box");
     ForeignOptions options;
     options.big_endian = s->endian == "big";
+    options.allow_lossy = s->allow_lossy;
     const convert::DenseVolume shape = convert::export_shape(reader, box, s->level, type);
     // Refuse a bad box before creating the output.
     const Dims limit = lod_dims(reader.layout().dims, s->level);
@@ -66,9 +74,16 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
         throw UsageError("--box", box.to_string() + " is empty or outside the volume (" + std::to_string(limit[0]) +
                                       "x" + std::to_string(limit[1]) + "x" + std::to_string(limit[2]) + " at level " +
                                       std::to_string(s->level) + ")");
+    const std::string what = s->file + " -> " + s->output + " as " + convert::sample_type_name(type);
+    const convert::LossCheck check = exactness_check(s->allow_lossy, what, type, natural, "--type");
+    check_before_streaming(s->output, reader, box, s->level, type, check, s->salvage);
     const auto sink = create_sink(s->output, to, shape, options);
     std::vector<DamagedRegion> damaged;
-    convert::export_from_ivol(reader, box, s->level, type, *sink, {}, s->salvage ? &damaged : nullptr);
+    const convert::LossTally loss =
+        convert::export_from_ivol(reader, box, s->level, type, *sink, {}, s->salvage ? &damaged : nullptr, check);
+    if (!loss.exact() && !global.quiet)
+      std::cerr << "ivol extract: lossy: " << what << ": "
+                << convert::describe_loss(loss, shape.voxel_count(), convert::sample_type_name(type)) << "\n";
     if (!damaged.empty()) {
       std::cerr << "ivol extract: salvaged " << damaged.size()
                 << " region(s) from coarser levels because blocks are damaged:\n";

@@ -2,9 +2,12 @@
 
 #include <cstring>
 #include <filesystem>
+#include <iostream>
 #include <optional>
 
+#include "exactness.hpp"
 #include "hdf5_io.hpp"
+#include "ivol/binary16.hpp"
 #include "ivol/error.hpp"
 #include "option_parsing.hpp"
 #include "output_rules.hpp"
@@ -16,32 +19,66 @@
 namespace ivol::cli {
 namespace {
 
-// OpenVDB writes a whole grid: gather the slabs, write at the end.
+// OpenVDB writes a whole grid: gather the slabs as float32, write at the end;
+// f16 samples make a half-float grid, integers a float32 one (which holds
+// every u8, u16 and i16 value exactly).
 class VdbSink final : public convert::SlabWriter {
  public:
-  VdbSink(const std::string& path, const convert::DenseVolume& shape, float background, std::uint64_t memory_bytes)
-      : path_(path), volume_(shape), background_(background) {
-    if (volume_.type != convert::SampleType::Float32)
-      throw Error(ErrorClass::InvalidArgument, path + ": OpenVDB grids hold float32 values (--type f32)");
-    // The whole volume is held, and once more as the floats write_vdb builds
-    // the grid from.
+  VdbSink(const std::string& path, const convert::DenseVolume& shape, float background, std::uint64_t memory_bytes,
+          bool allow_lossy)
+      : path_(path), volume_(shape), background_(background), allow_lossy_(allow_lossy) {
+    half_ = shape.type == convert::SampleType::Float16;
+    type_ = shape.type;
+    volume_.type = convert::SampleType::Float32;
+    // The whole volume is held as float32, and once more as the floats
+    // write_vdb builds the grid from.
     const std::string what = path + ": an OpenVDB grid of " + convert::dims_text(shape.dims);
-    const std::uint64_t bytes = convert::slab_bytes(shape.dims, shape.dims[2], shape.type, what);
+    const std::uint64_t bytes = convert::slab_bytes(shape.dims, shape.dims[2], convert::SampleType::Float32, what);
     convert::require_within_budget(convert::checked_mul(bytes, 2, what), convert::memory_budget(memory_bytes),
                                    what + " (OpenVDB grids are written whole)");
     convert::checked_resize(volume_.data, bytes, what);
   }
   void write(const void* samples, std::uint32_t count) override {
-    const std::uint64_t bytes = convert::slab_bytes(volume_.dims, count, volume_.type, path_);
-    std::memcpy(volume_.data.data() + at_, samples, bytes);
-    at_ += bytes;
+    const std::size_t n = std::size_t{count} * volume_.dims[0] * volume_.dims[1];
+    const auto* p = static_cast<const std::uint8_t*>(samples);
+    std::uint8_t* floats = volume_.data.data() + at_;
+    if (type_ == convert::SampleType::Float16) {
+      // Bit operations, not through binary64 (which would quiet a signalling
+      // NaN): the half-float grid then stores the binary16 bits given.
+      for (std::size_t i = 0; i < n; ++i) {
+        std::uint16_t h;
+        std::memcpy(&h, p + 2 * i, 2);
+        const float f = binary16_to_float(h);
+        std::memcpy(floats + 4 * i, &f, 4);
+      }
+    } else {
+      convert::DenseVolume slab;
+      slab.type = type_;
+      slab.dims = {volume_.dims[0], volume_.dims[1], count};
+      slab.data.assign(p, p + n * convert::sample_size(type_));
+      const std::vector<float> values = slab.to_float();  // exact for u8, u16, i16 and f32
+      std::memcpy(floats, values.data(), n * 4);
+    }
+    at_ += n * 4;
   }
-  void finish() override { convert::write_vdb(volume_, path_, background_); }
+  void finish() override {
+    const std::string grid = half_ ? "a half-float grid" : "a float32 grid";
+    const convert::LossTally loss =
+        convert::write_vdb(volume_, path_, background_, "density", half_, [&](const convert::LossTally& l) {
+          if (!allow_lossy_) convert::refuse_loss(l, volume_.voxel_count(), path_ + " as " + grid, grid);
+        });
+    if (!loss.exact())
+      std::cerr << "ivol: lossy: " << path_ << " as " << grid << ": "
+                << convert::describe_loss(loss, volume_.voxel_count(), grid) << "\n";
+  }
 
  private:
   std::string path_;
   convert::DenseVolume volume_;
+  convert::SampleType type_;
   float background_;
+  bool allow_lossy_;
+  bool half_ = false;
   std::size_t at_ = 0;
 };
 
@@ -112,8 +149,8 @@ Format output_format(const std::string& path, const std::string& name, const cha
   return named;
 }
 
-std::unique_ptr<convert::SlabReader> open_source(const std::string& path, Format format,
-                                                 const ForeignOptions& options) {
+std::unique_ptr<convert::SlabReader> open_source(const std::string& path, Format format, const ForeignOptions& options,
+                                                 bool* rounded) {
   switch (format) {
     case Format::Raw:
       if (!options.raw_dims_given)
@@ -122,8 +159,22 @@ std::unique_ptr<convert::SlabReader> open_source(const std::string& path, Format
       return convert::open_raw_slabs(path, options.raw);
     case Format::Tiff:
       return convert::open_tiff_slabs(path);
-    case Format::Hdf5:
-      return convert::open_hdf5_slabs(path, options.dataset, nullptr, options.memory_bytes);
+    case Format::Hdf5: {
+      convert::Hdf5SourceInfo info;
+      auto source = convert::open_hdf5_slabs(path, options.dataset, &info, options.memory_bytes);
+      // ivol holds at most float32; HDF5 rounds float64 on the way, out of
+      // sight, so the values cannot be checked: the rounding must be accepted.
+      if (info.narrowed_to_f32 && !options.allow_lossy)
+        throw Error(ErrorClass::InvalidArgument,
+                    path + ": " + options.dataset +
+                        " holds float64 samples, which ivol reads as float32, rounding every value float32 does not "
+                        "hold (not counted); nothing written. --allow-lossy accepts the rounding");
+      if (rounded) *rounded = info.narrowed_to_f32;
+      if (info.narrowed_to_f32)
+        std::cerr << "ivol: lossy: " << path << ": " << options.dataset
+                  << ": float64 samples rounded to float32 (not counted)\n";
+      return source;
+    }
     case Format::Vdb:
       return convert::memory_slabs(convert::read_vdb(path, options.grid, options.memory_bytes).volume);
     case Format::Ivol:
@@ -146,11 +197,39 @@ std::unique_ptr<convert::SlabWriter> create_sink(const std::string& path, Format
     case Format::Hdf5:
       return convert::create_hdf5_slabs(path, shape, options.dataset);
     case Format::Vdb:
-      return std::make_unique<VdbSink>(path, shape, options.background, options.memory_bytes);
+      return std::make_unique<VdbSink>(path, shape, options.background, options.memory_bytes, options.allow_lossy);
     case Format::Ivol:
       break;
   }
   throw Error(ErrorClass::InvalidArgument, path + ": .ivol is not a dense format");
+}
+
+void check_vdb_type(Format to, convert::SampleType type, const char* option) {
+  if (to == Format::Vdb && type != convert::SampleType::Float32 && type != convert::SampleType::Float16)
+    throw UsageError(option, std::string("OpenVDB grids hold float32 (") + option + " f32) or half-float (" + option +
+                                 " f16) values, not " + convert::sample_type_name(type));
+}
+
+convert::LossCheck exactness_check(bool allow_lossy, const std::string& what, convert::SampleType type,
+                                   convert::SampleType natural, const char* option) {
+  if (allow_lossy) return {};
+  const std::string hint =
+      type == natural ? std::string() : std::string(option) + " " + convert::sample_type_name(natural);
+  return [what, type, hint](const convert::LossTally& loss, std::uint64_t voxels) {
+    convert::refuse_loss(loss, voxels, what, convert::sample_type_name(type), hint);
+  };
+}
+
+void check_before_streaming(const std::string& output, Reader& reader, const Box& box, unsigned lod,
+                            convert::SampleType type, const convert::LossCheck& check, bool salvage) {
+  if (!is_stdio(output) || !check || convert::always_exact(reader.layout(), type)) return;
+  class Discard final : public convert::SlabWriter {
+   public:
+    void write(const void*, std::uint32_t) override {}
+    void finish() override {}
+  } discard;
+  std::vector<DamagedRegion> damaged;
+  convert::export_from_ivol(reader, box, lod, type, discard, {}, salvage ? &damaged : nullptr, check);
 }
 
 }  // namespace ivol::cli

@@ -281,10 +281,17 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
                code_values.data());
       writer.add_slab(code_values.data(), options.keep ? keep.data() : nullptr);
     } else {
+      tally_encoding(build.encoding, values.data() + centre, n * slice, report.encoding_loss);
       writer.add_slab(values.data() + centre, options.keep ? keep.data() : nullptr);
     }
     ticker.update(z0 + n);
   }
+  if (!options.allow_lossy)
+    refuse_loss(report.encoding_loss, shape.voxel_count(),
+                (options.what.empty() ? path : options.what) + ": " + sample_type_name(shape.type) + " samples as " +
+                    encoding_name(build.encoding),
+                encoding_name(build.encoding),
+                "--encoding " + std::string(encoding_name(lossless_encoding(shape.type))));
   finish_import(writer, shape, options, report);
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return report;
@@ -297,8 +304,26 @@ ImportReport import_to_ivol(const DenseVolume& volume, const std::string& path, 
 
 SampleType natural_sample_type(const Reader& reader) {
   const VolumeLayout& v = reader.layout();
-  if (v.encoding == ValueEncoding::UInt16 && v.value_scale == 1.0 && v.value_offset == 0.0) return SampleType::UInt16;
+  const bool identity = v.value_scale == 1.0 && v.value_offset == 0.0;
+  const auto source = reader.metadata().structure.find("source_encoding");
+  const std::string source_type =
+      source != reader.metadata().structure.end() && source->is_string() ? source->get<std::string>() : "";
+  if (v.encoding == ValueEncoding::UInt16) {
+    if (identity && source_type == "u8") return SampleType::UInt8;
+    const double lo = std::min(v.physical(0), v.physical(65535)), hi = std::max(v.physical(0), v.physical(65535));
+    const bool integers =
+        std::nearbyint(v.value_scale) == v.value_scale && std::nearbyint(v.value_offset) == v.value_offset;
+    if (integers && lo >= 0 && hi <= 65535) return SampleType::UInt16;
+    if (integers && lo >= -32768 && hi <= 32767) return SampleType::Int16;
+  }
+  if (v.encoding == ValueEncoding::Binary16 && identity && source_type == "f16") return SampleType::Float16;
   return SampleType::Float32;
+}
+
+SampleType natural_float_type(const Reader& reader) {
+  const VolumeLayout& v = reader.layout();
+  const bool identity = v.value_scale == 1.0 && v.value_offset == 0.0;
+  return v.encoding == ValueEncoding::Binary16 && identity ? SampleType::Float16 : SampleType::Float32;
 }
 
 DenseVolume export_shape(const Reader& reader, const Box& box, unsigned lod, SampleType type) {
@@ -319,38 +344,6 @@ DenseVolume export_shape(const Reader& reader, const Box& box, unsigned lod, Sam
 
 namespace {
 
-void convert_samples(const std::vector<float>& values, SampleType type, std::uint8_t* out) {
-  auto clamp_round = [](double v, double lo, double hi) {
-    return std::isnan(v) ? 0.0 : std::min(hi, std::max(lo, std::nearbyint(v)));
-  };
-  for (std::uint64_t i = 0; i < values.size(); ++i) {
-    std::uint8_t* p = out + i * sample_size(type);
-    switch (type) {
-      case SampleType::UInt8:
-        *p = static_cast<std::uint8_t>(clamp_round(values[i], 0, 255));
-        break;
-      case SampleType::UInt16: {
-        const auto v = static_cast<std::uint16_t>(clamp_round(values[i], 0, 65535));
-        std::memcpy(p, &v, 2);
-        break;
-      }
-      case SampleType::Int16: {
-        const auto v = static_cast<std::int16_t>(clamp_round(values[i], -32768, 32767));
-        std::memcpy(p, &v, 2);
-        break;
-      }
-      case SampleType::Float16: {
-        const std::uint16_t v = float_to_binary16(values[i]);
-        std::memcpy(p, &v, 2);
-        break;
-      }
-      case SampleType::Float32:
-        std::memcpy(p, &values[i], 4);
-        break;
-    }
-  }
-}
-
 class MemorySink final : public SlabWriter {
  public:
   explicit MemorySink(DenseVolume& volume) : volume_(volume) {}
@@ -368,8 +361,8 @@ class MemorySink final : public SlabWriter {
 
 }  // namespace
 
-void export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type, SlabWriter& sink,
-                      const Progress& progress, std::vector<DamagedRegion>* damaged) {
+LossTally export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type, SlabWriter& sink,
+                           const Progress& progress, std::vector<DamagedRegion>* damaged, const LossCheck& check) {
   if (box.empty()) box = full_box(reader.layout().dims, lod);
   // Slabs of about 64 MiB of float32, whole slices; a slice that alone
   // exceeds the budget (a one-leaf file of 2^31 per side) is refused.
@@ -382,17 +375,24 @@ void export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type, Sl
   const auto slab = static_cast<std::uint32_t>(std::max<std::uint64_t>(1, (64ull << 20) / slice_bytes));
   ProgressTicker ticker(progress, box.hi[2] - box.lo[2]);
   std::vector<std::uint8_t> samples;
+  LossTally loss;
+  // Stored bits, not Reader::read_box's float32 physical values: those lose
+  // the payload of a signalling NaN and cannot say what a uint16 code with a
+  // scale and an offset means exactly.
   for (std::uint32_t z = box.lo[2]; z < box.hi[2]; z += slab) {
     Box part = box;
     part.lo[2] = z;
     part.hi[2] = std::min(box.hi[2], z + slab);
-    const std::vector<float> values = reader.read_box(part, lod, damaged);
-    samples.resize(values.size() * sample_size(type));
-    convert_samples(values, type, samples.data());
+    const std::vector<std::uint8_t> stored = reader.read_box_bits(part, lod, damaged);
+    const std::uint64_t count = stored.size() / encoding_width(reader.layout().encoding);
+    samples.resize(count * sample_size(type));
+    stored_to_samples(reader.layout(), stored.data(), count, type, samples.data(), loss);
     sink.write(samples.data(), part.hi[2] - part.lo[2]);
     ticker.update(part.hi[2] - box.lo[2]);
   }
+  if (check) check(loss, slice * (box.hi[2] - box.lo[2]));
   sink.finish();
+  return loss;
 }
 
 DenseVolume export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type) {

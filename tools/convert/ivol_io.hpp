@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "dense_volume.hpp"
+#include "exactness.hpp"
 #include "ivol/block_encoder.hpp"
 #include "ivol/encoding.hpp"
 #include "ivol/metadata.hpp"
@@ -44,6 +45,12 @@ struct ImportOptions {
   // computed meanwhile (the sources' digests, tools/cli/fixity.hpp).
   std::function<void(Metadata&)> complete_metadata;
   Progress progress;
+  // False: when the encoding does not hold every sample bit for bit (e.g.
+  // --encoding binary16 of float32 values), throw before the file is written
+  // (ivol convert without --allow-lossy). The keep rule's coarsening is its
+  // own request and is not counted.
+  bool allow_lossy = true;
+  std::string what;  // names the conversion in that refusal (default: the output path)
 };
 
 struct ImportReport {
@@ -52,7 +59,8 @@ struct ImportReport {
   double value_offset = 0.0;
   bool lossless = true;
   double max_abs_error = 0.0;
-  float threshold = 0.0f;  // when a keep rule was applied
+  LossTally encoding_loss;  // what the encoding's rounding changed (the keep rule's coarsening aside)
+  float threshold = 0.0f;   // when a keep rule was applied
   std::uint64_t kept_voxels = 0;
   std::uint64_t file_bytes = 0;
   std::uint64_t slab_slices = 0;
@@ -83,16 +91,30 @@ ImportReport import_to_ivol(const DenseVolume& volume, const std::string& path, 
 // The shape (dims, type, geometry; no samples) of a box of an .ivol file at a
 // level of detail: voxel size scaled by 2^lod, origin at the box's first cell.
 DenseVolume export_shape(const Reader& reader, const Box& box, unsigned lod, SampleType type);
+// Called after the last slab, before the sink is finished: throws to refuse
+// a conversion that was not exact (nothing is left at the output).
+using LossCheck = std::function<void(const LossTally& loss, std::uint64_t voxels)>;
+
 // Streams the box (full box when empty) to `sink`, created for
-// export_shape(...): physical values, rounded and clamped for integers.
-// With `damaged`, reads past damaged blocks (Reader::read_box's salvage) and
-// lists the regions filled from coarser levels.
-void export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type, SlabWriter& sink,
-                      const Progress& progress = {}, std::vector<DamagedRegion>* damaged = nullptr);
+// export_shape(...): the stored values converted by stored_to_samples (bit
+// for bit where the types agree, else exact or counted as loss: integers
+// rounded and clamped). With `damaged`, reads past damaged blocks
+// (Reader::read_box_bits's salvage) and lists the regions filled from coarser
+// levels. Returns what the conversion changed.
+LossTally export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type, SlabWriter& sink,
+                           const Progress& progress = {}, std::vector<DamagedRegion>* damaged = nullptr,
+                           const LossCheck& check = {});
 // The same into memory.
 DenseVolume export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type);
-// The sample type that holds a file's values without loss when there is one
-// (uint16 codes with scale 1 and offset 0), else f32.
+// The sample type that holds a file's values: the source's own type where the
+// encoding, scale and offset give it back (structure.source_encoding u8 with
+// uint16 codes -> u8; uint16 codes with integer scale and offset -> u16 or i16
+// when their range fits; a binary16 file made from f16 -> f16), else f32,
+// which holds every binary16 and float32 value and every uint16 value whose
+// physical value is a float32 number.
 SampleType natural_sample_type(const Reader& reader);
+// The same among the float types, for OpenVDB: f16 for a binary16 file with
+// scale 1 and offset 0 (a half-float grid holds it bit for bit), else f32.
+SampleType natural_float_type(const Reader& reader);
 
 }  // namespace ivol::convert

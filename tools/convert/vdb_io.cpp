@@ -109,6 +109,16 @@ openvdb::FloatGrid::Ptr choose_float_grid(openvdb::io::File& file, const std::st
   }
 }
 
+// Calls visit(coord, dense index) for every voxel of a volume of `dims`, x fastest.
+template <typename Visit>
+void for_each_voxel(const Dims& dims, Visit&& visit) {
+  std::uint64_t i = 0;
+  for (std::uint32_t z = 0; z < dims[2]; ++z)
+    for (std::uint32_t y = 0; y < dims[1]; ++y)
+      for (std::uint32_t x = 0; x < dims[0]; ++x, ++i)
+        visit(openvdb::Coord(static_cast<int>(x), static_cast<int>(y), static_cast<int>(z)), i);
+}
+
 // Copies the grid's values over the dense box (the background where the
 // tree holds nothing) and marks the active voxels, and which of them an
 // active tile covers. Coordinates are widened to 64 bits: a grid may sit
@@ -215,8 +225,8 @@ VdbVolume read_vdb(const std::string& path, const std::string& grid_name, std::u
   return out;
 }
 
-void write_vdb(const DenseVolume& volume, const std::string& path, float background, const std::string& grid_name,
-               bool half) {
+LossTally write_vdb(const DenseVolume& volume, const std::string& path, float background, const std::string& grid_name,
+                    bool half, const std::function<void(const LossTally&)>& check) {
   const std::string context = grid_context(path, grid_name);
   if (grid_name.empty()) throw Error(ErrorClass::InvalidArgument, path + ": the grid needs a name");
   for (std::uint32_t extent : volume.dims) {
@@ -241,7 +251,39 @@ void write_vdb(const DenseVolume& volume, const std::string& path, float backgro
     const DenseFloats dense(box, values.data());
     openvdb::tools::copyFromDense(dense, *grid, /*tolerance=*/0.0f);
   }
+  // copyFromDense compares values, not bits, and takes a NaN for the
+  // background: give every voxel the grid does not hold bit for bit its own
+  // active value (-0 against a background of +0, NaNs).
+  {
+    openvdb::FloatGrid::Accessor access = grid->getAccessor();
+    for_each_voxel(volume.dims, [&](const openvdb::Coord& c, std::uint64_t i) {
+      const float held = access.getValue(c);
+      if (std::memcmp(&held, &values[i], 4) != 0) access.setValueOn(c, values[i]);
+    });
+  }
   openvdb::tools::prune(grid->tree());
+  LossTally loss;
+  {
+    openvdb::FloatGrid::ConstAccessor access = grid->getConstAccessor();
+    for_each_voxel(volume.dims, [&](const openvdb::Coord& c, std::uint64_t i) {
+      const float held = access.getValue(c);
+      std::uint32_t want, got;
+      std::memcpy(&want, &values[i], 4);
+      std::memcpy(&got, &held, 4);
+      if (want == got) return;
+      if (std::isnan(held) && std::isnan(values[i])) {
+        ++loss.voxels;
+        ++loss.nan_payloads;
+      } else if (held == values[i]) {
+        ++loss.voxels;
+        ++loss.signed_zeros;
+      } else {
+        loss.add(values[i], held);
+      }
+    });
+  }
+  if (half) tally_encoding(ValueEncoding::Binary16, values.data(), values.size(), loss);
+  if (check) check(loss);
 
   openvdb::math::Transform::Ptr transform = openvdb::math::Transform::createLinearTransform(1.0);
   if (volume.has_geometry) {
@@ -284,6 +326,7 @@ void write_vdb(const DenseVolume& volume, const std::string& path, float backgro
     throw Error(ErrorClass::Io, context + ": the file holds " + std::to_string(st.st_size) + " bytes of the " +
                                     std::to_string(written) + " written");
   staged.commit();
+  return loss;
 }
 
 }  // namespace ivol::convert

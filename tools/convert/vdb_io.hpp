@@ -12,10 +12,12 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
 #include "dense_volume.hpp"
+#include "exactness.hpp"
 
 namespace ivol::convert {
 
@@ -50,7 +52,13 @@ VdbVolume read_vdb(const std::string& path, const std::string& grid_name = "", s
 // geometry). Grid metadata: class fog volume when the background is 0 and
 // every value lies in [0, 1] (OpenVDB's convention), else unknown; "unit".
 // Written to a temporary file in the same directory, then renamed.
-void write_vdb(const DenseVolume& volume, const std::string& path, float background,
-               const std::string& grid_name = "density", bool half = true);
+// Voxels equal to the background but of other bits (-0 against +0) are made
+// active so that they keep their bits. Before anything is written, the grid
+// is compared with the volume bit for bit (and with `half`, every value with
+// its binary16 rounding): `check`, when given, sees what would change and
+// throws to refuse; the result says the same.
+LossTally write_vdb(const DenseVolume& volume, const std::string& path, float background,
+                    const std::string& grid_name = "density", bool half = true,
+                    const std::function<void(const LossTally&)>& check = {});
 
 }  // namespace ivol::convert

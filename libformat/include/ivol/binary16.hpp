@@ -15,4 +15,10 @@ double binary16_to_double(std::uint16_t bits);
 std::uint16_t float_to_binary16(float value);
 std::uint16_t double_to_binary16(double value);
 
+// As float_to_binary16, except that a NaN keeps its sign and the top 10 bits
+// of its payload (the quiet bit set when those are all zero): the bits a leaf
+// stores (spec §9 passes any leaf NaN through), so that binary16 -> float ->
+// binary16 gives back every one of the 65 536 bit patterns.
+std::uint16_t float_to_binary16_keep_nan(float value);
+
 }  // namespace ivol

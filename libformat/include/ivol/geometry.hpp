@@ -57,7 +57,11 @@ struct VolumeLayout {
   std::uint64_t weight(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k) const;
   // The same as a binary64 product, as spec §10 evaluates it (exact below 2^53).
   double weight_f64(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k) const;
-  double physical(double decoded) const { return value_offset + value_scale * decoded; }
+  // With scale 1 and offset 0 the decoded number itself: 0 + 1 × −0 would be
+  // +0, and spec §9 has readers pass a leaf's bits (−0 included) through.
+  double physical(double decoded) const {
+    return value_scale == 1.0 && value_offset == 0.0 ? decoded : value_offset + value_scale * decoded;
+  }
 };
 
 }  // namespace ivol
