@@ -29,3 +29,12 @@ bad exact-import-binary16  2 "f32 samples as binary16 is not exact" \
 /usr/bin/python3 -c "import h5py, numpy as np; h5py.File('$work/f64.h5', 'w')['/exchange/data'] = np.arange(64.0).reshape(4, 4, 4) / 3"
 bad exact-hdf5-float64     2 "holds float64 samples, which ivol reads as float32" \
                                                       -- "$IVOL" convert "$work/f64.h5" "$out/x.ivol"
+
+# Standard output cannot be taken back: the refusal comes before the first byte.
+bad exact-stdout-u8        2 "as u8 is not exact"     -- "$IVOL" convert "$work/frac.ivol" - --out-type u8
+streamed=$("$IVOL" extract "$work/frac.ivol" --box 0,0,0,16,16,16 --type u8 -o - 2>/dev/null | wc -c)
+if [ "$streamed" -eq 0 ]; then
+  echo "ok   exact-stdout-nothing-streamed"; passed=$((passed + 1))
+else
+  echo "FAIL exact-stdout-nothing-streamed: $streamed bytes on standard output"; failed=$((failed + 1))
+fi
