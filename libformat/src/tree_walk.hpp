@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "ivol/error.hpp"
@@ -70,8 +71,38 @@ std::uint32_t lookup_bits(Access& access, const VolumeLayout& layout, const Leve
 // coordinates of level of detail `lod`.
 // Where a salvaging walk met damage: the region it filled from a coarser
 // level instead.
+// Regions are merged per cause (the message names the damaged block or the
+// missing gap): one entry, the box around every region it cost, and at most
+// kMaxEntries entries, the rest in one last entry.
 struct SalvageLog {
+  static constexpr std::size_t kMaxEntries = 1000;
   std::vector<DamagedRegion>& regions;
+  std::unordered_map<std::string, std::size_t> by_cause = {};
+  std::size_t overflow = SIZE_MAX;
+
+  void add(const Box& region, unsigned level, const std::string& message) {
+    auto found = by_cause.find(message);
+    std::size_t at = found == by_cause.end() ? SIZE_MAX : found->second;
+    if (at == SIZE_MAX && by_cause.size() >= kMaxEntries) {
+      if (overflow == SIZE_MAX) {
+        overflow = regions.size();
+        regions.push_back({region, level, "further damage, not listed one by one"});
+        return;
+      }
+      at = overflow;
+    }
+    if (at == SIZE_MAX) {
+      by_cause.emplace(message, regions.size());
+      regions.push_back({region, level, message});
+      return;
+    }
+    DamagedRegion& r = regions[at];
+    for (int a = 0; a < 3; ++a) {
+      r.region.lo[a] = std::min(r.region.lo[a], region.lo[a]);
+      r.region.hi[a] = std::max(r.region.hi[a], region.hi[a]);
+    }
+    r.level = std::min(r.level, level);
+  }
 };
 
 // Calls sink(region, bits) for every leaf (or node of the target level) that
@@ -91,9 +122,7 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
     std::uint64_t inner;
     std::uint32_t fallback;  // bits of the nearest readable ancestor (salvage)
   };
-  auto log = [&](const Box& region, unsigned level, const Error& e) {
-    salvage->regions.push_back({region, level, e.what()});
-  };
+  auto log = [&](const Box& region, unsigned level, const Error& e) { salvage->add(region, level, e.what()); };
   // A value, or in salvage mode the fallback when it cannot be read.
   auto value_or = [&](std::uint64_t index, std::uint32_t fallback, const Box& region, unsigned level) {
     if (!salvage) return access.value_bits(index);
