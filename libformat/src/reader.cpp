@@ -48,6 +48,7 @@ std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigne
   std::vector<DamagedRegion> fine_damage;
   detail::SalvageLog fine_log{fine_damage};
   const std::vector<std::uint32_t> fine = grid_bits(impl, full, 0, salvage ? &fine_log : nullptr);
+  fine_log.flush();
   for (const DamagedRegion& d : fine_damage) {  // into the coordinates of the level of detail
     Box coarse;
     for (int a = 0; a < 3; ++a) {

@@ -19,6 +19,7 @@ namespace ivol {
 
 struct Reader::Impl {
   detail::RandomAccessFile file;
+  std::string salvaged_metadata;  // the metadata text a salvaging open found; before `info`, which fills it
   FileInfo info;
   Metadata metadata;
   detail::LevelRanges ranges;
@@ -40,8 +41,6 @@ struct Reader::Impl {
   };
   std::vector<Hint> hint[6];
   std::size_t last_level[6] = {0, 0, 0, 0, 0, 0};  // the hint that served the last lookup
-
-  std::string salvaged_metadata;  // the metadata text a salvaging open found
 
   Impl(const std::string& path, const ReaderOptions& options)
       : file(path),
