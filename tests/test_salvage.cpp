@@ -353,3 +353,34 @@ TEST(Salvage, UnframedFilesSayWhyNot) {
 }
 
 }  // namespace
+
+namespace {
+
+// A file whose final metadata comes last, after an early metadata block
+// (stream 6, spec §15): cut before the final one, salvage uses the early
+// one and says so; uncut, a reader uses stream 1 and skips stream 6.
+TEST(Salvage, FallsBackToTheEarlyMetadata) {
+  const std::string vector =
+      std::string(IVOL_SOURCE_DIR) + "/format-spec/vectors/valid/framed_octree_6x6x6_float32_early_metadata.ivol";
+  Reader whole(vector);
+  const FileInfo& info = whole.info();
+  ASSERT_EQ(info.blocks.front().stream, 6);
+  ASSERT_EQ(info.blocks.back().stream, 1);
+  EXPECT_EQ(whole.metadata().voxel_size[0], 0.05);
+  auto bytes = test::read_bytes(vector);
+  bytes.resize(info.blocks.back().file_offset);
+  const std::string path = test::temp_path("early.ivol");
+  test::write_bytes(path, bytes);
+  ReaderOptions options;
+  options.salvage = true;
+  Reader cut(path, options);
+  EXPECT_EQ(cut.info().salvage->metadata, "early");
+  EXPECT_EQ(cut.metadata().voxel_size[0], 0.1);
+  EXPECT_EQ(cut.info().salvage->finest_complete_lod, 0);
+  std::vector<DamagedRegion> damaged;
+  EXPECT_EQ(cut.read_box_bits(full_box(info.layout.dims), 0, &damaged),
+            whole.read_box_bits(full_box(info.layout.dims)));
+  EXPECT_TRUE(damaged.empty());
+}
+
+}  // namespace
