@@ -89,7 +89,15 @@ struct Reader::Impl {
     std::uint64_t values = 0;
     for (std::size_t b : stream_blocks[3]) values += info.blocks[b].element_count;
     if (info.salvage) values = detail::GridStructure::kValuesUnknown;  // gaps are read as missing
-    grid.emplace(info.layout, std::move(borders), std::move(cells), values, file.path());
+    try {
+      grid.emplace(info.layout, std::move(borders), std::move(cells), values, file.path());
+    } catch (const Error& e) {
+      if (!info.salvage) throw;
+      throw Error(ErrorClass::Truncated, info.salvage->reason +
+                                             "; nothing can be salvaged: the grid's borders or cell words did "
+                                             "not all survive: " +
+                                             e.what());
+    }
   }
 
   detail::BlockData block(std::size_t index) {

@@ -314,6 +314,16 @@ class Salvager {
         used_.push_back(b);
         next += b.element_count;
       }
+      // Without every cell word no value can be placed (the borders are
+      // checked when the grid is built from them).
+      if (stream == 5) {
+        const std::uint64_t edge = std::uint64_t{1} << v.cell_log2;
+        std::uint64_t cells = 1;
+        for (int a = 0; a < 3; ++a) cells *= (v.dims[a] + edge - 1) / edge;
+        if (next != cells)
+          fail(ErrorClass::Truncated, "only " + std::to_string(next) + " of the nested grid's " +
+                                          std::to_string(cells) + " cell words survived: its values cannot be placed");
+      }
     }
     std::uint64_t total = ~std::uint64_t{0};  // unknown until the borders or cells are read
     if (v.kind == StructureKind::Regular) {
