@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
+#include <optional>
 
 #include "commands.hpp"
 #include "fixity.hpp"
@@ -212,8 +213,15 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   // sent; the writer calls it on this (the MPI) thread.
   if (mpi) options.write.encoder = mpi->block_encoder();
   options.write.framed_blocks = s.format_version == "1.3";
-  // The metadata is complete here: a grid's file begins with it (spec §15).
-  StructureStreamWriter writer(*structure, s.output, options, metadata);
+  // Without sources to digest the metadata is complete here, and a grid's
+  // file begins with it (spec §15); the digests come after the values, so
+  // then it comes last (an early metadata block, stream 6, is not written).
+  std::optional<StructureStreamWriter> writer_storage;
+  if (complete_metadata)
+    writer_storage.emplace(*structure, s.output, options);
+  else
+    writer_storage.emplace(*structure, s.output, options, metadata);
+  StructureStreamWriter& writer = *writer_storage;
   StructureValueWindow values(*structure);
   double writing_during_fdk = 0;  // the writer works inside the FDK's slab hand-over
   const recon::FdkReport fdk =
