@@ -148,7 +148,7 @@ TEST(FdkStructure, StreamingWriteGivesTheFileOfTheWholeValues) {
     reconstructor.reconstruct_structure(g, *structure);
     write_structure(*structure, whole_path, Metadata{}, options);
 
-    StructureStreamWriter writer(*structure, streamed_path, options);
+    StructureStreamWriter writer(*structure, streamed_path, options, Metadata{});
     StructureValueWindow window(*structure);
     std::uint32_t last = 0;
     int calls = 0;

@@ -35,6 +35,7 @@ struct Case {
   std::uint32_t block_bytes;
   bool compress;
   bool byte_planes = true;
+  bool framed = true;  // format 1.3 framed blocks; false: format 1.0 .. 1.2
 };
 
 class RoundTrip : public ::testing::TestWithParam<Case> {};
@@ -50,6 +51,7 @@ TEST_P(RoundTrip, EveryViewMatches) {
   w.block_bytes = c.block_bytes;
   w.compress = c.compress;
   w.byte_planes = c.byte_planes;
+  w.framed_blocks = c.framed;
   const std::string path = test::temp_path("roundtrip.ivol");
   const Metadata metadata = sample_metadata();
   const WriteStats stats = write_octree(tree, metadata, path, w);
@@ -74,8 +76,9 @@ TEST_P(RoundTrip, EveryViewMatches) {
   EXPECT_TRUE(report.ok()) << (report.problems.empty() ? "" : report.problems[0].message);
   EXPECT_TRUE(report.tree_checked);
   // Codec 2 for node words and values, never the metadata, and only when
-  // asked; a file that has such a block says version 1.2, an octree file
-  // without stays 1.0.
+  // asked; an unframed file that has such a block says version 1.2, an
+  // octree file without stays 1.0; a framed file says 1.3, has the 80-byte
+  // header and begins with its metadata (spec §15).
   bool planes = false;
   for (const BlockInfo& b : reader.info().blocks) {
     if (b.codec == 2) {
@@ -84,7 +87,10 @@ TEST_P(RoundTrip, EveryViewMatches) {
       planes = true;
     }
   }
-  EXPECT_EQ(reader.info().version_minor, planes ? 2 : 0);
+  EXPECT_EQ(reader.info().version_minor, c.framed ? 3 : planes ? 2 : 0);
+  EXPECT_EQ(reader.info().framed(), c.framed);
+  EXPECT_EQ(reader.info().header_size, c.framed ? 80u : 40u);
+  EXPECT_EQ(reader.info().blocks.front().stream == 1, c.framed);
   if (c.compress && c.byte_planes && volume.size() > 64) EXPECT_TRUE(planes);
 }
 
@@ -97,7 +103,10 @@ INSTANTIATE_TEST_SUITE_P(Layouts, RoundTrip,
                                            Case{{64, 48, 80}, ValueEncoding::Binary16, 4096, false},
                                            Case{{64, 64, 64}, ValueEncoding::Float32, 8192, true},
                                            Case{{40, 33, 29}, ValueEncoding::Binary16, 4096, true, false},
-                                           Case{{64, 64, 64}, ValueEncoding::UInt16, 16384, true}));
+                                           Case{{64, 64, 64}, ValueEncoding::UInt16, 16384, true},
+                                           Case{{40, 33, 29}, ValueEncoding::Binary16, 256, true, true, false},
+                                           Case{{40, 33, 29}, ValueEncoding::Float32, 4096, false, true, false},
+                                           Case{{3, 5, 7}, ValueEncoding::Binary16, 4096, true, false, false}));
 
 TEST(RoundTrip, UInt16WithScaleAndOffset) {
   const Dims dims{30, 20, 10};

@@ -35,13 +35,22 @@ class Refusal : public ::testing::Test {
     return info_.index_offset + 48 + 8 * (info_.layout.depth + 1) + 32 * block + field;
   }
 
+  // Where a block's elements begin: after the block header in a framed file.
+  std::size_t payload_at(const BlockInfo& b) const { return b.file_offset + (info_.framed() ? 32 : 0); }
+
   // Sets element `element` of a stored stream and makes every checksum agree.
   void patch_element(std::uint8_t stream, std::uint64_t element, std::uint64_t bits, std::size_t width) {
     for (std::size_t b = 0; b < info_.blocks.size(); ++b) {
       const BlockInfo& blk = info_.blocks[b];
       if (blk.stream != stream || element < blk.first_element || element >= blk.first_element + blk.element_count)
         continue;
-      std::memcpy(&bytes_[blk.file_offset + (element - blk.first_element) * width], &bits, width);
+      std::memcpy(&bytes_[payload_at(blk) + (element - blk.first_element) * width], &bits, width);
+      if (info_.framed()) {  // the block header's payload_crc and header_crc (spec §7.1)
+        const std::uint32_t payload_crc = crc32c(&bytes_[payload_at(blk)], blk.stored_size - 32);
+        std::memcpy(&bytes_[blk.file_offset + 24], &payload_crc, 4);
+        const std::uint32_t header_crc = crc32c(&bytes_[blk.file_offset], 28);
+        std::memcpy(&bytes_[blk.file_offset + 28], &header_crc, 4);
+      }
       const std::uint32_t crc = crc32c(&bytes_[blk.file_offset], blk.stored_size);
       std::memcpy(&bytes_[entry_at(b, 24)], &crc, 4);
       test::refresh_container_checksums(bytes_);
@@ -168,7 +177,7 @@ TEST_F(Refusal, BlockDeclaringMoreThan64MiB) {
 TEST_F(Refusal, WrongFirstInnerChild) {
   std::uint64_t root = 0;
   for (const BlockInfo& b : info_.blocks)
-    if (b.stream == 2 && b.first_element == 0) std::memcpy(&root, &bytes_[b.file_offset], 8);
+    if (b.stream == 2 && b.first_element == 0) std::memcpy(&root, &bytes_[payload_at(b)], 8);
   ASSERT_NE(child_mask(root), 0);
   patch_element(2, 0, make_node_word(child_mask(root), first_inner_child(root) + 1), 8);
   expect_refused(ErrorClass::Malformed, "node 0");

@@ -154,8 +154,9 @@ TEST(StructureWriter, OctreeFileHasTheGeneratedStructureAndValues) {
     write_structure(*s, path, Metadata{}, options);
     Reader reader(path);
     EXPECT_EQ(reader.layout().kind, kind) << "written in its own form";
-    // Values blocks over byte planes (codec 2) need format 1.2.
-    EXPECT_EQ(reader.info().version_minor, 2);
+    // Framed blocks (the default) need format 1.3, which has codec 2 too.
+    EXPECT_EQ(reader.info().version_minor, 3);
+    EXPECT_TRUE(reader.info().framed());
     std::vector<float> expected(dense.size());
     s->to_dense(expected.data());
     EXPECT_EQ(reader.read_lod(0), expected);

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""ivolref.py -- independent reference reader for the .ivol format, version 1.2.
+"""ivolref.py -- independent reference reader for the .ivol format, version 1.3 (draft).
 
 Written from format-spec/ivol.md alone (no code of the ivol project was read).
 Section numbers (§n) below refer to that document.  Where the specification
@@ -14,6 +14,7 @@ python3-zstandard).  Usage:
     ivolref.py lod FILE K -o OUT        level of detail K (§12.3), partial read
     ivolref.py info FILE                JSON summary of header, index, metadata
     ivolref.py conformance MANIFEST     run a set of test vectors
+    ivolref.py salvage FILE -o OUT      salvage a cut or damaged framed file (§18)
 
 Exit status: 0 success; 1 the file was refused ("error: <class>: <message>");
 2 usage or I/O error; 3 the file exceeds this reader's own limits (§13 allows
@@ -186,7 +187,8 @@ SIGNATURE = b"\x89IVOL\r\n\n"
 
 Header = collections.namedtuple(
     "Header", "version_major version_minor header_size "
-              "required_features optional_features")
+              "required_features optional_features framed descriptor")
+FEATURE_FRAMED_BLOCKS = 1        # §14.3: required feature bit 0 (since 1.3)
 
 
 def read_header(r):
@@ -229,13 +231,24 @@ def read_header(r):
     if reserved != 0:
         fail("malformed", "header: reserved field at offset 32 is 0x%08X, expected 0"
              % reserved)
-    # No required feature is defined in version 1.0 (§14.2): name the bits.
-    if required != 0:
-        bits = [b for b in range(64) if required >> b & 1]
+    # Bit 0 (framed_blocks, §4.1) is the only required feature known: name the others.
+    unknown = required & ~FEATURE_FRAMED_BLOCKS
+    if unknown != 0:
+        bits = [b for b in range(64) if unknown >> b & 1]
         fail("unsupported-feature", "header: required_features has unknown bit(s) %s"
              % ", ".join(map(str, bits)))
-    # optional_features: ignored (§14.2).  Bytes 36 .. header_size - 4: skipped (§4).
-    return Header(major, minor, header_size, required, optional)
+    framed = bool(required & FEATURE_FRAMED_BLOCKS)
+    descriptor = None
+    if framed:   # §4.1: the volume descriptor, compared with the index in step 5
+        if header_size < 80:
+            fail("malformed", "header: header_size %d, expected >= 80 with required "
+                 "feature bit 0 (framed_blocks)" % header_size)
+        if hdr[68:76] != bytes(8):
+            fail("malformed", "header: reserved bytes 68..76 are %s, expected 0"
+                 % hdr[68:76].hex(" "))
+        descriptor = hdr[36:68]
+    # optional_features: ignored (§14.2).  Other bytes up to header_size - 4: skipped (§4).
+    return Header(major, minor, header_size, required, optional, framed, descriptor)
 
 
 # ============================================================ §5 Footer
@@ -359,6 +372,10 @@ def read_index(header, footer, idx):
              % value_scale)
     if not math.isfinite(value_offset):
         fail("malformed", "index: value_offset %r, expected finite" % value_offset)
+    if header.framed and header.descriptor != idx[8:40]:   # §4.1
+        fail("malformed", "header: the volume descriptor (bytes 36..68) is %s, the "
+             "index's fixed part bytes 8..40 are %s" % (header.descriptor.hex(" "),
+                                                        idx[8:40].hex(" ")))
     if block_count < 2:
         fail("malformed", "index: block_count %d, expected >= 2" % block_count)
     if not 32 <= block_entry_size <= 4096:
@@ -436,6 +453,9 @@ def read_index(header, footer, idx):
             fail("malformed", "block table: %s has element_count 0" % ix.where(e))
         if e.stored_size < 1:
             fail("malformed", "block table: %s has stored_size 0" % ix.where(e))
+        if header.framed and e.stored_size <= BLOCK_HEADER_SIZE:   # §7.1
+            fail("malformed", "block table: %s has stored_size %d, which leaves no "
+                 "payload after the 32-byte block header" % (ix.where(e), e.stored_size))
         if e.flags & 0xFE:
             fail("malformed", "block table: %s has reserved flag bits set (flags 0x%02X)"
                  % (ix.where(e), e.flags))
@@ -556,6 +576,45 @@ def stream_width(ix, stream):
             STREAM_BORDERS: 4, STREAM_CELLS: 8}[stream]
 
 
+BLOCK_SIGNATURE = b"IVBK"
+BLOCK_HEADER_SIZE = 32
+BlockHeader = collections.namedtuple(
+    "BlockHeader", "stream codec flags level first_element element_count "
+                   "payload_size payload_crc header_crc")
+
+
+def parse_block_header(b):
+    """§7.1: the 32 bytes of a block header."""
+    return BlockHeader(*struct.unpack_from("<BBBBQIIII", b, 4))
+
+
+def check_block_header(ix, e, stored):
+    """§7.1: in a framed file the stored bytes start with a block header that
+    repeats the index entry.  Returns the payload."""
+    where = ix.where(e)
+    if stored[:4] != BLOCK_SIGNATURE:
+        fail("malformed", "%s: block_signature is %s, expected 'IVBK'"
+             % (where, stored[:4].hex(" ")))
+    h = parse_block_header(stored)
+    actual = crc32c(stored[:28])
+    if actual != h.header_crc:
+        fail("checksum", "%s: header_crc is 0x%08X, CRC-32C of block header bytes 0..28 "
+             "is 0x%08X" % (where, h.header_crc, actual))
+    for field in ("stream", "codec", "flags", "level", "first_element", "element_count"):
+        if getattr(h, field) != getattr(e, field):
+            fail("malformed", "%s: the block header's %s is %d, the index entry's is %d"
+                 % (where, field, getattr(h, field), getattr(e, field)))
+    if h.payload_size != e.stored_size - BLOCK_HEADER_SIZE:
+        fail("malformed", "%s: payload_size is %d, expected stored_size - 32 = %d"
+             % (where, h.payload_size, e.stored_size - BLOCK_HEADER_SIZE))
+    payload = stored[BLOCK_HEADER_SIZE:]
+    actual = crc32c(payload)
+    if actual != h.payload_crc:
+        fail("checksum", "%s: payload_crc is 0x%08X, CRC-32C of the payload is 0x%08X"
+             % (where, h.payload_crc, actual))
+    return payload
+
+
 def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
     """§7: read one block, check its CRC, decode it.  Returns the decoded bytes."""
     where = ix.where(e)
@@ -564,6 +623,14 @@ def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
     if actual != e.crc:   # §7: the CRC is checked before decoding
         fail("checksum", "%s: CRC-32C of the %d stored bytes is 0x%08X, the block table "
              "says 0x%08X" % (where, e.stored_size, actual, e.crc))
+    if ix.header.framed:
+        stored = check_block_header(ix, e, stored)
+    return decode_payload(ix, e, stored, limit)
+
+
+def decode_payload(ix, e, stored, limit=MAX_BLOCK_DECODED):
+    """§7: decode a block's payload (its stored bytes without a block header)."""
+    where = ix.where(e)
     if e.codec not in (0, 1, 2):   # checked when the block is read (SPEC-NOTES 8)
         fail("unsupported-feature", "%s: codec %d, this reader knows 0 (stored), 1 (zstd) "
              "and 2 (zstd over byte planes)" % (where, e.codec))
@@ -574,9 +641,9 @@ def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
     if size > limit:   # §11: the metadata is at most 16 MiB
         fail("malformed", "%s: decoded size %d exceeds %d" % (where, size, limit))
     if e.codec == 0:
-        if e.stored_size != size:
-            fail("malformed", "%s: stored block (codec 0) has stored_size %d, expected "
-                 "element_count x width = %d" % (where, e.stored_size, size))
+        if len(stored) != size:
+            fail("malformed", "%s: stored block (codec 0) has a payload of %d bytes, "
+                 "expected element_count x width = %d" % (where, len(stored), size))
         return stored
     content = decode_zstd_frame(stored, size, where)
     if e.codec == 1:
@@ -800,6 +867,8 @@ def check_ignorable_block(r, ix, e):
     stored = r.read(e.file_offset, e.stored_size)
     if crc32c(stored) != e.crc:
         fail("checksum", "%s: CRC-32C of the ignorable block does not match" % ix.where(e))
+    if ix.header.framed:
+        check_block_header(ix, e, stored)
 
 
 def read_streams(r, ix, top_level, check_ignorable):
@@ -1453,6 +1522,246 @@ def first_difference(a, b):
     return ""
 
 
+# ============================================================ §18 Salvage (informative)
+
+class SalvageIndex:
+    """What §18 step 3 rebuilds: enough of an Index for where() and
+    decode_payload(), the level table and the blocks placed."""
+
+    def where(self, e):
+        return "block at offset %d (stream %d, level %d)" % (e.file_offset, e.stream, e.level)
+
+
+def salvage_header(data):
+    """§18 step 1: the header, with its volume descriptor, must be intact."""
+    if len(data) < 16 or data[:8] != SIGNATURE:
+        fail("truncated", "salvage: the header is cut or not an .ivol header")
+    major, minor, header_size = struct.unpack_from("<HHI", data, 8)
+    if major != 1 or not 80 <= header_size <= 4096 or len(data) < header_size:
+        fail("truncated", "salvage: version %d, header_size %d, or the header is cut"
+             % (major, header_size))
+    (stored_crc,) = struct.unpack_from("<I", data, header_size - 4)
+    if crc32c(data[:header_size - 4]) != stored_crc:
+        fail("checksum", "salvage: the header's CRC-32C does not match")
+    (required,) = struct.unpack_from("<Q", data, 16)
+    if required != FEATURE_FRAMED_BLOCKS:
+        fail("unsupported-feature", "salvage: required_features is 0x%X; only framed "
+             "files (bit 0 alone) can be salvaged" % required)
+    ix = SalvageIndex()
+    ix.header_size = header_size
+    (kind, encoding, depth, cell_log2, sx, sy, sz, scale, offset) = \
+        struct.unpack_from("<4B3I2d", data, 36)
+    if kind not in KIND_NAMES or encoding not in ENCODINGS:
+        fail("unsupported-feature", "salvage: structure_kind %d / value_encoding %d"
+             % (kind, encoding))
+    if min(sx, sy, sz) < 1 or depth != (max(sx, sy, sz) - 1).bit_length():
+        fail("malformed", "salvage: the volume descriptor's sizes or depth are wrong")
+    ix.structure_kind, ix.value_encoding, ix.depth = kind, encoding, depth
+    ix.encoding_name, ix.width = ENCODINGS[encoding]
+    ix.size = (sx, sy, sz)
+    ix.cell_log2 = cell_log2
+    return ix
+
+
+_crc_memo = {}
+
+
+def _crc_of(b):
+    """crc32c, remembered: salvaging every cut of a file checks the same blocks again."""
+    if b not in _crc_memo:
+        _crc_memo[b] = crc32c(b)
+    return _crc_memo[b]
+
+
+def salvage_scan(data, start):
+    """§18 step 2: walk the blocks from `start`; where a header does not hold,
+    search forward for the next IVBK whose header_crc and payload_crc hold.
+    Returns the blocks found, as (BlockEntry, payload)."""
+    found = []
+    pos = start
+    while pos < len(data):
+        if len(data) - pos > BLOCK_HEADER_SIZE and data[pos:pos + 4] == BLOCK_SIGNATURE:
+            h = parse_block_header(data[pos:pos + BLOCK_HEADER_SIZE])
+            end = pos + BLOCK_HEADER_SIZE + h.payload_size
+            if (_crc_of(data[pos:pos + 28]) == h.header_crc and h.payload_size > 0
+                    and end <= len(data)
+                    and _crc_of(data[pos + BLOCK_HEADER_SIZE:end]) == h.payload_crc):
+                e = BlockEntry(len(found), pos, h.first_element, h.element_count,
+                               BLOCK_HEADER_SIZE + h.payload_size, None, h.stream, h.codec,
+                               h.flags, h.level)
+                found.append((e, data[pos + BLOCK_HEADER_SIZE:end]))
+                pos = end
+                continue
+        nxt = data.find(BLOCK_SIGNATURE, pos + 1)
+        pos = len(data) if nxt < 0 else nxt
+    return found
+
+
+def salvage_usable(ix, found, stream):
+    """Blocks of `stream` whose fields an index entry could have had (§6.3,
+    §6.4, §7), by first_element; one overlapping an earlier one is dropped."""
+    out = []
+    for e, payload in sorted((b for b in found if b[0].stream == stream),
+                             key=lambda b: b[0].first_element):
+        size = e.element_count * stream_width(ix, stream)
+        if (e.flags != 0 or e.codec > 2 or e.element_count < 1 or size > MAX_BLOCK_DECODED
+                or (e.codec == 0 and len(payload) != size) or e.level > ix.depth
+                or (ix.structure_kind != KIND_OCTREE and e.level != 0)):
+            continue
+        if out and e.first_element < out[-1][0].first_element + out[-1][0].element_count:
+            continue
+        out.append((e, payload))
+    return out
+
+
+def salvage_decode(ix, e, payload):
+    try:
+        return decode_payload(ix, e, payload)
+    except IvolError:
+        return None
+
+
+def salvage(data):
+    """§18: the volume of a cut or damaged framed file, from its blocks alone.
+    Returns (summary dict, dense stored bits as a numpy array in [z][y][x])."""
+    ix = salvage_header(data)
+    found = salvage_scan(data, ix.header_size)
+    summary = {"blocks_found": len(found), "metadata": "missing"}
+    # §15: the metadata block when it survived, else the early metadata (stream 6).
+    for stream, name in ((STREAM_METADATA, "complete"), (6, "early")):
+        for e, payload in found:
+            if e.stream != stream or summary["metadata"] != "missing":
+                continue
+            try:
+                text = payload if e.codec == 0 else decode_zstd_frame(
+                    payload, e.element_count, ix.where(e))
+                if isinstance(json.loads(text.decode("utf-8")), dict):
+                    summary["metadata"] = name
+            except (IvolError, ValueError):
+                pass
+    sx, sy, sz = ix.size
+    dtype = "<u%d" % ix.width
+    dense = np.zeros((sz, sy, sx), dtype)
+    filled = np.ones((sz, sy, sx), bool)    # voxels that did not get their own value
+    if ix.structure_kind == KIND_REGULAR:   # §18 step 4: no coarser level; fill 0
+        for e, payload in salvage_usable(ix, found, STREAM_VALUES):
+            if e.first_element + e.element_count > sx * sy * sz:
+                continue
+            decoded = salvage_decode(ix, e, payload)
+            if decoded is not None:
+                flat = dense.reshape(-1)
+                flat[e.first_element:e.first_element + e.element_count] = \
+                    np.frombuffer(decoded, dtype)
+                filled.reshape(-1)[e.first_element:e.first_element + e.element_count] = False
+        summary["filled_voxels"] = int(filled.sum())
+        return summary, dense
+    if ix.structure_kind != KIND_OCTREE:
+        raise UsageError("salvage of rectilinear and nested grids is not implemented here")
+    D = ix.depth
+    nodes_found = salvage_usable(ix, found, STREAM_NODES)
+    values_found = salvage_usable(ix, found, STREAM_VALUES)
+    # §18 step 3: inner_count[l + 1] from the masks of level l while every node
+    # of level l was found; the root is taken as inner (a leaf root has no
+    # node word to tell it).  Past that level the next level's count is at most
+    # 8 x inner_count[l], its values are used, and deeper levels are absent.
+    counts = [0] * (D + 1)
+    counts[0] = 1 if D > 0 else 0
+    first_inner = lambda l: sum(counts[:l])
+    node_words = {}
+    known = D
+    for l in range(D):
+        lo, n = first_inner(l), counts[l]
+        level_blocks = [(e, p) for e, p in nodes_found if e.level == l
+                        and lo <= e.first_element and e.first_element + e.element_count <= lo + n]
+        held = 0
+        for e, payload in level_blocks:
+            words = salvage_decode(ix, e, payload)
+            if words is None:
+                continue
+            held += e.element_count
+            for k, w in enumerate(np.frombuffer(words, "<u8")):
+                node_words[e.first_element + k] = int(w)
+        if held != n:
+            if l + 1 < D:
+                counts[l + 1] = 8 * counts[l]
+            known = l
+            break
+        counts[l + 1] = 0 if l + 1 == D else sum(
+            bin(node_words[lo + k] >> 56).count("1") for k in range(n))
+    value_of = {}
+    for l in range(min(known + 1, D) + 1):
+        lo = 0 if l == 0 else 1 + 8 * first_inner(l - 1)
+        n = 1 if l == 0 else 8 * counts[l - 1]
+        for e, payload in values_found:
+            if e.level == l and lo <= e.first_element and e.first_element + e.element_count <= lo + n:
+                decoded = salvage_decode(ix, e, payload)
+                if decoded is not None:
+                    for k, v in enumerate(np.frombuffer(decoded, dtype)):
+                        value_of[e.first_element + k] = int(v)
+    # §18 step 4: each voxel takes its leaf's value where it survived, else the
+    # value of its nearest ancestor that survived (0 where none did).
+    fic_mask = (1 << 56) - 1
+
+    def visit(l, i, j, k, vidx, inner, fallback):
+        have = vidx in value_of
+        own = value_of[vidx] if have else fallback
+        word = node_words.get(inner) if inner is not None else None
+        if word is not None:   # §8.3 range and §8.4 rules, as any reader checks them
+            mask, fic = word >> 56, word & fic_mask
+            lo = first_inner(l + 1)
+            if (l + 1 > D or (l + 1 == D and mask) or fic < lo
+                    or fic + bin(mask).count("1") > lo + counts[l + 1]):
+                word = None
+        if word is None:
+            s = 1 << (D - l)
+            region = (slice(k * s, (k + 1) * s), slice(j * s, (j + 1) * s),
+                      slice(i * s, (i + 1) * s))
+            dense[region] = own
+            filled[region] = not (have and inner is None)
+            return
+        nxt = fic
+        for c in range(8):
+            child = None
+            if mask >> c & 1:
+                child, nxt = nxt, nxt + 1
+            ci, cj, ck = 2 * i + (c & 1), 2 * j + (c >> 1 & 1), 2 * k + (c >> 2 & 1)
+            s = 1 << (D - l - 1)
+            if ci * s < sx and cj * s < sy and ck * s < sz:
+                visit(l + 1, ci, cj, ck, 1 + 8 * inner + c, child, own)
+
+    visit(0, 0, 0, 0, 0, 0 if counts[0] else None, 0)
+    summary["levels_known"] = known
+    summary["filled_voxels"] = int(filled.sum())
+    return summary, dense
+
+
+def salvage_command(path, out, every_cut):
+    with open(path, "rb") as f:
+        data = f.read()
+    if not every_cut:
+        summary, dense = salvage(data)
+        with open(out, "wb") as f:
+            f.write(dense.tobytes())
+        print(json.dumps(summary))
+        return
+    # Every prefix of the file: one record each, a byte 1 and the dense bits
+    # when it salvaged, a byte 0 and zeros when not (tests cross-check this).
+    size = None
+    records = []
+    for cut in range(len(data)):
+        try:
+            _, dense = salvage(data[:cut])
+            records.append(b"\x01" + dense.tobytes())
+            size = len(records[-1]) - 1
+        except IvolError:
+            records.append(None)
+    if size is None:
+        raise UsageError("no cut of %s can be salvaged" % path)
+    with open(out, "wb") as f:
+        for r in records:
+            f.write(r if r is not None else bytes(size + 1))
+
+
 # ============================================================ command line
 
 def main(argv=None):
@@ -1473,6 +1782,12 @@ def main(argv=None):
     p.add_argument("file")
     p = sub.add_parser("conformance", help="run the vectors of a JSON manifest")
     p.add_argument("manifest")
+    p = sub.add_parser("salvage", help="the volume of a cut or damaged framed file "
+                       "(§18): dense stored bits, missing regions from coarser levels")
+    p.add_argument("file")
+    p.add_argument("-o", dest="out", required=True)
+    p.add_argument("--every-cut", action="store_true",
+                   help="salvage every prefix of the file; one record per cut")
     args = parser.parse_args(argv)
 
     try:
@@ -1490,6 +1805,8 @@ def main(argv=None):
                 f.write(data)
         elif args.command == "info":
             print(json.dumps(info(args.file), indent=2))
+        elif args.command == "salvage":
+            salvage_command(args.file, args.out, args.every_cut)
         elif args.command == "conformance":
             try:
                 failed = run_conformance(args.manifest)

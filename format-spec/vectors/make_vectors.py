@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Conformance test vectors for the .ivol format, version 1.2.
+"""Conformance test vectors for the .ivol format, version 1.3 (draft).
 
 Written from format-spec/ivol.md alone (no code of the ivol project is used).
 Needs only the Python standard library, numpy and zstandard; run it with
@@ -31,6 +31,7 @@ The script contains
     NOT produced by this reader.
 """
 
+import copy
 import json
 import math
 import os
@@ -412,6 +413,7 @@ class Blk:
         self.stored = None          # override of the stored bytes
         self.ov = {}                # override of entry fields
         self.extra = b""            # bytes 32 .. block_entry_size of the entry
+        self.hov = {}               # override of block header fields (framed files, §7.1)
 
     def stored_bytes(self):
         if self.stored is not None:
@@ -660,9 +662,20 @@ class Layout:
 def assemble(t, blocks, scale=1.0, offset=0.0, major=1, minor=0, header_extra=b"",
              required=0, optional=0, hreserved=0, fixed_extra=b"", structure_kind=1,
              value_encoding=None, depth=None, ireserved=0, size=None, level_table=None,
-             entry_extra=b"", gap_before_index=b"", index_tail=b"", block_count=None):
+             entry_extra=b"", gap_before_index=b"", index_tail=b"", block_count=None,
+             framed=False, descriptor=None):
     """Header | blocks | index | footer, all CRCs computed.  Returns
-    (bytes, Layout).  Every keyword overrides one field of a valid file."""
+    (bytes, Layout).  Every keyword overrides one field of a valid file.
+    framed (1.3, §4.1, §7.1): required feature bit 0, the volume descriptor
+    (index bytes 8 .. 40, or `descriptor`) and 8 reserved bytes in the
+    header, and a 32-byte block header before every block's payload."""
+    X, Y, Z = t.size if size is None else size
+    D = t.D if depth is None else depth
+    ve = t.enc if value_encoding is None else value_encoding
+    fixed_fields = struct.pack("<BBBBIIIdd", structure_kind, ve, D, ireserved, X, Y, Z, scale, offset)
+    if framed:
+        required |= 1
+        header_extra = (fixed_fields if descriptor is None else descriptor) + bytes(8) + header_extra
     header_size = 40 + len(header_extra)
     fixed_size = 48 + len(fixed_extra)
     entry_size = 32 + len(entry_extra)
@@ -677,6 +690,8 @@ def assemble(t, blocks, scale=1.0, offset=0.0, major=1, minor=0, header_extra=b"
     entries = []
     for b in blocks:
         st = b.stored_bytes()
+        if framed:
+            st = block_header(b, st) + st
         f = dict(file_offset=len(out), first=b.first, count=b.count, stored_size=len(st),
                  crc=crc32c(st), stream=b.stream, codec=b.codec, flags=b.flags, level=b.level)
         f.update(b.ov)
@@ -687,9 +702,6 @@ def assemble(t, blocks, scale=1.0, offset=0.0, major=1, minor=0, header_extra=b"
                                    f["flags"], f["level"]) + (b.extra or entry_extra))
     out += gap_before_index
     index_offset = len(out)
-    X, Y, Z = t.size if size is None else size
-    D = t.D if depth is None else depth
-    ve = t.enc if value_encoding is None else value_encoding
     lt = t.inner_count if level_table is None else level_table
     bc = len(blocks) if block_count is None else block_count
     idx = struct.pack("<4sIBBBBIIIddII", IDX_SIG, fixed_size, structure_kind, ve, D, ireserved,
@@ -704,6 +716,18 @@ def assemble(t, blocks, scale=1.0, offset=0.0, major=1, minor=0, header_extra=b"
     out += footer
     lay.index_offset, lay.index_size = index_offset, len(idx)
     return bytes(out), lay
+
+
+def block_header(b, payload):
+    """§7.1: signature, stream, codec, flags, level, first_element,
+    element_count, payload_size, payload_crc, header_crc; `b.hov` overrides
+    fields (and `header_crc`) for invalid files."""
+    f = dict(sig=b"IVBK", stream=b.stream, codec=b.codec, flags=b.flags, level=b.level,
+             first=b.first, count=b.count, payload_size=len(payload), payload_crc=crc32c(payload))
+    f.update({k: v for k, v in b.hov.items() if k != "header_crc"})
+    h = struct.pack("<4sBBBBQIII", f["sig"], f["stream"], f["codec"], f["flags"], f["level"],
+                    f["first"], f["count"], f["payload_size"], f["payload_crc"])
+    return h + struct.pack("<I", b.hov.get("header_crc", crc32c(h)))
 
 
 def u16(d, o):
@@ -812,10 +836,29 @@ def check_metadata(txt):
     return obj
 
 
+def check_block_header(st, e):
+    """§7.1: the block header repeats the index entry; returns the payload."""
+    if st[:4] != b"IVBK":
+        _fail("malformed", "block_header.signature", "block %d" % e["n"])
+    if crc32c(st[:28]) != u32(st, 28):
+        _fail("checksum", "block_header.crc", "block %d" % e["n"])
+    stream, codec, flags, level, first, count, psize, pcrc = struct.unpack_from("<BBBBQIII", st, 4)
+    if (stream, codec, flags, level, first, count) != (e["stream"], e["codec"], e["flags"], e["level"],
+                                                       e["first"], e["count"]):
+        _fail("malformed", "block_header.fields", "block %d" % e["n"])
+    if psize != len(st) - 32:
+        _fail("malformed", "block_header.payload_size", "block %d" % e["n"])
+    if crc32c(st[32:]) != pcrc:
+        _fail("checksum", "block_header.payload_crc", "block %d" % e["n"])
+    return st[32:]
+
+
 def decode_block(data, e, width):
     st = data[e["file_offset"]:e["file_offset"] + e["stored_size"]]
     if crc32c(st) != e["crc"]:
         _fail("checksum", "block.crc", "block %d" % e["n"])
+    if e["framed"]:
+        st = check_block_header(st, e)
     need = e["count"] * width
     if e["codec"] == CODEC_STORED:
         return st
@@ -870,8 +913,13 @@ def read_ivol(data, verify=True):
         _fail("checksum", "header_crc")
     if u32(data, 32) != 0:
         _fail("malformed", "header.reserved")
-    if u64(data, 16) != 0:
+    if u64(data, 16) & ~1:
         _fail("unsupported-feature", "required_features")
+    framed = bool(u64(data, 16) & 1)         # §4.1 (1.3): framed blocks, volume descriptor
+    if framed and hs < 80:
+        _fail("malformed", "framed.header_size")
+    if framed and data[68:76] != bytes(8):
+        _fail("malformed", "framed.reserved")
     # 4. footer
     if data[-8:] != END_SIG:
         _fail("truncated", "end_signature")
@@ -912,6 +960,8 @@ def read_ivol(data, verify=True):
         _fail("malformed", "value_scale")
     if not math.isfinite(offset):
         _fail("malformed", "value_offset")
+    if framed and data[36:68] != idx[8:40]:
+        _fail("malformed", "framed.descriptor")
     bc, es = u32(idx, 40), u32(idx, 44)
     if bc < 2:
         _fail("malformed", "block_count")
@@ -942,12 +992,12 @@ def read_ivol(data, verify=True):
         o = fs + 8 * (D + 1) + b * es
         fo, fe, cnt, ss, crc, stream, codec, flags, level = struct.unpack_from("<QQIIIBBBB", idx, o)
         e = dict(n=b, file_offset=fo, first=fe, count=cnt, stored_size=ss, crc=crc,
-                 stream=stream, codec=codec, flags=flags, level=level)
+                 stream=stream, codec=codec, flags=flags, level=level, framed=framed)
         if flags & 0xFE:
             _fail("malformed", "block.flags", "block %d" % b)
         if fo != pos:
             _fail("malformed", "block.placement", "block %d" % b)
-        if cnt < 1 or ss < 1:
+        if cnt < 1 or ss < 1 or (framed and ss <= 32):
             _fail("malformed", "block.sizes", "block %d" % b)
         pos += ss
         # streams 4 and 5 are known only in files of kinds 3 and 4; elsewhere
@@ -959,7 +1009,7 @@ def read_ivol(data, verify=True):
                 _fail("unsupported-feature", "codec", "block %d codec %d" % (b, codec))
             if cnt * width[stream] > MIB64:
                 _fail("malformed", "block.too_large", "block %d" % b)
-            if codec == 0 and ss != cnt * width[stream]:
+            if codec == 0 and ss != cnt * width[stream] + (32 if framed else 0):
                 _fail("malformed", "block.stored_size", "block %d" % b)
         elif not flags & 1:
             _fail("unsupported-feature", "stream", "block %d stream %d" % (b, stream))
@@ -1772,11 +1822,14 @@ def gen():
         "One byte of optional_features changed without updating header_crc.")
     inv("header_reserved_nonzero", reseal(patch(base, 32, "<I", 1), index=False), "malformed",
         "header.reserved", "Header reserved field (offset 32) = 1, header CRC recomputed.")
-    inv("required_feature_bit0", reseal(patch(base, 16, "<Q", 1), index=False), "unsupported-feature",
-        "required_features", "required_features bit 0 set (unknown in 1.0 - 1.2), header CRC recomputed.")
+    inv("required_feature_bit1", reseal(patch(base, 16, "<Q", 2), index=False), "unsupported-feature",
+        "required_features", "required_features bit 1 set (unknown in 1.0 - 1.3), header CRC recomputed.")
+    inv("framed_header_size_40", reseal(patch(base, 16, "<Q", 1), index=False), "malformed",
+        "framed.header_size", "required_features bit 0 (framed_blocks, 1.3) set in a 40-byte header: "
+        "no room for the volume descriptor (§4.1); header CRC recomputed.")
     inv("required_feature_bit63", reseal(patch(base, 16, "<Q", 1 << 63), index=False),
         "unsupported-feature", "required_features", "required_features bit 63 set.")
-    inv("order_reserved_before_required", reseal(patch(patch(base, 16, "<Q", 1), 32, "<I", 7), index=False),
+    inv("order_reserved_before_required", reseal(patch(patch(base, 16, "<Q", 2), 32, "<I", 7), index=False),
         "malformed", "header.reserved",
         "Check order (§13 step 3): reserved header field non-zero AND unknown required feature: "
         "reserved fields are checked first -> malformed.")
@@ -2232,6 +2285,7 @@ def gen():
     gen_grids_invalid(base, bblocks, bt)
     gen_codec2_valid(BASE)
     gen_codec2_invalid(bt, vblk, nblk1)
+    gen_framed()
     return SAMPLE
 
 
@@ -2301,6 +2355,109 @@ def _order_sensitive_cells_f32(src):
             dx, dy, dz = n & 1, (n >> 1) & 1, (n >> 2) & 1
             src[2 * cz + dz, 2 * cy + dy, 2 * cx + dx] = v[n]
     return cells
+
+
+# ------------------------------------------------ framed blocks (version 1.3 draft)
+
+def gen_framed():
+    """§4.1, §7.1: files with required feature bit 0, the volume descriptor in
+    an 80-byte header and a block header before every block, metadata first
+    (§15); one file per structure kind, every encoding and codec; then files
+    that break one framing rule each."""
+    framed = dict(framed=True, minor=3)
+    # octree, binary16, zstd over byte planes, several blocks per level
+    rng = np.random.default_rng(1301)
+    vals = np.round(rng.normal(1.0, 0.25, 9 * 7 * 5), 2)
+    vals[: 9 * 7 * 2] = 0.5                       # a uniform slab: leaves above voxel level
+    src = arr_f16(vals, (5, 7, 9))
+    d, lay, t, bl = simple_file(src, BINARY16, codec="planes", limit=48, meta_first=True, **framed)
+    add_valid("framed_octree_9x7x5_binary16", d, src, BINARY16,
+              "Framed (1.3 draft, required feature bit 0): 80-byte header with the volume descriptor, "
+              "a 32-byte block header (IVBK) before every block, the index entry's stored_size and crc "
+              "covering header and payload; metadata block first, then values and nodes level by level "
+              "(§15); octree 9x7x5 binary16, values over byte planes (codec 2), blocks of at most 48 bytes.")
+    base, base_tree, base_blocks = d, t, bl
+    # octree, uint16 with scale and offset, stored blocks (codec 0: stored_size = 32 + decoded)
+    src = rng.integers(0, 4096, size=(4, 6, 5)).astype(np.uint16)
+    src[:2, :2, :2] = 99
+    d, *_ = simple_file(src, UINT16, codec=CODEC_STORED, limit=40, meta_first=True, scale=0.25,
+                        offset=-3.0, **framed)
+    add_valid("framed_octree_5x6x4_uint16_stored", d, src, UINT16,
+              "Framed octree 5x6x4 uint16 (value_scale 0.25, value_offset -3), every block stored "
+              "(codec 0): stored_size is 32 + element_count x width.")
+    # octree, float32, zstd; early metadata (stream 6, ignorable) first, metadata last
+    vals = rng.normal(0.0, 1.0, 6 * 6 * 6)
+    src = arr_f32(vals, (6, 6, 6))
+    t = build_tree(src, FLOAT32)
+    blocks = level_blocks(t, CODEC_ZSTD, 256)
+    early = meta_block({"voxel_size": [0.1, 0.1, 0.1], "unit": "mm", "origin": [0, 0, 0],
+                        "value": {"quantity": "grey_value"}})
+    early.stream, early.flags = 6, 1
+    d, _ = assemble(t, [early] + blocks + [meta_block(DEFAULT_META)], **framed)
+    add_valid("framed_octree_6x6x6_float32_early_metadata", d, src, FLOAT32,
+              "Framed octree 6x6x6 float32 (zstd) written as a writer that learns its final metadata "
+              "late (§15): an early metadata block (stream 6, ignorable flag set) first, the metadata "
+              "block (stream 1) last. A reader skips stream 6; a salvaging reader uses it when stream 1 "
+              "did not survive.")
+    # the three grids of §8A
+    rs = np.random.default_rng(1302)
+    src = rs.integers(0, 60000, size=(3, 4, 5)).astype(np.uint16)
+    g = write_regular(src, UINT16)
+    d, *_ = grid_file(g, limit=32, meta_first=True, **framed)
+    add_valid("framed_regular_5x4x3_uint16", d, src, UINT16,
+              "Framed regular grid 5x4x3 uint16, metadata first, values in blocks of at most 16.",
+              kind=KIND_REGULAR)
+    bx, by, bz = [0, 2, 3, 7], [0, 1, 5], [0, 4]
+    cv = [f16(v) for v in rs.normal(0.0, 4.0, 3 * 2 * 1)]
+    src = rect_source(BINARY16, bx, by, bz, cv)
+    g = write_rectilinear(src, BINARY16, bx, by, bz)
+    d, *_ = grid_file(g, codec="planes", limit=8, slimit=8, meta_first=True, **framed)
+    add_valid("framed_rectilinear_7x5x4_binary16", d, src, BINARY16,
+              "Framed rectilinear grid 7x5x4 binary16 (B_x = [0,2,3,7], B_y = [0,1,5], B_z = [0,4]), "
+              "borders and values in small blocks, values over byte planes.",
+              kind=KIND_RECTILINEAR)
+    expo = [[[(i + j + k) % 2 for i in range(3)] for j in range(2)] for k in range(2)]
+    src = nested_source(FLOAT32, (6, 4, 3), 1, expo, lambda: f32(rs.normal(5.0, 2.0)))
+    g = write_nested(src, FLOAT32, 1, expo)
+    d, *_ = grid_file(g, limit=32, slimit=32, meta_first=True, **framed)
+    add_valid("framed_nested_6x4x3_float32", d, src, FLOAT32,
+              "Framed nested grid 6x4x3 float32, cell_log2 1: the descriptor repeats byte 11 "
+              "(cell_log2) as well.", kind=KIND_NESTED, extra={"cell_log2": 1})
+
+    # ---- invalid: one framing rule broken each (all other checksums hold)
+    vb = next(n for n, b in enumerate(base_blocks) if b.stream == STREAM_VALUES and b.level > 0)
+
+    def with_header(field, value):
+        bl = [copy.copy(b) for b in base_blocks]
+        bl[vb].hov = {field: value}
+        data, _ = assemble(base_tree, bl, **framed)
+        return data
+
+    b = base_blocks[vb]
+    add_invalid("framed_block_header_level", with_header("level", b.level + 1), "malformed",
+                "block_header.fields", "Framed file whose values block header says level %d, its index "
+                "entry %d (§7.1: the header repeats the entry)." % (b.level + 1, b.level))
+    add_invalid("framed_block_header_first_element", with_header("first", b.first + 1), "malformed",
+                "block_header.fields", "A block header's first_element differs from its index entry's.")
+    add_invalid("framed_block_header_crc", with_header("header_crc", 0x12345678), "checksum",
+                "block_header.crc", "A block header whose header_crc is wrong (the entry's crc, over "
+                "header and payload, holds).")
+    add_invalid("framed_block_signature", with_header("sig", b"IVBX"), "malformed",
+                "block_header.signature", "A block header whose block_signature is 'IVBX' (header_crc and "
+                "the entry's crc recomputed).")
+    add_invalid("framed_payload_crc", with_header("payload_crc", 0), "checksum",
+                "block_header.payload_crc", "A block header whose payload_crc is wrong.")
+    add_invalid("framed_payload_size", with_header("payload_size", len(b.stored_bytes()) + 1),
+                "malformed", "block_header.payload_size",
+                "A block header whose payload_size is stored_size - 31 instead of stored_size - 32.")
+    desc = bytearray(struct.pack("<BBBBIIIdd", 1, BINARY16, 4, 0, 9, 7, 5, 1.0, 0.0))
+    struct.pack_into("<I", desc, 4, 10)          # size_x 10 in the header, 9 in the index
+    data, _ = assemble(base_tree, base_blocks, descriptor=bytes(desc), **framed)
+    add_invalid("framed_descriptor_mismatch", data, "malformed", "framed.descriptor",
+                "The volume descriptor (header bytes 36..68) says size_x 10, the index 9 (§4.1).")
+    add_invalid("framed_descriptor_reserved", reseal(patch(base, 70, "<B", 1), index=False), "malformed",
+                "framed.reserved", "Reserved header byte 70 (of 68..76, kept for the brick layout) is 1; "
+                "header CRC recomputed.")
 
 
 def gen_grids_valid():
@@ -2899,7 +3056,7 @@ def gen_codec2_invalid(bt, vblk, nblk1):
         % (S, S, len(big.stored_bytes())))
 
 
-README_HEAD = """# .ivol 1.2 conformance vectors
+README_HEAD = """# .ivol 1.3 (draft) conformance vectors
 
 Generated by `make_vectors.py` from the specification `format-spec/ivol.md`
 alone. Regenerate with
@@ -2992,6 +3149,24 @@ detail as the file it is derived from (named in its description).
   stream 200 keep their meaning, and `valid/ignorable_stream_4_octree.ivol`
   shows the same for stream 4.
 
+### Changes to the 1.2 vectors for 1.3 (draft)
+
+* Required feature bit 0 is now `framed_blocks` (§4.1, §7.1).
+  `invalid/required_feature_bit0.ivol` is gone: the same file (bit 0 set in
+  a 40-byte header) is now `invalid/framed_header_size_40.ivol`, refused as
+  `malformed` (a framed file needs header_size >= 80 for its volume
+  descriptor); an unknown required feature is tested by
+  `invalid/required_feature_bit1.ivol` (same construction, bit 1,
+  `unsupported-feature`). `invalid/order_reserved_before_required.ivol` sets
+  bit 1 instead of bit 0, so that it still combines a reserved field with an
+  unknown feature.
+* New: 6 valid `framed_*` files (an octree of each encoding and codec, one
+  with an early metadata block of stream 6, and one file of each grid kind;
+  all with the metadata first) and 9 invalid ones, each breaking one framing
+  rule (block header fields, header_crc, signature, payload_crc,
+  payload_size, the descriptor against the index, its reserved bytes).
+* The manifest's `format` is `ivol 1.3 (draft)`.
+
 ### Changes to the 1.1 vectors for 1.2
 
 * `invalid/codec_2.ivol` is gone: 1.2 made codec 2 zstd over byte planes.
@@ -3067,7 +3242,7 @@ def main():
         os.makedirs(p)
     gen()
     zver = ".".join(str(v) for v in zstandard.ZSTD_VERSION)
-    man = {"format": "ivol 1.2", "generator": "make_vectors.py", "zstd_version": zver,
+    man = {"format": "ivol 1.3 (draft)", "generator": "make_vectors.py", "zstd_version": zver,
            "vectors": MANIFEST}
     with open(os.path.join(HERE, "manifest.json"), "w", encoding="utf-8") as fh:
         json.dump(man, fh, indent=1, ensure_ascii=False)

@@ -5,6 +5,7 @@
 
 #include <cstring>
 
+#include "framing.hpp"
 #include "ivol/crc32c.hpp"
 #include "ivol/error.hpp"
 
@@ -16,7 +17,7 @@ constexpr unsigned char kZstdMagic[4] = {0x28, 0xB5, 0x2F, 0xFD};
 }  // namespace
 
 std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const BlockInfo& block, std::size_t index,
-                                                std::size_t width, bool known) {
+                                                std::size_t width, bool known, bool framed) {
   const std::string part = file.path() + ": block " + std::to_string(index) + " (" + stream_name(block.stream) +
                            ", level " + std::to_string(block.level) + ", elements " +
                            std::to_string(block.first_element) + " .. " +
@@ -28,6 +29,10 @@ std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const Bl
     char text[96];
     std::snprintf(text, sizeof text, "CRC-32C is 0x%08X but the index says 0x%08X", actual, block.crc);
     throw Error(ErrorClass::Checksum, part + text);
+  }
+  if (framed) {  // spec §7.1: the block header repeats the index entry; the payload follows it
+    check_block_header(stored.data(), stored.size(), block, part);
+    stored.erase(stored.begin(), stored.begin() + 32);
   }
   // A block of a stream this reader does not know (ignorable, or the index
   // would have been refused): its CRC is all that can be checked.

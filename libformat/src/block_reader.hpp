@@ -16,9 +16,10 @@ namespace ivol::detail {
 // Reads, checks and decodes block `index` of the block table; `width` is the
 // element width of its stream.
 // A block of a stream unknown to the file's kind is only checked against its
-// CRC (`known` false).
+// CRC (`known` false). `framed`: format 1.3, the stored bytes begin with a
+// block header, checked against `block` and not part of what is returned.
 std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const BlockInfo& block, std::size_t index,
-                                                std::size_t width, bool known = true);
+                                                std::size_t width, bool known, bool framed);
 
 using BlockData = std::shared_ptr<const std::vector<std::uint8_t>>;
 

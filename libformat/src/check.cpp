@@ -30,7 +30,7 @@ CheckReport check_file(const std::string& path) {
     try {
       const auto decoded =
           detail::read_and_decode_block(*file, block, b, detail::stream_width(block.stream, info.layout.encoding),
-                                        detail::is_known_stream(block.stream, info.layout.kind));
+                                        detail::is_known_stream(block.stream, info.layout.kind), info.framed());
       if (block.stream == 1) metadata_text.assign(decoded.begin(), decoded.end());
     } catch (const Error& e) {
       ++report.blocks_damaged;

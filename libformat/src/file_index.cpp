@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "framing.hpp"
 #include "ivol/crc32c.hpp"
 #include "ivol/error.hpp"
 #include "layout.hpp"
@@ -101,12 +102,21 @@ class StructureReader {
       fail(ErrorClass::Malformed, "header", "reserved bytes 32..35 are not zero");
     info_.required_features = load<std::uint64_t>(&header_[layout::kHeaderRequiredFeatures]);
     info_.optional_features = load<std::uint64_t>(&header_[layout::kHeaderOptionalFeatures]);
-    if (info_.required_features != 0) {
+    const std::uint64_t unknown = info_.required_features & ~layout::kFeatureFramedBlocks;
+    if (unknown != 0) {
       std::string bits;
       for (int b = 0; b < 64; ++b)
-        if ((info_.required_features >> b) & 1u) bits += (bits.empty() ? "" : ", ") + std::to_string(b);
+        if ((unknown >> b) & 1u) bits += (bits.empty() ? "" : ", ") + std::to_string(b);
       fail(ErrorClass::UnsupportedFeature, "header",
            "required feature bit(s) " + bits + " are not known to this reader");
+    }
+    if (info_.framed()) {  // spec §4: the volume descriptor, checked against the index later
+      if (info_.header_size < layout::kFramedHeaderSize)
+        fail(ErrorClass::Malformed, "header",
+             "header_size " + std::to_string(info_.header_size) +
+                 " is below 80, but required feature bit 0 (framed_blocks) needs the volume descriptor");
+      for (std::size_t i = layout::kHeaderDescriptorReserved; i < layout::kHeaderDescriptorReserved + 8; ++i)
+        if (header_[i] != 0) fail(ErrorClass::Malformed, "header", "reserved bytes 68..75 are not zero");
     }
   }
 
@@ -187,6 +197,10 @@ class StructureReader {
     if (expected != index.size())
       fail(ErrorClass::Malformed, "index",
            "index_size is " + std::to_string(index.size()) + " but its fields need " + std::to_string(expected));
+    if (info_.framed() &&
+        std::memcmp(p + layout::kIndexStructureKind, &header_[layout::kHeaderDescriptor], layout::kDescriptorSize) != 0)
+      fail(ErrorClass::Malformed, "header",
+           "the volume descriptor (bytes 36..67) differs from the index's fixed part (bytes 8..39)");
     read_level_table(p + fixed_size);
     read_block_table(p + fixed_size + 8ull * (v.depth + 1), block_count, entry_size);
   }
@@ -241,6 +255,9 @@ class StructureReader {
                                        std::to_string(expected_offset) + " (blocks lie back to back after the header)");
       if (blk.element_count == 0) bad(ErrorClass::Malformed, "element_count is 0");
       if (blk.stored_size == 0) bad(ErrorClass::Malformed, "stored_size is 0");
+      if (info_.framed() && blk.stored_size <= layout::kBlockHeaderSize)
+        bad(ErrorClass::Malformed,
+            "stored_size " + std::to_string(blk.stored_size) + " leaves no payload after the 32-byte block header");
       expected_offset += blk.stored_size;
       if (expected_offset > info_.index_offset)
         bad(ErrorClass::Malformed, "the block runs past the index at offset " + std::to_string(info_.index_offset));
@@ -257,9 +274,11 @@ class StructureReader {
       const std::uint64_t decoded = blk.element_count * width;
       if (decoded > layout::kMaxBlockDecodedBytes)
         bad(ErrorClass::Malformed, "decoded size " + std::to_string(decoded) + " exceeds 64 MiB");
-      if (blk.codec == 0 && blk.stored_size != decoded)
+      const std::uint64_t frame = info_.framed() ? layout::kBlockHeaderSize : 0;
+      if (blk.codec == 0 && blk.stored_size != decoded + frame)
         bad(ErrorClass::Malformed, "a stored block of " + std::to_string(blk.element_count) + " elements must be " +
-                                       std::to_string(decoded) + " bytes, not " + std::to_string(blk.stored_size));
+                                       std::to_string(decoded + frame) + " bytes, not " +
+                                       std::to_string(blk.stored_size));
       if (blk.level > v.depth) bad(ErrorClass::Malformed, "level " + std::to_string(blk.level) + " is deeper than D");
       std::uint64_t lo = 0;
       std::uint64_t hi = 0;

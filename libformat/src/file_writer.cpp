@@ -8,6 +8,7 @@
 #include <cstring>
 #include <memory>
 
+#include "framing.hpp"
 #include "ivol/crc32c.hpp"
 #include "ivol/error.hpp"
 #include "ivol/temporary_file.hpp"
@@ -21,13 +22,20 @@ namespace {
   throw Error(ErrorClass::Io, path + ": " + what + ": " + std::strerror(errno));
 }
 
-std::array<unsigned char, layout::kHeaderSize> header_bytes(std::uint16_t minor) {
-  std::array<unsigned char, layout::kHeaderSize> header{};
+// 40 bytes (format 1.0 .. 1.2), or 80 with the volume descriptor (framed, 1.3).
+std::vector<unsigned char> header_bytes(std::uint16_t minor, const VolumeLayout& volume, bool framed) {
+  const std::uint32_t size = framed ? layout::kFramedHeaderSize : layout::kHeaderSize;
+  std::vector<unsigned char> header(size, 0);
   std::memcpy(header.data(), layout::kSignature.data(), 8);
   layout::store<std::uint16_t>(header.data() + layout::kHeaderVersionMajor, layout::kVersionMajor);
   layout::store<std::uint16_t>(header.data() + layout::kHeaderVersionMinor, minor);
-  layout::store<std::uint32_t>(header.data() + layout::kHeaderSizeField, layout::kHeaderSize);
-  layout::store<std::uint32_t>(header.data() + layout::kHeaderSize - 4, crc32c(header.data(), layout::kHeaderSize - 4));
+  layout::store<std::uint32_t>(header.data() + layout::kHeaderSizeField, size);
+  if (framed) {
+    layout::store<std::uint64_t>(header.data() + layout::kHeaderRequiredFeatures, layout::kFeatureFramedBlocks);
+    const auto descriptor = detail::volume_descriptor(volume);
+    std::memcpy(header.data() + layout::kHeaderDescriptor, descriptor.data(), descriptor.size());
+  }
+  layout::store<std::uint32_t>(header.data() + size - 4, crc32c(header.data(), size - 4));
   return header;
 }
 
@@ -81,13 +89,17 @@ EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_ele
   return block;
 }
 
-FileWriter::FileWriter(const std::string& path, const VolumeLayout& layout) : path_(path), layout_(layout) {
+FileWriter::FileWriter(const std::string& path, const VolumeLayout& layout, bool framed)
+    : path_(path), layout_(layout), framed_(framed) {
   remove_abandoned_temporaries(path);  // left by writers of this file that were killed
   fd_ = create_locked_temporary(path, temp_path_);
 
-  // Octree files stay version 1.0, so that 1.0 readers read them, unless
-  // they use codec 2 (finish() then writes the header again).
-  const auto header = header_bytes(layout_.kind == StructureKind::Octree ? 0 : layout::kVersionMinor);
+  // Unframed octree files stay version 1.0, so that 1.0 readers read them,
+  // unless they use codec 2 (finish() then writes the header again).
+  const std::uint16_t minor = framed_                                 ? layout::kVersionMinorFramed
+                              : layout_.kind == StructureKind::Octree ? 0
+                                                                      : layout::kVersionMinor;
+  const auto header = header_bytes(minor, layout_, framed_);
   write_all(header.data(), header.size(), "header");
 }
 
@@ -111,21 +123,52 @@ void FileWriter::write_all(const void* data, std::size_t size, const char* what)
 void FileWriter::append(const EncodedBlock& block) {
   if (finished_) throw Error(ErrorClass::InvalidArgument, path_ + ": append after finish");
   const std::uint64_t at = offset_;
+  Entry entry{at,
+              block.first_element,
+              block.element_count,
+              static_cast<std::uint32_t>(block.bytes.size()),
+              block.crc,
+              static_cast<std::uint8_t>(block.stream),
+              static_cast<std::uint8_t>(block.codec),
+              block.level};
+  if (framed_) {
+    // Framed here, not in encode_block, so that wherever a block was
+    // compressed (another rank, block_encoder.hpp) the file is the same.
+    if (block.bytes.size() > 0xFFFFFFFFu - layout::kBlockHeaderSize)
+      throw Error(ErrorClass::InvalidArgument, path_ + ": a block too large to frame");
+    BlockInfo info;
+    info.stream = entry.stream;
+    info.codec = entry.codec;
+    info.level = entry.level;
+    info.first_element = entry.first_element;
+    info.element_count = entry.element_count;
+    const auto header = detail::block_header(info, entry.stored_size, block.crc);
+    write_all(header.data(), header.size(), "block header");
+    entry.stored_size += layout::kBlockHeaderSize;
+    entry.crc = crc32c_extend(crc32c(header.data(), header.size()), block.bytes.data(), block.bytes.size());
+  }
   write_all(block.bytes.data(), block.bytes.size(), "block");
-  entries_.push_back(Entry{at, block.first_element, block.element_count, static_cast<std::uint32_t>(block.bytes.size()),
-                           block.crc, static_cast<std::uint8_t>(block.stream), static_cast<std::uint8_t>(block.codec),
-                           block.level});
+  entries_.push_back(entry);
 }
 
-void FileWriter::finish(const Metadata& metadata, const std::vector<std::uint64_t>& inner_count) {
-  if (inner_count.size() != layout_.depth + 1)
-    throw Error(ErrorClass::InvalidArgument, path_ + ": the level table needs depth + 1 entries");
-  const std::string json = metadata.to_json().dump();
+void FileWriter::write_metadata(const Metadata& metadata) {
+  if (!metadata_json_.empty()) throw Error(ErrorClass::InvalidArgument, path_ + ": the metadata is written already");
+  std::string json = metadata.to_json().dump();
   if (json.size() > layout::kMaxMetadataBytes)
     throw Error(ErrorClass::InvalidArgument, path_ + ": metadata exceeds 16 MiB");
   WriteOptions metadata_options;
   append(
       encode_block(Stream::Metadata, 0, 0, static_cast<std::uint32_t>(json.size()), 1, json.data(), metadata_options));
+  metadata_json_ = std::move(json);
+}
+
+void FileWriter::finish(const Metadata& metadata, const std::vector<std::uint64_t>& inner_count) {
+  if (inner_count.size() != layout_.depth + 1)
+    throw Error(ErrorClass::InvalidArgument, path_ + ": the level table needs depth + 1 entries");
+  if (metadata_json_.empty())
+    write_metadata(metadata);
+  else if (metadata.to_json().dump() != metadata_json_)
+    throw Error(ErrorClass::InvalidArgument, path_ + ": finish() got other metadata than the file begins with");
 
   const std::uint64_t index_offset = offset_;
   const std::size_t level_bytes = 8 * inner_count.size();
@@ -133,13 +176,8 @@ void FileWriter::finish(const Metadata& metadata, const std::vector<std::uint64_
   unsigned char* p = index.data();
   std::memcpy(p, layout::kIndexSignature.data(), 4);
   layout::store<std::uint32_t>(p + layout::kIndexFixedSizeField, layout::kIndexFixedSize);
-  p[layout::kIndexStructureKind] = static_cast<std::uint8_t>(layout_.kind);
-  p[layout::kIndexCellLog2] = layout_.kind == StructureKind::Nested ? layout_.cell_log2 : 0;
-  p[layout::kIndexValueEncoding] = static_cast<std::uint8_t>(layout_.encoding);
-  p[layout::kIndexDepth] = static_cast<std::uint8_t>(layout_.depth);
-  for (int a = 0; a < 3; ++a) layout::store<std::uint32_t>(p + layout::kIndexSizeX + 4 * a, layout_.dims[a]);
-  layout::store<double>(p + layout::kIndexScale, layout_.value_scale);
-  layout::store<double>(p + layout::kIndexOffset, layout_.value_offset);
+  const auto descriptor = detail::volume_descriptor(layout_);  // the same bytes as in a framed header
+  std::memcpy(p + layout::kIndexStructureKind, descriptor.data(), descriptor.size());
   layout::store<std::uint32_t>(p + layout::kIndexBlockCount, static_cast<std::uint32_t>(entries_.size()));
   layout::store<std::uint32_t>(p + layout::kIndexBlockEntrySize, layout::kBlockEntrySize);
   p += layout::kIndexFixedSize;
@@ -169,8 +207,8 @@ void FileWriter::finish(const Metadata& metadata, const std::vector<std::uint64_
   // A block over byte planes (codec 2) needs a version 1.2 reader: say so.
   bool planes = false;
   for (const Entry& e : entries_) planes = planes || e.codec == static_cast<std::uint8_t>(Codec::ZstdBytePlanes);
-  if (planes) {
-    const auto header = header_bytes(layout::kVersionMinorBytePlanes);
+  if (planes && !framed_) {
+    const auto header = header_bytes(layout::kVersionMinorBytePlanes, layout_, false);
     if (::pwrite(fd_, header.data(), header.size(), 0) != static_cast<ssize_t>(header.size()))
       io_error(path_, "cannot write the header");
   }

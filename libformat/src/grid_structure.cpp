@@ -81,7 +81,7 @@ GridStructure::GridStructure(const VolumeLayout& layout, std::vector<std::uint32
     case StructureKind::Octree:
       break;
   }
-  if (total != values_in_file)
+  if (values_in_file != kValuesUnknown && total != values_in_file)
     fail("values", "the file holds " + std::to_string(values_in_file) + " values, the structure has " +
                        std::to_string(total) + " cells");
 }

@@ -14,6 +14,9 @@ namespace ivol::detail {
 
 class GridStructure {
  public:
+  // values_in_file when a salvaged file's values stream has gaps.
+  static constexpr std::uint64_t kValuesUnknown = ~std::uint64_t{0};
+
   // Checks the borders (rectilinear) or cell words (nested) against spec
   // §8A and the number of values the file holds; throws Error(Malformed).
   GridStructure(const VolumeLayout& layout, std::vector<std::uint32_t> borders, std::vector<std::uint64_t> cells,

@@ -20,6 +20,7 @@ constexpr std::array<unsigned char, 4> kIndexSignature = {'I', 'V', 'I', 'X'};
 constexpr std::uint16_t kVersionMajor = 1;
 constexpr std::uint16_t kVersionMinor = 1;            // written only for the kinds of spec §8A
 constexpr std::uint16_t kVersionMinorBytePlanes = 2;  // files with a block of codec 2
+constexpr std::uint16_t kVersionMinorFramed = 3;      // files with framed blocks (required feature bit 0)
 
 // Header (§4)
 constexpr std::uint32_t kHeaderSize = 40;
@@ -30,6 +31,26 @@ constexpr std::size_t kHeaderSizeField = 12;
 constexpr std::size_t kHeaderRequiredFeatures = 16;
 constexpr std::size_t kHeaderOptionalFeatures = 24;
 constexpr std::size_t kHeaderReserved = 32;
+
+// Framed blocks (§4, §7; since 1.3, required feature bit 0): an 80-byte header
+// with the volume descriptor, and a 32-byte block header before every payload.
+constexpr std::uint64_t kFeatureFramedBlocks = 1;
+constexpr std::uint32_t kFramedHeaderSize = 80;
+constexpr std::size_t kHeaderDescriptor = 36;  // copy of index fixed part bytes 8 .. 40
+constexpr std::size_t kDescriptorSize = 32;
+constexpr std::size_t kHeaderDescriptorReserved = 68;  // 8 bytes, for the brick layout
+constexpr std::array<unsigned char, 4> kBlockSignature = {'I', 'V', 'B', 'K'};
+constexpr std::uint32_t kBlockHeaderSize = 32;
+constexpr std::size_t kBlockStream = 4;
+constexpr std::size_t kBlockCodec = 5;
+constexpr std::size_t kBlockFlags = 6;
+constexpr std::size_t kBlockLevel = 7;
+constexpr std::size_t kBlockFirstElement = 8;
+constexpr std::size_t kBlockElementCount = 16;
+constexpr std::size_t kBlockPayloadSize = 20;
+constexpr std::size_t kBlockPayloadCrc = 24;
+constexpr std::size_t kBlockHeaderCrc = 28;
+constexpr std::uint8_t kStreamEarlyMetadata = 6;  // ignorable; the metadata as known before the values
 
 // Footer (§5)
 constexpr std::size_t kFooterSize = 32;

@@ -1,5 +1,6 @@
 // Writes an in-memory octree level by level from the root down (spec §15):
-// the values of level l, then its nodes.
+// the metadata (first in framed files), then the values of level l, then its
+// nodes.
 #include <chrono>
 
 #include "block_pipeline.hpp"
@@ -14,7 +15,8 @@ WriteStats write_octree(const Octree& octree, const Metadata& metadata, const st
   if (options.block_bytes < 8 || options.block_bytes > (64u << 20))
     throw Error(ErrorClass::InvalidArgument, "write: block size must be 8 B .. 64 MiB");
   const VolumeLayout& layout = octree.layout();
-  FileWriter writer(path, layout);
+  FileWriter writer(path, layout, options.framed_blocks);
+  if (writer.framed()) writer.write_metadata(metadata);  // first, so that a cut file keeps it (spec §15)
   detail::BlockPipeline pipeline(writer, options);
   const std::size_t width = encoding_width(layout.encoding);
   const auto* values = octree.value_bytes().data();

@@ -17,13 +17,26 @@ namespace {
 // Stored bits of every voxel of `box` at level of detail `lod` for the grid
 // structures of spec §8A: the cells' values at full resolution, and the mean
 // of §12.3 (binary64, z then y then x) at coarser levels.
-std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigned lod) {
+// With `salvage`, a cell whose value cannot be read takes the stored code 0
+// (a grid has no coarser level to fall back on) and is logged.
+std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigned lod,
+                                     detail::SalvageLog* salvage = nullptr) {
   const VolumeLayout& v = impl.info.layout;
   const detail::GridStructure& grid = *impl.grid;
   if (lod == 0) {
     std::vector<std::uint32_t> bits(box.voxel_count());
     grid.for_each_cell(box, [&](const Box& region, std::uint64_t index) {
-      detail::fill_region(bits.data(), box, region, impl.value_bits(index));
+      std::uint32_t value = 0;
+      if (!salvage) {
+        value = impl.value_bits(index);
+      } else {
+        try {
+          value = impl.value_bits(index);
+        } catch (const Error& e) {
+          salvage->add(region, 0, e.what());
+        }
+      }
+      detail::fill_region(bits.data(), box, region, value);
     });
     return bits;
   }
@@ -32,7 +45,18 @@ std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigne
     full.lo[a] = box.lo[a] << lod;
     full.hi[a] = static_cast<std::uint32_t>(std::min<std::uint64_t>(std::uint64_t{box.hi[a]} << lod, v.dims[a]));
   }
-  const std::vector<std::uint32_t> fine = grid_bits(impl, full, 0);
+  std::vector<DamagedRegion> fine_damage;
+  detail::SalvageLog fine_log{fine_damage};
+  const std::vector<std::uint32_t> fine = grid_bits(impl, full, 0, salvage ? &fine_log : nullptr);
+  fine_log.flush();
+  for (const DamagedRegion& d : fine_damage) {  // into the coordinates of the level of detail
+    Box coarse;
+    for (int a = 0; a < 3; ++a) {
+      coarse.lo[a] = d.region.lo[a] >> lod;
+      coarse.hi[a] = static_cast<std::uint32_t>((std::uint64_t{d.region.hi[a]} + (1ull << lod) - 1) >> lod);
+    }
+    salvage->add(coarse, 0, d.message);
+  }
   const std::uint64_t fx = full.hi[0] - full.lo[0], fy = full.hi[1] - full.lo[1];
   std::vector<std::uint32_t> bits(box.voxel_count());
   std::size_t n = 0;
@@ -96,15 +120,15 @@ std::vector<float> Reader::read_box(const Box& box, unsigned lod, std::vector<Da
   impl_->check_box(box, lod);
   const VolumeLayout& v = impl_->info.layout;
   std::vector<float> out(box.voxel_count());
+  std::optional<detail::SalvageLog> log;
+  if (damaged) log.emplace(detail::SalvageLog{*damaged});
   if (impl_->grid) {
-    const std::vector<std::uint32_t> bits = grid_bits(*impl_, box, lod);
+    const std::vector<std::uint32_t> bits = grid_bits(*impl_, box, lod, log ? &*log : nullptr);
     for (std::size_t i = 0; i < bits.size(); ++i)
       out[i] = static_cast<float>(v.physical(decode_value(v.encoding, bits[i])));
     return out;
   }
   detail::ImplAccess access{impl_.get()};
-  std::optional<detail::SalvageLog> log;
-  if (damaged) log.emplace(detail::SalvageLog{*damaged});
   if (encoding_width(v.encoding) == 2) {
     // Physical values of all 65536 codes, once per call: cheaper than
     // decoding each voxel when the box is large.
@@ -138,14 +162,14 @@ std::vector<std::uint8_t> Reader::read_box_bits(const Box& box, unsigned lod, st
   const VolumeLayout& v = impl_->info.layout;
   const std::size_t width = encoding_width(v.encoding);
   std::vector<std::uint8_t> out(box.voxel_count() * width);
+  std::optional<detail::SalvageLog> log;
+  if (damaged) log.emplace(detail::SalvageLog{*damaged});
   if (impl_->grid) {
-    const std::vector<std::uint32_t> bits = grid_bits(*impl_, box, lod);
+    const std::vector<std::uint32_t> bits = grid_bits(*impl_, box, lod, log ? &*log : nullptr);
     for (std::size_t i = 0; i < bits.size(); ++i) std::memcpy(out.data() + i * width, &bits[i], width);
     return out;
   }
   detail::ImplAccess access{impl_.get()};
-  std::optional<detail::SalvageLog> log;
-  if (damaged) log.emplace(detail::SalvageLog{*damaged});
   detail::walk_box(
       access, v, impl_->ranges, box, lod,
       [&](const Box& region, std::uint32_t bits) {
@@ -225,9 +249,9 @@ std::vector<std::uint8_t> Reader::read_block(std::size_t block_index) {
   if (block_index >= impl_->info.blocks.size())
     throw Error(ErrorClass::InvalidArgument, path() + ": no block " + std::to_string(block_index));
   const BlockInfo& b = impl_->info.blocks[block_index];
-  return detail::read_and_decode_block(impl_->file, b, block_index,
-                                       detail::stream_width(b.stream, impl_->info.layout.encoding),
-                                       detail::is_known_stream(b.stream, impl_->info.layout.kind));
+  return detail::read_and_decode_block(
+      impl_->file, b, block_index, detail::stream_width(b.stream, impl_->info.layout.encoding),
+      detail::is_known_stream(b.stream, impl_->info.layout.kind), impl_->info.framed());
 }
 
 }  // namespace ivol

@@ -12,12 +12,14 @@
 #include "ivol/error.hpp"
 #include "ivol/reader.hpp"
 #include "layout.hpp"
+#include "salvage.hpp"
 #include "tree_walk.hpp"
 
 namespace ivol {
 
 struct Reader::Impl {
   detail::RandomAccessFile file;
+  std::string salvaged_metadata;  // the metadata text a salvaging open found; before `info`, which fills it
   FileInfo info;
   Metadata metadata;
   detail::LevelRanges ranges;
@@ -41,7 +43,10 @@ struct Reader::Impl {
   std::size_t last_level[6] = {0, 0, 0, 0, 0, 0};  // the hint that served the last lookup
 
   Impl(const std::string& path, const ReaderOptions& options)
-      : file(path), info(detail::read_file_structure(file)), ranges(info.layout), cache(options.cache_bytes) {
+      : file(path),
+        info(detail::read_or_salvage(file, options.salvage, salvaged_metadata)),
+        ranges(info.layout),
+        cache(options.cache_bytes) {
     for (std::size_t b = 0; b < info.blocks.size(); ++b)
       if (detail::is_known_stream(info.blocks[b].stream, info.layout.kind))
         stream_blocks[info.blocks[b].stream].push_back(b);
@@ -50,11 +55,17 @@ struct Reader::Impl {
         return info.blocks[a].first_element < info.blocks[b].first_element;
       });
     for (auto& h : hint) h.assign(info.layout.depth + 1, Hint{});
-    const auto text = block(stream_blocks[1].front());
-    try {
-      metadata = Metadata::parse(std::string(text->begin(), text->end()));
-    } catch (const Error& e) {
-      throw Error(e.error_class(), file.path() + ": " + e.what());
+    if (info.salvage) {
+      // Checked when salvaged; none survived: the defaults (info.salvage says so).
+      if (!salvaged_metadata.empty()) metadata = Metadata::parse(salvaged_metadata);
+    } else {
+      try {
+        const auto text = block(stream_blocks[1].front());
+        metadata = Metadata::parse(std::string(text->begin(), text->end()));
+      } catch (const Error& e) {
+        if (!options.salvage) throw Error(e.error_class(), file.path() + ": " + e.what());
+        // A salvaging reader reads the values without it; the defaults stand in.
+      }
     }
     if (info.layout.kind != StructureKind::Octree) load_grid();
   }
@@ -77,7 +88,16 @@ struct Reader::Impl {
     }
     std::uint64_t values = 0;
     for (std::size_t b : stream_blocks[3]) values += info.blocks[b].element_count;
-    grid.emplace(info.layout, std::move(borders), std::move(cells), values, file.path());
+    if (info.salvage) values = detail::GridStructure::kValuesUnknown;  // gaps are read as missing
+    try {
+      grid.emplace(info.layout, std::move(borders), std::move(cells), values, file.path());
+    } catch (const Error& e) {
+      if (!info.salvage) throw;
+      throw Error(ErrorClass::Truncated, info.salvage->reason +
+                                             "; nothing can be salvaged: the grid's borders or cell words did "
+                                             "not all survive: " +
+                                             e.what());
+    }
   }
 
   detail::BlockData block(std::size_t index) {
@@ -91,8 +111,8 @@ struct Reader::Impl {
     const BlockInfo& b = info.blocks[index];
     detail::BlockData data;
     try {
-      data = std::make_shared<const std::vector<std::uint8_t>>(
-          detail::read_and_decode_block(file, b, index, detail::stream_width(b.stream, info.layout.encoding)));
+      data = std::make_shared<const std::vector<std::uint8_t>>(detail::read_and_decode_block(
+          file, b, index, detail::stream_width(b.stream, info.layout.encoding), true, info.framed()));
     } catch (const Error& e) {
       failures.emplace(index, e);
       throw;
@@ -118,15 +138,26 @@ struct Reader::Impl {
     const auto& list = stream_blocks[stream];
     auto it = std::upper_bound(list.begin(), list.end(), element,
                                [&](std::uint64_t e, std::size_t b) { return e < info.blocks[b].first_element; });
-    if (it == list.begin()) throw Error(ErrorClass::Malformed, file.path() + ": element outside every block");
+    if (it == list.begin() || element - info.blocks[*(it - 1)].first_element >= info.blocks[*(it - 1)].element_count)
+      missing(stream,
+              it == list.begin() ? 0 : info.blocks[*(it - 1)].first_element + info.blocks[*(it - 1)].element_count,
+              it == list.end() ? nullptr : &info.blocks[*it]);
     const std::size_t found = *(it - 1);
     const BlockInfo& blk = info.blocks[found];
-    if (element - blk.first_element >= blk.element_count)
-      throw Error(ErrorClass::Malformed, file.path() + ": element outside every block");
     Hint& h = hint[stream][blk.level];
     h = Hint{found, blk.first_element, blk.element_count, block(found)};
     last_level[stream] = blk.level;
     return h.data->data() + (element - blk.first_element) * width;
+  }
+
+  // An element in no block: only a salvaged file has such gaps (a sound index
+  // covers every stream). One message per gap, so that a salvaging read lists
+  // each gap once.
+  [[noreturn]] void missing(std::uint8_t stream, std::uint64_t from, const BlockInfo* next) const {
+    throw Error(info.salvage ? ErrorClass::Truncated : ErrorClass::Malformed,
+                file.path() + ": " + stream_name(stream) + " elements " + std::to_string(from) + " .. " +
+                    (next ? std::to_string(next->first_element) : std::string("the end")) +
+                    (info.salvage ? " were not found" : " are in no block"));
   }
 
   std::uint64_t node_word(std::uint64_t index) { return layout::load<std::uint64_t>(element(2, index)); }

@@ -223,7 +223,8 @@ class Engine final : public StreamingOctreeWriter::Impl {
       for (std::uint64_t s = 0; s < records_.size(); ++s)
         for (unsigned l = subtree_level_; l <= depth_; ++l) layout.inner_count[l] += count(s, l, 0);
     }
-    FileWriter writer(path_, layout);
+    FileWriter writer(path_, layout, options_.write.framed_blocks);
+    if (writer.framed()) writer.write_metadata(metadata);  // known by now: first, as spec §15 recommends
     detail::BlockPipeline pipeline(writer, options_.write);
     const std::uint32_t block = options_.write.block_bytes;
     std::uint64_t next_child = 1;  // breadth-first first_inner_child, across levels

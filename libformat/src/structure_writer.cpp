@@ -139,11 +139,12 @@ struct StructureStreamWriter::Impl {
   std::unique_ptr<detail::BlockAssembler> values_out;
   std::unique_ptr<FileOrder> order;
 
-  Impl(const VoxelStructure& s, const std::string& path, const StreamingOptions& o) : structure(s), options(o) {
+  Impl(const VoxelStructure& s, const std::string& path, const StreamingOptions& o, const Metadata* metadata)
+      : structure(s), options(o) {
     if (s.kind() == StructureKind::Octree)
       open_octree(path);
     else
-      open_grid(path);
+      open_grid(path, metadata);
   }
 
   void open_octree(const std::string& path) {
@@ -190,7 +191,7 @@ struct StructureStreamWriter::Impl {
     values.release_below(static_cast<std::uint32_t>(z1));
   }
 
-  void open_grid(const std::string& path) {
+  void open_grid(const std::string& path, const Metadata* metadata) {
     const BuildOptions& build = options.build;
     layout.kind = structure.kind();
     layout.dims = structure.dims();
@@ -203,7 +204,8 @@ struct StructureStreamWriter::Impl {
     while ((1u << cell_log2) < structure.nested_cell()) ++cell_log2;
     layout.cell_log2 = static_cast<std::uint8_t>(layout.kind == StructureKind::Nested ? cell_log2 : 0);
 
-    file = std::make_unique<FileWriter>(path, layout);
+    file = std::make_unique<FileWriter>(path, layout, options.write.framed_blocks);
+    if (metadata && file->framed()) file->write_metadata(*metadata);
     pipeline = std::make_unique<detail::BlockPipeline>(*file, options.write);
     const std::uint32_t block = options.write.block_bytes;
     if (layout.kind == StructureKind::Rectilinear) {
@@ -274,7 +276,11 @@ struct StructureStreamWriter::Impl {
 
 StructureStreamWriter::StructureStreamWriter(const VoxelStructure& structure, const std::string& path,
                                              const StreamingOptions& options)
-    : impl_(std::make_unique<Impl>(structure, path, options)) {}
+    : impl_(std::make_unique<Impl>(structure, path, options, nullptr)) {}
+
+StructureStreamWriter::StructureStreamWriter(const VoxelStructure& structure, const std::string& path,
+                                             const StreamingOptions& options, const Metadata& metadata)
+    : impl_(std::make_unique<Impl>(structure, path, options, &metadata)) {}
 
 StructureStreamWriter::~StructureStreamWriter() = default;
 
@@ -289,7 +295,7 @@ StreamingResult StructureStreamWriter::finish(const Metadata& metadata, Structur
 StreamingResult write_structure(const VoxelStructure& structure, const std::string& path, const Metadata& metadata,
                                 StreamingOptions options) {
   WholeStructureValues values(structure);
-  StructureStreamWriter writer(structure, path, options);
+  StructureStreamWriter writer(structure, path, options, metadata);
   return writer.finish(metadata, values);
 }
 

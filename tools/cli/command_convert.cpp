@@ -25,6 +25,7 @@ struct ConvertSettings {
   std::string encoding, keep, quantity, value_unit;
   std::uint32_t block_bytes = 0;
   std::string codec = "zstd-planes";
+  std::string format_version = "1.3";
   std::uint64_t memory_mib = 0;
   std::string out_type;
   unsigned level = 0;
@@ -83,6 +84,11 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
                    "zstd-planes: values over byte planes (format 1.2, smaller); zstd: format 1.0/1.1 readers read it")
       ->check(CLI::IsMember({"zstd-planes", "zstd"}))
       ->capture_default_str();
+  into->add_option("--format-version", s->format_version,
+                   "1.3: framed blocks, salvageable when cut; 1.2: for readers older than 1.3 (with --codec zstd, "
+                   "for 1.0/1.1 readers)")
+      ->check(CLI::IsMember({"1.3", "1.2"}))
+      ->capture_default_str();
   into->add_option("--memory", s->memory_mib, "About how many MiB the conversion may hold (default 2048)")
       ->check(whole_number());
   into->add_option("--quantity", s->quantity, "What the values are, e.g. linear_attenuation");
@@ -130,6 +136,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       if (!s->keep.empty()) options.keep = parse_keep(s->keep, "--keep");
       options.block_bytes = s->block_bytes;
       options.byte_planes = s->codec == "zstd-planes";
+      options.framed_blocks = s->format_version == "1.3";
       // A slab's samples are held about four times over (as read, as float,
       // the keep mask, the subtrees being built): give a quarter to the slab.
       options.slab_budget_bytes = foreign.memory_bytes / 4;

@@ -9,6 +9,7 @@
 #include "ivol_io.hpp"
 #include "option_parsing.hpp"
 #include "output_rules.hpp"
+#include "salvage_report.hpp"
 
 namespace ivol::cli {
 namespace {
@@ -51,13 +52,20 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
   cmd->add_option("--endian", s->endian, "Raw output byte order")->check(CLI::IsMember({"little", "big"}));
   cmd->add_flag("-f,--force", s->force, "Replace the output if it exists");
   cmd->add_flag("--salvage", s->salvage,
-                "Read past damaged blocks: their regions take the average of a coarser level (exit 3)");
+                "Read past damaged blocks and a cut or damaged index (format 1.3 files): missing regions take the "
+                "average of a coarser level (exit 3)");
   return [s, &global]() {
     const Format to = output_format(s->output, s->to, "-o");
     if (to == Format::Ivol) throw UsageError("-o", "extract writes dense formats, not .ivol");
     check_output(s->output, "-o", {s->file}, s->force, /*stdout_allowed=*/true);
     std::ostream& say = is_stdio(s->output) ? std::cerr : std::cout;  // not among the samples
-    Reader reader(s->file);
+    ReaderOptions reader_options;
+    reader_options.salvage = s->salvage;
+    Reader reader(s->file, reader_options);
+    if (reader.info().salvage) {
+      std::cerr << "ivol extract: " << reader.info().salvage->reason << "\n";
+      print_salvage(std::cerr, "  ", *reader.info().salvage, reader.layout());
+    }
     const convert::SampleType natural =
         to == Format::Vdb ? convert::natural_float_type(reader) : convert::natural_sample_type(reader);
     const convert::SampleType type = s->type.empty() ? natural : parse_sample_type(s->type, "--type");
@@ -86,7 +94,7 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
                 << convert::describe_loss(loss, shape.voxel_count(), convert::sample_type_name(type)) << "\n";
     if (!damaged.empty()) {
       std::cerr << "ivol extract: salvaged " << damaged.size()
-                << " region(s) from coarser levels because blocks are damaged:\n";
+                << " region(s) from coarser levels because blocks are damaged or missing:\n";
       for (std::size_t n = 0; n < damaged.size() && n < 10; ++n)
         std::cerr << "  " << damaged[n].region.to_string() << " (level " << damaged[n].level
                   << "): " << damaged[n].message << "\n";

@@ -1,9 +1,12 @@
 // ivol info FILE [--json]: what a file holds and how it is laid out.
 #include <iostream>
+#include <optional>
 
 #include "commands.hpp"
+#include "ivol/error.hpp"
 #include "ivol/reader.hpp"
 #include "report.hpp"
+#include "salvage_report.hpp"
 
 namespace ivol::cli {
 
@@ -14,7 +17,17 @@ Runner add_info_command(CLI::App& app, const GlobalOptions& /*global*/) {
   cmd->add_option("FILE", *file, "The .ivol file")->required();
   cmd->add_flag("--json", *json, "Print one JSON object (for machines)");
   return [file, json]() {
-    Reader reader(*file);
+    std::optional<Reader> opened;
+    try {
+      opened.emplace(*file);
+    } catch (const Error&) {
+      // A cut or damaged file: say what a salvaging read would get, then fail
+      // as for any bad file.
+      std::cout << *file << ": cannot be read as it is\n";
+      print_salvage_prospect(std::cout, "  ", *file);
+      throw;
+    }
+    Reader& reader = *opened;
     const nlohmann::json d = describe_file(reader);
     if (*json) {
       std::cout << d.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";

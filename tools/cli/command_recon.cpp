@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
+#include <optional>
 
 #include "commands.hpp"
 #include "fixity.hpp"
@@ -37,6 +38,7 @@ struct ReconSettings {
   std::uint64_t device_memory_mib = 0;
   std::uint32_t slab_slices = 0;
   std::string encoding = "binary16";
+  std::string format_version = "1.3";
   std::string keep;
   std::string structure;
   std::string threshold = "otsu";
@@ -210,7 +212,16 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   // The other ranks take a share of the compression once their slabs are
   // sent; the writer calls it on this (the MPI) thread.
   if (mpi) options.write.encoder = mpi->block_encoder();
-  StructureStreamWriter writer(*structure, s.output, options);
+  options.write.framed_blocks = s.format_version == "1.3";
+  // Without sources to digest the metadata is complete here, and a grid's
+  // file begins with it (spec §15); the digests come after the values, so
+  // then it comes last (an early metadata block, stream 6, is not written).
+  std::optional<StructureStreamWriter> writer_storage;
+  if (complete_metadata)
+    writer_storage.emplace(*structure, s.output, options);
+  else
+    writer_storage.emplace(*structure, s.output, options, metadata);
+  StructureStreamWriter& writer = *writer_storage;
   StructureValueWindow values(*structure);
   double writing_during_fdk = 0;  // the writer works inside the FDK's slab hand-over
   const recon::FdkReport fdk =
@@ -309,6 +320,10 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
   out->add_option("--encoding", s->encoding, "binary16 or float32")
       ->check(CLI::IsMember({"binary16", "float32"}))
       ->capture_default_str();
+  out->add_option("--format-version", s->format_version,
+                  "1.3: framed blocks, salvageable when cut; 1.2: for readers older than 1.3")
+      ->check(CLI::IsMember({"1.3", "1.2"}))
+      ->capture_default_str();
   out->add_option("--keep", s->keep,
                   "threshold=T|otsu,margin=M: full resolution only around the object (otsu: from a preview)")
       ->check(checked([](const std::string& v) { parse_keep(v, "--keep"); }));
@@ -378,6 +393,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
 
     convert::ImportOptions import;
     import.encoding = parse_encoding(s->encoding);
+    import.framed_blocks = s->format_version == "1.3";
     import.slab_budget_bytes = (s->memory_mib << 20) / 4;
     double preview_seconds = 0.0;
     if (!s->keep.empty()) {

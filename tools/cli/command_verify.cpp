@@ -15,6 +15,7 @@
 #include "ivol/error.hpp"
 #include "option_parsing.hpp"
 #include "output_rules.hpp"
+#include "salvage_report.hpp"
 #include "sha256.hpp"
 #include "staged_file.hpp"
 #include "verify_against.hpp"
@@ -113,6 +114,7 @@ void print_text(const FileResult& r, bool quiet) {
     std::cout << ")\n";
     for (const CheckProblem& p : r.report->problems)
       std::cout << "  " << error_class_name(p.error_class) << ": " << p.message << "\n";
+    if (r.status == "damaged" && !r.report->info) print_salvage_prospect(std::cout, "  ", r.path);  // no usable index
   }
   if (r.against) {
     const AgainstReport& a = *r.against;

@@ -187,6 +187,7 @@ StreamingOptions import_streaming_options(const DenseVolume& shape, const Import
   report.value_offset = build.value_offset;
   if (options.block_bytes) streaming.write.block_bytes = options.block_bytes;
   streaming.write.byte_planes = options.byte_planes;
+  streaming.write.framed_blocks = options.framed_blocks;
   streaming.write.encoder = options.encoder;
   if (options.slab_budget_bytes) streaming.slab_budget_bytes = options.slab_budget_bytes;
   return streaming;

@@ -10,6 +10,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "ivol/geometry.hpp"
@@ -19,6 +20,31 @@ namespace ivol {
 
 struct ReaderOptions {
   std::uint64_t cache_bytes = 256ull << 20;  // decoded blocks kept in memory
+  // When the footer or index cannot be used (a cut copy, a damaged tail):
+  // rebuild the index from the framed blocks of a format 1.3 file (spec §18)
+  // instead of failing. The Reader then reads what survived; read_box with
+  // `damaged` fills the rest from the nearest coarser level and lists it.
+  // A file whose index is sound is read as without this option (except that
+  // a damaged metadata block gives default metadata instead of an error).
+  bool salvage = false;
+};
+
+// What a salvaging open found (FileInfo::salvage).
+struct SalvageInfo {
+  std::string reason;              // why the index could not be used
+  std::uint64_t blocks_found = 0;  // blocks whose header and payload CRCs hold
+  std::uint64_t blocks_used = 0;   // of them, placed in the rebuilt index
+  std::uint64_t bytes_lost = 0;    // bytes after the header that are in no found block
+  // [begin, end) of those bytes, at most the first 100 runs.
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> gaps;
+  // "complete" (the metadata block survived), "early" (only the early
+  // metadata, stream 6: keys may be missing) or "missing" (defaults).
+  std::string metadata = "missing";
+  // The finest level of detail every element of which survived; -1: none.
+  int finest_complete_lod = -1;
+  std::uint64_t values_found = 0;  // values the rebuilt index holds
+  std::uint64_t values_total = 0;  // values the volume has; 0 when not known
+  std::vector<std::string> notes;  // blocks found but not used, and why (at most 100)
 };
 
 // One entry of the block table (spec §6.3).
@@ -48,11 +74,21 @@ struct FileInfo {
   std::uint64_t index_size = 0;
   VolumeLayout layout;
   std::vector<BlockInfo> blocks;
+  // Format 1.3 framed blocks (required feature bit 0): every block's stored
+  // bytes begin with a 32-byte block header.
+  bool framed() const { return (required_features & 1u) != 0; }
+  // Set when the index was rebuilt by scanning the blocks (ReaderOptions::
+  // salvage): what was found and what is missing.
+  std::shared_ptr<const SalvageInfo> salvage;
 };
 
 // A region a salvaging read filled from a coarser level because a block it
-// needed is damaged: `region` in the coordinates of the read's level of
-// detail, `level` the octree level where the damage was met.
+// needed is damaged or missing: `region` in the coordinates of the read's
+// level of detail, `level` the octree level where the damage was met. One
+// entry per damaged block or missing run of elements (`message` names it),
+// its region the box around all it cost; at most 1001 entries a read. The
+// grids of spec §8A have no coarser level: their missing cells read as the
+// stored code 0.
 struct DamagedRegion {
   Box region;
   unsigned level = 0;

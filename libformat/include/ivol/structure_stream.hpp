@@ -92,6 +92,12 @@ class WholeStructureValues final : public StructureValueSource {
 class StructureStreamWriter {
  public:
   StructureStreamWriter(const VoxelStructure& structure, const std::string& path, const StreamingOptions& options);
+  // With the metadata known before the first value: a grid's framed file
+  // then begins with it (spec §15), so that a cut file keeps it; finish()
+  // must be given the same metadata. (The octree's is written first anyway:
+  // its file is written at finish().) write_structure() uses this.
+  StructureStreamWriter(const VoxelStructure& structure, const std::string& path, const StreamingOptions& options,
+                        const Metadata& metadata);
   ~StructureStreamWriter();  // an unfinished writer leaves nothing behind
   StructureStreamWriter(const StructureStreamWriter&) = delete;
   StructureStreamWriter& operator=(const StructureStreamWriter&) = delete;

@@ -34,6 +34,12 @@ struct WriteOptions {
   // of noisy CT values; false writes codec 1 only, for format 1.0 / 1.1
   // readers.
   bool byte_planes = true;
+  // Format 1.3 framing (required feature bit 0): a block header before every
+  // block, the volume descriptor in the file header and the metadata first,
+  // so that a cut or damaged file can be salvaged without its index; false
+  // writes format 1.2 files (no framing) for readers older than 1.3. Blocks
+  // are framed where they are appended, so an encoder (below) never sees it.
+  bool framed_blocks = true;
   unsigned threads = 0;  // compression threads; 0: all hardware threads
   // Where batches of blocks are compressed; null: on this process's threads.
   // The file is the same either way (ivol/block_encoder.hpp).
@@ -59,16 +65,22 @@ EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_ele
 class FileWriter {
  public:
   // `layout` gives dims, encoding, scale and offset; its inner_count is given
-  // to finish(). Creates a temporary file next to `path`.
-  FileWriter(const std::string& path, const VolumeLayout& layout);
+  // to finish(). Creates a temporary file next to `path`. `framed`: format
+  // 1.3 framed blocks (WriteOptions::framed_blocks).
+  FileWriter(const std::string& path, const VolumeLayout& layout, bool framed = true);
   ~FileWriter();  // an unfinished file is removed; nothing at `path` changes
   FileWriter(const FileWriter&) = delete;
   FileWriter& operator=(const FileWriter&) = delete;
 
   void append(const EncodedBlock& block);
-  // Writes the metadata block, the index and the footer, flushes, and renames
-  // the temporary file to `path` (replacing any file there atomically).
+  // Writes the metadata block now: writers of framed files call it before the
+  // first value (spec §15), so that a cut file keeps its metadata.
+  void write_metadata(const Metadata& metadata);
+  // Writes the metadata block unless write_metadata() did (then `metadata`
+  // must be the same), the index and the footer, flushes, and renames the
+  // temporary file to `path` (replacing any file there atomically).
   void finish(const Metadata& metadata, const std::vector<std::uint64_t>& inner_count);
+  bool framed() const { return framed_; }
 
   std::uint64_t bytes_written() const { return offset_; }
   std::uint64_t block_count() const { return entries_.size(); }
@@ -89,6 +101,8 @@ class FileWriter {
   std::string path_;
   std::string temp_path_;
   VolumeLayout layout_;
+  bool framed_ = true;
+  std::string metadata_json_;  // as written by write_metadata(); empty until then
   int fd_ = -1;
   std::uint64_t offset_ = 0;
   std::vector<Entry> entries_;
