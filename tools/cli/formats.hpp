@@ -25,6 +25,7 @@ struct ForeignOptions {
   std::string grid;                        // OpenVDB; empty: the first float grid
   float background = 0.0f;                 // OpenVDB output
   std::uint64_t memory_bytes = 0;          // --memory; 0: the default (convert/sizes.hpp)
+  bool allow_gaps = false;                 // TIFF folder with missing slice numbers
 };
 
 // The format written to `path`: `name` (--to) or the extension, which must
