@@ -48,13 +48,14 @@ void settle_metadata(convert::DenseVolume& shape, const ConvertSettings& s, Form
 }
 
 // Where geometry came from, after the summary line; an unknown voxel size
-// is a warning even when nothing else is printed.
+// is a warning (on stderr; --quiet prints nothing but errors, and the output
+// records it anyway).
 void print_geometry(const convert::DenseVolume& shape, const ConvertSettings& s, std::ostream& say, bool quiet) {
+  if (quiet) return;
   if (!shape.has_geometry)
     std::cerr << "ivol convert: warning: " << s.input
               << " gives no voxel size and --voxel-size was not given; the output records it as unknown "
                  "(provenance voxel_size_known = false)\n";
-  if (quiet) return;
   for (const std::string& line : convert::geometry_summary(shape)) say << "  " << line << "\n";
 }
 

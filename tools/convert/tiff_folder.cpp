@@ -117,7 +117,7 @@ TiffFolder scan_tiff_folder(const std::string& folder, const TiffFolderOptions& 
                                              "; keep one of them");
     step = std::min(step, slices[i].number - slices[i - 1].number);
   }
-  std::vector<std::string> gaps;
+  std::vector<std::string> gaps, notes;
   for (std::size_t i = 1; i < slices.size(); ++i) {
     const unsigned long long before = slices[i - 1].number, after = slices[i].number;
     if (after - before == step) continue;
@@ -127,13 +127,17 @@ TiffFolder scan_tiff_folder(const std::string& folder, const TiffFolderOptions& 
       what += " .. " + name_for(slices[i - 1], after - step) + " (" + std::to_string(missing) + " slices)";
     gaps.push_back(slices[i].name + " follows " + slices[i - 1].name + ": " + what + (missing > 1 ? " are" : " is") +
                    " missing");
+    notes.push_back(dir + "/" + gaps.back() + ": converted without " + (missing > 1 ? "them" : "it") +
+                    " (--allow-gaps)");
   }
-  if (!gaps.empty() && !options.allow_gaps)
+  if (!gaps.empty() && !options.allow_gaps) {
+    const std::size_t more = gaps.size() - 1;
     throw Error(ErrorClass::Malformed,
                 dir + "/" + gaps[0] +
-                    (gaps.size() > 1 ? " (and " + std::to_string(gaps.size() - 1) + " more gaps)" : std::string()) +
+                    (more ? " (and " + std::to_string(more) + " more gap" + (more > 1 ? "s)" : ")") : std::string()) +
                     "; use --allow-gaps to convert anyway");
-  for (const std::string& gap : gaps) out.notes.push_back(dir + "/" + gap + ": converted without it (--allow-gaps)");
+  }
+  out.notes.insert(out.notes.end(), notes.begin(), notes.end());
   for (const Numbered& s : slices) out.files.push_back(path(s.name));
   return out;
 }
