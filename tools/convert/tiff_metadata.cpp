@@ -106,8 +106,9 @@ bool read_ome(const std::string& description, const std::string& where, DenseVol
                                              ome.unit[a] + "' cannot be converted to PhysicalSizeXUnit '" +
                                              ome.unit[0] + "'");
     size[a] = *v * factor;
-    if (!(size[a] > 0))
-      throw Error(ErrorClass::Malformed, where + ": OME PhysicalSize" + std::string(1, "XYZ"[a]) + " must be positive");
+    if (!(size[a] > 0) || !std::isfinite(size[a]))
+      throw Error(ErrorClass::Malformed,
+                  where + ": OME PhysicalSize" + std::string(1, "XYZ"[a]) + " must be positive and finite");
   }
   shape.voxel_size = size;
   shape.unit = unit.empty() ? "um" : unit;
@@ -117,7 +118,7 @@ bool read_ome(const std::string& description, const std::string& where, DenseVol
   return true;
 }
 
-bool read_imagej(TIFF* tif, const std::string& description, DenseVolume& shape) {
+bool read_imagej(TIFF* tif, const std::string& description, const std::string& where, DenseVolume& shape) {
   const ImageJDescription ij = parse_imagej_description(description);
   if (!ij.is_imagej) return false;
   std::string unit = normalise_length_unit(ij.unit);
@@ -132,7 +133,7 @@ bool read_imagej(TIFF* tif, const std::string& description, DenseVolume& shape) 
   size[0] *= factor;
   size[1] *= factor;
   std::string from = "ImageJ XResolution/YResolution";
-  if (ij.spacing && *ij.spacing > 0) {
+  if (ij.spacing && *ij.spacing > 0 && std::isfinite(*ij.spacing * factor)) {
     size[2] = *ij.spacing * factor;
     from += " and spacing=";
   } else {
@@ -146,7 +147,11 @@ bool read_imagej(TIFF* tif, const std::string& description, DenseVolume& shape) 
   shape.unit_from = unit_from;
   if (ij.origin_pixels[0] || ij.origin_pixels[1] || ij.origin_pixels[2]) {
     // ImageJ's calibrated x of pixel i is (i - xorigin) * pixelWidth.
-    for (int a = 0; a < 3; ++a) shape.origin[a] = -ij.origin_pixels[a].value_or(0.0) * size[a];
+    for (int a = 0; a < 3; ++a) {
+      shape.origin[a] = -ij.origin_pixels[a].value_or(0.0) * size[a];
+      if (!std::isfinite(shape.origin[a]))
+        throw Error(ErrorClass::Malformed, where + ": ImageJ " + std::string(1, "xyz"[a]) + "origin is out of range");
+    }
     shape.origin_from = "ImageJ xorigin/yorigin/zorigin";
   }
   return true;
@@ -238,7 +243,7 @@ void read_tiff_metadata(TIFF* tif, const std::string& where, DenseVolume& shape)
   if (!TIFFGetField(tif, TIFFTAG_IMAGEDESCRIPTION, &description) || !description) return;
   const std::string text(description);
   if (read_ome(text, where, shape)) return;
-  read_imagej(tif, text, shape);
+  read_imagej(tif, text, where, shape);
 }
 
 void write_tiff_metadata(TIFF* tif, const DenseVolume& shape, std::uint32_t index, std::uint32_t count) {

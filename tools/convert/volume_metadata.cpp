@@ -33,6 +33,7 @@ std::array<double, 3> triple(const nlohmann::json& j, const std::string& where, 
   for (int a = 0; a < 3; ++a) {
     if (!j[a].is_number()) throw Error(ErrorClass::Malformed, where + ": " + key + " is not an array of 3 numbers");
     out[a] = j[a].get<double>();
+    if (!std::isfinite(out[a])) throw Error(ErrorClass::Malformed, where + ": " + key + " holds a non-finite number");
   }
   return out;
 }

@@ -16,6 +16,8 @@ folder("gap", [("s%d.tif" % i, u16(i)) for i in (54, 55, 56, 58, 59)])
 folder("duplicate", [("s1.tif", u16(1)), ("s01.tif", u16(1)), ("s2.tif", u16(2))])
 folder("size", [("s1.tif", u16(1)), ("s2.tif", u16(2)), ("s3.tif", u16(3, (8, 9))), ("s4.tif", u16(4))])
 folder("type", [("s1.tif", u16(1)), ("s2.tif", u16(2)), ("s3.tif", np.full((8, 8), 3, np.float32))])
+folder("unnumbered", [("s1.tif", u16(1)), ("s2.tif", u16(2)), ("preview.tif", u16(0))])
+folder("every_other", [("s%d.tif" % i, u16(i)) for i in (0, 2, 4, 6)])
 folder("appledouble", [("s1.tif", u16(1)), ("s2.tif", u16(2))])
 # What macOS leaves on a non-Apple disk: a resource fork that is no TIFF.
 open(os.path.join(d, "appledouble", "._s1.tif"), "wb").write(b"\x00\x05\x16\x07" + bytes(60))
@@ -25,7 +27,10 @@ bad tiff-folder-gap        2 "gap/s58.tif follows s56.tif: s57.tif is missing; u
 bad tiff-folder-duplicate  2 "s1.tif and s01.tif have the same slice number 1" -- "$IVOL" convert "$work/duplicate" "$out/x.ivol"
 bad tiff-folder-size       2 "size/s3.tif: 9x8 u16 differs from $work/size/s1.tif: 8x8 u16" -- "$IVOL" convert "$work/size" "$out/x.ivol"
 bad tiff-folder-type       2 "type/s3.tif: 8x8 f32 differs from $work/type/s1.tif: 8x8 u16" -- "$IVOL" convert "$work/type" "$out/x.tif"
+bad tiff-folder-unnumbered 2 "unnumbered/preview.tif: no slice number in the name" -- "$IVOL" convert "$work/unnumbered" "$out/x.ivol"
 # --allow-gaps converts what is there and says so; the output goes outside
 # $out, which must stay empty.
 bad tiff-folder-allow-gaps 0 "s57.tif is missing: converted without it (--allow-gaps)" -- "$IVOL" convert "$work/gap" "$work/gap.ivol" --allow-gaps
 bad tiff-folder-appledouble 0 "skipped hidden file ._s1.tif" -- "$IVOL" convert "$work/appledouble" "$work/appledouble.ivol"
+# A folder of every other slice has a step of 2, not gaps.
+bad tiff-folder-step-two   0 "every_other (tiff u16 8x8x4" -- "$IVOL" convert "$work/every_other" "$work/every_other.ivol"
