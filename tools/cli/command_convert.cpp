@@ -49,14 +49,16 @@ void settle_metadata(convert::DenseVolume& shape, const ConvertSettings& s, Form
 
 // Where geometry came from, after the summary line; an unknown voxel size
 // is a warning (on stderr; --quiet prints nothing but errors, and the output
-// records it anyway).
-void print_geometry(const convert::DenseVolume& shape, const ConvertSettings& s, std::ostream& say, bool quiet) {
+// records it anyway). A raw output keeps none of it: said too.
+void print_geometry(const convert::DenseVolume& shape, const ConvertSettings& s, Format to, std::ostream& say,
+                    bool quiet) {
   if (quiet) return;
+  const bool raw = to == Format::Raw;
   if (!shape.has_geometry)
-    std::cerr << "ivol convert: warning: " << s.input
-              << " gives no voxel size and --voxel-size was not given; the output records it as unknown "
-                 "(provenance voxel_size_known = false)\n";
+    std::cerr << "ivol convert: warning: " << s.input << " gives no voxel size and --voxel-size was not given"
+              << (raw ? "\n" : "; the output records it as unknown (provenance voxel_size_known = false)\n");
   for (const std::string& line : convert::geometry_summary(shape)) say << "  " << line << "\n";
+  if (raw) say << "  (a raw file keeps no geometry or metadata: note them down)\n";
 }
 
 }  // namespace
@@ -206,7 +208,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
             << static_cast<double>(bytes) / r.file_bytes << "x smaller" << (r.lossless ? ", lossless" : "") << ") in "
             << seconds << " s\n";
       }
-      print_geometry(shape, *s, say, global.quiet);
+      print_geometry(shape, *s, to, say, global.quiet);
       return kExitOk;
     }
 
@@ -233,7 +235,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       }
       sink->finish();
       if (!global.quiet) say << s->input << " -> " << s->output << " (" << describe(shape) << ")\n";
-      print_geometry(shape, *s, say, global.quiet);
+      print_geometry(shape, *s, to, say, global.quiet);
       return kExitOk;
     }
 
@@ -248,7 +250,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     if (!global.quiet)
       say << s->input << " -> " << s->output << " (" << format_name(to) << " " << describe(shape)
           << (s->level ? ", level of detail " + std::to_string(s->level) : std::string()) << ")\n";
-    print_geometry(shape, *s, say, global.quiet);
+    print_geometry(shape, *s, to, say, global.quiet);
     return kExitOk;
   };
 }

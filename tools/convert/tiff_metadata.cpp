@@ -190,7 +190,9 @@ std::string imagej_description(const DenseVolume& shape, std::uint32_t slices) {
   std::string text = "ImageJ=1.11a\nimages=" + std::to_string(slices) + "\n";
   if (slices > 1) text += "slices=" + std::to_string(slices) + "\n";
   if (shape.has_geometry) {
-    text += "unit=" + shape.unit + "\nspacing=" + number_text(shape.voxel_size[2]) + "\n";
+    // ImageJ reads the description as Latin-1: "um", not UTF-8 "µm".
+    const std::string unit = normalise_length_unit(shape.unit);
+    text += "unit=" + (unit.empty() ? "pixel" : unit) + "\nspacing=" + number_text(shape.voxel_size[2]) + "\n";
     if (shape.origin != std::array<double, 3>{0, 0, 0})
       for (int a = 0; a < 3; ++a)
         text += std::string(1, "xyz"[a]) + "origin=" + number_text(-shape.origin[a] / shape.voxel_size[a]) + "\n";
