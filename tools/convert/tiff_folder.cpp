@@ -135,7 +135,7 @@ TiffFolder scan_tiff_folder(const std::string& folder, const TiffFolderOptions& 
     throw Error(ErrorClass::Malformed,
                 dir + "/" + gaps[0] +
                     (more ? " (and " + std::to_string(more) + " more gap" + (more > 1 ? "s)" : ")") : std::string()) +
-                    "; use --allow-gaps to convert anyway");
+                    "; " + options.gap_hint);
   }
   out.notes.insert(out.notes.end(), notes.begin(), notes.end());
   for (const Numbered& s : slices) out.files.push_back(path(s.name));

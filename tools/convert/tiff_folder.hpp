@@ -25,6 +25,8 @@ namespace ivol::convert {
 
 struct TiffFolderOptions {
   bool allow_gaps = false;
+  // What the refusal of a gap suggests.
+  std::string gap_hint = "use --allow-gaps to convert anyway";
 };
 
 struct TiffFolder {

@@ -34,3 +34,6 @@ bad tiff-folder-allow-gaps 0 "s57.tif is missing: converted without it (--allow-
 bad tiff-folder-appledouble 0 "skipped hidden file ._s1.tif" -- "$IVOL" convert "$work/appledouble" "$work/appledouble.ivol"
 # A folder of every other slice has a step of 2, not gaps.
 bad tiff-folder-step-two   0 "every_other (tiff u16 8x8x4" -- "$IVOL" convert "$work/every_other" "$work/every_other.ivol"
+# Projections in a folder are checked the same way: a missing view would
+# shift every later angle.
+bad recon-tiff-folder-gap  2 "gap/s58.tif follows s56.tif: s57.tif is missing; every view needs its projection" -- "$IVOL" recon "$work/gap" --sid 600 --sdd 1200 --pitch 1.5 --size 16 --voxel 1.5 -o "$out/x.ivol"
