@@ -175,6 +175,20 @@ TEST(TiffFolder, NumberingRules) {
   EXPECT_NE(message.find(dir + "/b_013.tif does not follow the numbering of a_010.tif"), std::string::npos) << message;
 }
 
+TEST(TiffFolder, TheNumberThatChangesIsTheSlice) {
+  const std::string dir = fresh_dir("changing");
+  for (const char* name : {"part2_z9_v3.tif", "part2_z10_v3.tif", "part2_z11_v3.tif"}) touch(dir + "/" + name);
+  const TiffFolder f = scan_tiff_folder(dir);
+  ASSERT_EQ(f.files.size(), 3u);
+  EXPECT_EQ(f.files[0], dir + "/part2_z9_v3.tif");
+  EXPECT_EQ(f.files[2], dir + "/part2_z11_v3.tif");
+  touch(dir + "/part2_z13_v3.tif");
+  std::string message;
+  EXPECT_EQ(error_of([&] { scan_tiff_folder(dir); }, &message), ivol::ErrorClass::Malformed);
+  EXPECT_NE(message.find("part2_z13_v3.tif follows part2_z11_v3.tif: part2_z12_v3.tif is missing"), std::string::npos)
+      << message;
+}
+
 TEST(Provenance, ConversionsAppendAndUnknownVoxelSizeIsMarked) {
   DenseVolume v;
   v.provenance = R"({"created":"2026-01-01T00:00:00Z","command":"ivol recon ..."})";

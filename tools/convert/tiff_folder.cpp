@@ -24,26 +24,48 @@ struct Numbered {
   std::string digits;
   std::string suffix;
   unsigned long long number = 0;
-  bool has_number = false;
 };
 
-Numbered split_number(const std::string& name) {
+// A name's stem as alternating text and digit runs: text[0] digits[0]
+// text[1] ... digits[n-1] text[n].
+struct Tokens {
+  std::vector<std::string> text;
+  std::vector<std::string> digits;
+};
+
+Tokens tokenize(const std::string& name) {
+  const std::string stem = std::filesystem::path(name).stem().string();
+  Tokens t;
+  t.text.emplace_back();
+  for (std::size_t i = 0; i < stem.size();) {
+    if (!std::isdigit(static_cast<unsigned char>(stem[i]))) {
+      t.text.back() += stem[i++];
+      continue;
+    }
+    std::size_t end = i;
+    while (end < stem.size() && std::isdigit(static_cast<unsigned char>(stem[end]))) ++end;
+    t.digits.push_back(stem.substr(i, end - i));
+    t.text.emplace_back();
+    i = end;
+  }
+  return t;
+}
+
+std::string without_zeros(const std::string& digits) {
+  const std::size_t nonzero = digits.find_first_not_of('0');
+  return nonzero == std::string::npos ? "0" : digits.substr(nonzero);
+}
+
+Numbered split_at(const std::string& name, const Tokens& t, std::size_t position) {
   Numbered n;
   n.name = name;
-  const std::string stem = std::filesystem::path(name).stem().string();
-  std::size_t end = stem.size();
-  while (end > 0 && !std::isdigit(static_cast<unsigned char>(stem[end - 1]))) --end;
-  std::size_t begin = end;
-  while (begin > 0 && std::isdigit(static_cast<unsigned char>(stem[begin - 1]))) --begin;
-  if (begin == end || end - begin > 18) {  // no number, or one too long to be a slice index
-    n.prefix = stem;
-    return n;
+  for (std::size_t j = 0; j < t.text.size(); ++j) {
+    std::string& part = j <= position ? n.prefix : n.suffix;
+    part += t.text[j];
+    if (j < t.digits.size() && j != position) part += t.digits[j];
   }
-  n.prefix = stem.substr(0, begin);
-  n.digits = stem.substr(begin, end - begin);
-  n.suffix = stem.substr(end);
-  n.number = std::stoull(n.digits);
-  n.has_number = true;
+  n.digits = t.digits[position];
+  n.number = without_zeros(n.digits).size() <= 18 ? std::stoull(n.digits) : 0;  // longer ones are refused
   return n;
 }
 
@@ -90,25 +112,47 @@ TiffFolder scan_tiff_folder(const std::string& folder, const TiffFolderOptions& 
     return out;
   }
 
-  std::vector<Numbered> slices;
-  for (const std::string& name : names) slices.push_back(split_number(name));
-  std::sort(slices.begin(), slices.end(), [](const Numbered& a, const Numbered& b) {
-    return a.has_number != b.has_number ? a.has_number : a.number != b.number ? a.number < b.number : a.name < b.name;
-  });
+  // The slice number is the digit run that changes from file to file (the
+  // last one when several do, or none: then the files repeat a number);
+  // the text around the digit runs must be the same in every name.
+  std::sort(names.begin(), names.end());
+  std::vector<Tokens> tokens;
   std::vector<std::string> unnumbered;
-  for (const Numbered& s : slices)
-    if (!s.has_number) unnumbered.push_back(s.name);
+  for (const std::string& name : names) {
+    tokens.push_back(tokenize(name));
+    if (tokens.back().digits.empty()) unnumbered.push_back(name);
+  }
   if (!unnumbered.empty())
     throw Error(ErrorClass::Malformed, path(unnumbered[0]) + ": no slice number in the name (" + list(unnumbered) +
                                            " among " + std::to_string(names.size()) +
                                            " files), so the order of the slices is unknown; move "
                                            "what is not a slice out of the folder");
-  const Numbered& first = slices.front();
-  for (const Numbered& s : slices)
-    if (s.prefix != first.prefix || s.suffix != first.suffix)
-      throw Error(ErrorClass::Malformed, path(s.name) + " does not follow the numbering of " + first.name + " (" +
-                                             first.prefix + "<number>" + first.suffix +
+  const Tokens& reference = tokens[0];
+  std::size_t position = reference.digits.size() - 1;
+  for (std::size_t j = reference.digits.size(); j-- > 0;) {
+    bool varies = false;
+    for (const Tokens& t : tokens)
+      varies = varies || (t.text == reference.text && without_zeros(t.digits[j]) != without_zeros(reference.digits[j]));
+    if (varies) {
+      position = j;
+      break;
+    }
+  }
+  const Numbered pattern = split_at(names[0], reference, position);
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    if (tokens[i].text != reference.text)
+      throw Error(ErrorClass::Malformed, path(names[i]) + " does not follow the numbering of " + names[0] + " (" +
+                                             pattern.prefix + "<number>" + pattern.suffix +
                                              "); move what is not a slice out of the folder");
+    if (without_zeros(tokens[i].digits[position]).size() > 18)
+      throw Error(ErrorClass::Malformed,
+                  path(names[i]) + ": slice number " + tokens[i].digits[position] + " is too long to be one");
+  }
+  std::vector<Numbered> slices;
+  for (std::size_t i = 0; i < names.size(); ++i) slices.push_back(split_at(names[i], tokens[i], position));
+  std::sort(slices.begin(), slices.end(), [](const Numbered& a, const Numbered& b) {
+    return a.number != b.number ? a.number < b.number : a.name < b.name;
+  });
   unsigned long long step = ~0ull;
   for (std::size_t i = 1; i < slices.size(); ++i) {
     if (slices[i].number == slices[i - 1].number)
