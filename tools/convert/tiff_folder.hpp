@@ -5,10 +5,12 @@
 //   - hidden files (a name starting with '.': macOS's AppleDouble "._s1.tif",
 //     ".DS_Store", other dotfiles) are skipped, and the skipped TIFF-named
 //     ones are listed in a note;
-//   - the slice number of a file is the last run of digits in its name
-//     before the extension; every file must have one, and the text around it
-//     must be the same for all files (s0001.tif ... s0100.tif), else the
-//     order of the slices is a guess: refused, naming the file;
+//   - the slice number of a file is the run of digits in its name (before
+//     the extension) that changes from file to file (the last such run when
+//     several change; the last run when none does); every file must have
+//     digits, and the text around them must be the same for all files
+//     (scan2_z0001.tif ... scan2_z0100.tif), else the order of the slices
+//     is a guess: refused, naming the file;
 //   - two files with the same number (s1.tif and s01.tif, s1.tif and
 //     s1.tiff) are refused, naming both;
 //   - the step is the smallest difference between consecutive numbers
