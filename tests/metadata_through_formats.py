@@ -118,7 +118,8 @@ check("h5py attributes: quantity and value unit",
       m["value"].get("quantity") == "linear_attenuation" and m["value"].get("unit") == "1/mm", m["value"])
 check("h5py attributes: provenance kept", m["provenance"].get("scanner") == "h5py test" and
       m["provenance"].get("created") == "2026-01-02T03:04:05Z", m["provenance"])
-check("h5py attributes: summary", "(from HDF5 attribute voxel_size)" in out, out)
+check("h5py attributes: summary", "(from HDF5 attribute voxel_size)" in out and
+      "values: linear_attenuation in 1/mm (from HDF5 attributes quantity, value_unit)" in out, out)
 
 with h5py.File(path("dxchange.h5"), "w") as f:
     f.create_dataset("/exchange/data", data=volume)
@@ -252,7 +253,8 @@ out, _ = convert(path("attrs.h5"), path("override.ivol"), "--voxel-size", "0.25"
 size, origin, unit, m = geometry_of(path("override.ivol"))
 check("override HDF5 attributes", close(size, [0.25] * 3) and close(origin, [9, 8, 7]) and unit == "um" and
       m["value"] == {"quantity": "density", "unit": "g/cm3"}, m)
-check("override summary", "(from --voxel-size)" in out and "(from --origin)" in out and "(from --unit)" in out, out)
+check("override summary", "(from --voxel-size)" in out and "(from --origin)" in out and "(from --unit)" in out and
+      "values: density in g/cm3 (from --quantity, --value-unit)" in out, out)
 convert(path("pyopenvdb.vdb"), path("override_vdb.ivol"), "--voxel-size", "0.125,0.25,0.5", "--origin", "0,0,0")
 size, origin, _, _ = geometry_of(path("override_vdb.ivol"))
 check("override OpenVDB transform", close(size, [0.125, 0.25, 0.5]) and close(origin, [0, 0, 0]), (size, origin))

@@ -44,6 +44,10 @@ void settle_metadata(convert::DenseVolume& shape, const ConvertSettings& s, Form
   apply_geometry(shape, s.voxel_size, s.origin, s.unit);
   if (!s.quantity.empty()) shape.quantity = s.quantity;
   if (!s.value_unit.empty()) shape.value_unit = s.value_unit;
+  if (!s.quantity.empty() || !s.value_unit.empty())
+    shape.quantity_from = !s.quantity.empty() && !s.value_unit.empty() ? "--quantity, --value-unit"
+                          : !s.quantity.empty()                        ? "--quantity"
+                                                                       : "--value-unit";
   shape.provenance = convert::provenance_after_conversion(shape, command, s.input, format_name(from)).dump();
 }
 

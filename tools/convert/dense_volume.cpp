@@ -109,6 +109,7 @@ DenseVolume shape_of(const DenseVolume& volume) {
   shape.voxel_size_from = volume.voxel_size_from;
   shape.origin_from = volume.origin_from;
   shape.unit_from = volume.unit_from;
+  shape.quantity_from = volume.quantity_from;
   shape.notes = volume.notes;
   return shape;
 }

@@ -37,6 +37,7 @@ struct DenseVolume {
   std::string voxel_size_from;
   std::string origin_from;
   std::string unit_from;
+  std::string quantity_from;       // of quantity and value_unit
   std::vector<std::string> notes;  // what the reader noticed (skipped files, ...)
 
   std::uint64_t voxel_count() const { return ivol::voxel_count(dims); }

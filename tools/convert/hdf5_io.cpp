@@ -204,6 +204,8 @@ bool read_dxchange_pixel_size(hid_t file, const std::string& context, DenseVolum
 void read_geometry(hid_t file, hid_t dataset, const std::string& context, DenseVolume& volume) {
   if (attribute_exists(dataset, "quantity")) volume.quantity = read_string(dataset, "quantity", context);
   if (attribute_exists(dataset, "value_unit")) volume.value_unit = read_string(dataset, "value_unit", context);
+  if (!volume.quantity.empty() || !volume.value_unit.empty())
+    volume.quantity_from = "HDF5 attributes quantity, value_unit";
   if (attribute_exists(dataset, "provenance")) volume.provenance = read_string(dataset, "provenance", context);
   const char* size_name = attribute_exists(dataset, "voxel_size")   ? "voxel_size"
                           : attribute_exists(dataset, "pixel_size") ? "pixel_size"

@@ -311,6 +311,7 @@ DenseVolume export_shape(const Reader& reader, const Box& box, unsigned lod, Sam
   out.unit = m.unit;
   out.voxel_size_from = out.origin_from = out.unit_from = "the .ivol metadata";
   out.quantity = m.quantity;
+  out.quantity_from = "the .ivol metadata";
   out.value_unit = m.value_unit;
   if (!m.provenance.empty()) out.provenance = m.provenance.dump();
   for (int a = 0; a < 3; ++a) {

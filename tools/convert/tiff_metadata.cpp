@@ -83,6 +83,7 @@ bool read_ivol_tag(TIFF* tif, const std::string& where, DenseVolume& shape) {
   apply_metadata_json(j, where + ": tag " + std::to_string(kIvolMetadataTag), shape);
   const std::string from = "ivol metadata in the TIFF (tag " + std::to_string(kIvolMetadataTag) + ")";
   if (shape.has_geometry) shape.voxel_size_from = shape.origin_from = shape.unit_from = from;
+  if (!shape.quantity.empty() || !shape.value_unit.empty()) shape.quantity_from = from;
   return true;
 }
 

@@ -208,6 +208,8 @@ VdbVolume read_vdb(const std::string& path, const std::string& grid_name, std::u
       {"quantity", &geometry.quantity}, {"value_unit", &geometry.value_unit}, {"provenance", &geometry.provenance}};
   for (const auto& [key, field] : texts)
     if (const auto text = grid->getMetadata<openvdb::StringMetadata>(key)) *field = text->value();
+  if (!geometry.quantity.empty() || !geometry.value_unit.empty())
+    geometry.quantity_from = "OpenVDB grid metadata quantity, value_unit";
   // A grid ivol wrote from a volume of unknown voxel size has an identity
   // transform that means nothing.
   if (voxel_size_marked_unknown(geometry.provenance)) geometry.has_geometry = false;

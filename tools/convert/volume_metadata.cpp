@@ -152,8 +152,9 @@ std::vector<std::string> geometry_summary(const DenseVolume& s) {
         "voxel size unknown (none in the file, no --voxel-size): recorded as unknown "
         "(provenance voxel_size_known = false)");
   }
-  if (!s.quantity.empty())
-    lines.push_back("values: " + s.quantity + (s.value_unit.empty() ? std::string() : " in " + s.value_unit));
+  if (!s.quantity.empty() || !s.value_unit.empty())
+    lines.push_back("values: " + (s.quantity.empty() ? std::string("(quantity not given)") : s.quantity) +
+                    (s.value_unit.empty() ? std::string() : " in " + s.value_unit) + " " + from(s.quantity_from));
   for (const std::string& note : s.notes) lines.push_back(note);
   return lines;
 }

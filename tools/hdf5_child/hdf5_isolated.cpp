@@ -34,6 +34,7 @@ WorkerHandler volume_handler(const std::string& path, const std::string& dataset
       reply.put(source.chunk).put_string(source.filters);
       reply.put_string(shape.quantity).put_string(shape.value_unit).put_string(shape.provenance);
       reply.put_string(shape.voxel_size_from).put_string(shape.origin_from).put_string(shape.unit_from);
+      reply.put_string(shape.quantity_from);
       out.reply = std::move(reply.bytes());
       return;
     }
@@ -75,6 +76,7 @@ class IsolatedHdf5SlabReader final : public SlabReader {
     shape_.voxel_size_from = reply.get_string();
     shape_.origin_from = reply.get_string();
     shape_.unit_from = reply.get_string();
+    shape_.quantity_from = reply.get_string();
     if (source) *source = std::move(info);
   }
 
