@@ -95,6 +95,17 @@ convert(path("ome_default_unit.tif"), path("ome_default_unit.ivol"))
 size, _, unit, _ = geometry_of(path("ome_default_unit.ivol"))
 check("tifffile OME: no unit means micrometres", close(size, [2.5, 2.5, 3.0]) and unit == "um", (size, unit))
 
+# A hyperstack's pages are not the slices of one grey volume: refused.
+for mode, name in (("imagej", "hyperstack.tif"), ("ome", "ome_channels.tif")):
+    stack = np.zeros((3, 2, 6, 7), np.uint16)  # (z, c, y, x)
+    if mode == "imagej":
+        tifffile.imwrite(path(name), stack, imagej=True, metadata={"axes": "ZCYX"})
+    else:
+        tifffile.imwrite(path(name), stack, ome=True, metadata={"axes": "ZCYX"})
+    run = subprocess.run([IVOL, "convert", path(name), path(name + ".ivol")], capture_output=True, text=True)
+    check("%s with 2 channels refused" % mode, run.returncode == 2 and "2 channels" in run.stderr and
+          name in run.stderr and not os.path.exists(path(name + ".ivol")), (run.returncode, run.stderr))
+
 tifffile.imwrite(path("plain.tif"), volume)
 out, err = convert(path("plain.tif"), path("plain.ivol"))
 size, _, unit, m = geometry_of(path("plain.ivol"))

@@ -89,6 +89,9 @@ bool read_ivol_tag(TIFF* tif, const std::string& where, DenseVolume& shape) {
 
 bool read_ome(const std::string& description, const std::string& where, DenseVolume& shape) {
   const OmePhysicalSize ome = parse_ome_xml(description, where);
+  if (ome.channels > 1 || ome.times > 1)
+    throw Error(ErrorClass::Malformed, where + ": an OME image of " + number_text(ome.channels) + " channels and " +
+                                           number_text(ome.times) + " time points, not one grey volume");
   if (!ome.is_ome || !ome.size[0]) return ome.is_ome;
   const std::string unit = normalise_length_unit(ome.unit[0]);
   std::array<double, 3> size{};
@@ -122,6 +125,11 @@ bool read_ome(const std::string& description, const std::string& where, DenseVol
 bool read_imagej(TIFF* tif, const std::string& description, const std::string& where, DenseVolume& shape) {
   const ImageJDescription ij = parse_imagej_description(description);
   if (!ij.is_imagej) return false;
+  if (ij.channels > 1 || ij.frames > 1)
+    throw Error(ErrorClass::Malformed, where + ": an ImageJ hyperstack of " + number_text(ij.channels) +
+                                           " channels and " + number_text(ij.frames) +
+                                           " frames, not one grey volume; split it first (Fiji: Image > Stacks > "
+                                           "Tools > Reduce Dimensionality, or Image > Color > Split Channels)");
   std::string unit = normalise_length_unit(ij.unit);
   std::string unit_from = "ImageJ unit=";
   std::uint16_t resolution_unit = RESUNIT_NONE;
@@ -182,6 +190,8 @@ ImageJDescription parse_imagej_description(const std::string& text) {
     if (key == "xorigin") out.origin_pixels[0] = parse_number(value);
     if (key == "yorigin") out.origin_pixels[1] = parse_number(value);
     if (key == "zorigin") out.origin_pixels[2] = parse_number(value);
+    if (key == "channels") out.channels = parse_number(value).value_or(1);
+    if (key == "frames") out.frames = parse_number(value).value_or(1);
   }
   return out;
 }
@@ -237,6 +247,8 @@ OmePhysicalSize parse_ome_xml(const std::string& text, const std::string& where)
     const pugi::xml_attribute unit = pixels.attribute(("PhysicalSize" + axis + "Unit").c_str());
     out.unit[a] = unit ? unit.value() : "\u00b5m";
   }
+  if (const pugi::xml_attribute c = pixels.attribute("SizeC")) out.channels = parse_number(trim(c.value())).value_or(1);
+  if (const pugi::xml_attribute t = pixels.attribute("SizeT")) out.times = parse_number(trim(t.value())).value_or(1);
   return out;
 }
 

@@ -14,6 +14,9 @@
 //      is absent, ResolutionUnit centimetre or inch says the unit;
 //      xorigin/yorigin/zorigin (ImageJ's origin, in pixels) give the origin;
 //      unit=pixel (or none) means uncalibrated: no voxel size.
+// An ImageJ hyperstack of several channels or frames, or an OME image of
+// several channels or time points, is refused (Error(Malformed)): its pages
+// are not the slices of one grey volume.
 // A plain TIFF's resolution tags are not read: without ImageJ's or OME's
 // convention they are usually a scanner's or screen's dots per inch.
 //
@@ -52,6 +55,7 @@ struct ImageJDescription {
   std::string unit;  // as written; empty when absent
   std::optional<double> spacing;
   std::array<std::optional<double>, 3> origin_pixels;  // xorigin, yorigin, zorigin
+  double channels = 1, frames = 1;                     // a hyperstack has more than one
 };
 ImageJDescription parse_imagej_description(const std::string& text);
 std::string imagej_description(const DenseVolume& shape, std::uint32_t slices);
@@ -60,6 +64,7 @@ struct OmePhysicalSize {
   bool is_ome = false;
   std::array<std::optional<double>, 3> size;  // PhysicalSizeX, Y, Z
   std::array<std::string, 3> unit;            // their units ("µm" when absent)
+  double channels = 1, times = 1;             // SizeC, SizeT
 };
 // Throws Error(Malformed) for OME-XML that does not parse.
 OmePhysicalSize parse_ome_xml(const std::string& text, const std::string& where);
