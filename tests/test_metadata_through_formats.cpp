@@ -1,5 +1,5 @@
 // The parsers and rules behind geometry through the formats, case by case:
-// the ImageJ and OME-XML descriptions, unit spellings, ivol's tag 65432, and
+// the ImageJ and OME-XML descriptions, unit spellings, ivol's tag 65369, and
 // the TIFF folder rules. The libraries on the other side (tifffile, h5py,
 // pyopenvdb) are checked by metadata_through_formats.py.
 #include <gtest/gtest.h>
@@ -122,7 +122,7 @@ TEST(IvolTag, RoundTripsAndRefusesGarbage) {
   EXPECT_EQ(back.value_unit, v.value_unit);
   EXPECT_EQ(nlohmann::json::parse(back.provenance), nlohmann::json::parse(v.provenance));
 
-  // A tag 65432 that is not JSON is refused, naming the file.
+  // A tag 65369 that is not JSON is refused, naming the file.
   register_ivol_tiff_tag();
   TIFF* tif = TIFFOpen((dir + "/bad.tif").c_str(), "w");
   ASSERT_TRUE(tif);
@@ -137,7 +137,7 @@ TEST(IvolTag, RoundTripsAndRefusesGarbage) {
   TIFFClose(tif);
   std::string message;
   EXPECT_EQ(error_of([&] { read_tiff(dir + "/bad.tif"); }, &message), ivol::ErrorClass::Malformed);
-  EXPECT_NE(message.find("bad.tif: tag 65432"), std::string::npos) << message;
+  EXPECT_NE(message.find("bad.tif: tag 65369"), std::string::npos) << message;
 }
 
 TEST(TiffFolder, NumberingRules) {

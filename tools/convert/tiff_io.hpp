@@ -23,7 +23,7 @@ struct TiffWriteOptions {
 
 // One multi-page file, BigTIFF when the volume approaches 4 GiB; written to a
 // temporary file and renamed when complete. Carries the geometry and metadata
-// as tiff_metadata.hpp says (ImageJ description, resolution, tag 65432).
+// as tiff_metadata.hpp says (ImageJ description, resolution, tag 65369).
 void write_tiff(const DenseVolume& volume, const std::string& path, const TiffWriteOptions& options = {});
 
 // Names of the regular files in `folder`, in natural order (digit runs

@@ -3,7 +3,7 @@
 // through the formats").
 //
 // Reading (the first page of the first file), the first that applies:
-//   1. ivol's own metadata: tag 65432 (private, ASCII) holding a JSON object
+//   1. ivol's own metadata: tag 65369 (private, ASCII) holding a JSON object
 //      with the keys of the .ivol metadata block that describe a dense volume
 //      (voxel_size, origin, unit, value {quantity, unit}, provenance);
 //   2. OME-XML in ImageDescription: the Pixels element's PhysicalSizeX/Y/Z
@@ -22,7 +22,7 @@
 //
 // Writing: every page carries XResolution/YResolution (pixels per unit,
 // ResolutionUnit none, centimetre for "cm"); the first page carries an
-// ImageJ description (images, slices, unit, spacing, origin) and tag 65432.
+// ImageJ description (images, slices, unit, spacing, origin) and tag 65369.
 #pragma once
 
 #include <array>
@@ -36,9 +36,12 @@ typedef struct tiff TIFF;
 
 namespace ivol::convert {
 
-constexpr std::uint32_t kIvolMetadataTag = 65432;
+// From the reusable private range (65000-65535), one that neither libtiff
+// nor tifffile gives a meaning (65420-65459 are Hamamatsu NDPI's, 65000-65003
+// EER's, 65100-65112 and 65200 others').
+constexpr std::uint32_t kIvolMetadataTag = 65369;
 
-// Makes libtiff know tag 65432 (once per process; before TIFFOpen).
+// Makes libtiff know tag 65369 (once per process; before TIFFOpen).
 void register_ivol_tiff_tag();
 
 // Fills shape's geometry, metadata and *_from notes from an open TIFF at its

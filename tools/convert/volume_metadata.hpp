@@ -7,7 +7,7 @@
 // gives none (and no --voxel-size) has has_geometry false, the summary warns,
 // and the output's provenance carries "voxel_size_known": false (an .ivol
 // file then records voxel_size 1, 1, 1 in unit "pixel"). Readers of ivol's
-// own outputs (.ivol, TIFF tag 65432, HDF5 and OpenVDB provenance) take that
+// own outputs (.ivol, TIFF tag 65369, HDF5 and OpenVDB provenance) take that
 // key back as an unknown voxel size.
 #pragma once
 
