@@ -147,7 +147,6 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     if (to == Format::Ivol) {
       auto opened = open_source(s->input, from, foreign);
       convert::DenseVolume shape = convert::shape_of(opened->shape());
-      const bool carried_provenance = !shape.provenance.empty();
       settle_metadata(shape, *s, from, global.command_line);
       // finish_import takes the geometry from the source's shape: give it ours.
       const auto source = convert::reshaped_slabs(std::move(opened), shape);
@@ -169,14 +168,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       if (from == Format::Vdb && !s->grid.empty()) how["grid"] = s->grid;
       auto digests =
           std::make_shared<SourceDigests>(std::vector<std::string>{s->input}, std::vector<nlohmann::json>{how});
-      // A source that carried its own provenance keeps its sources (where the
-      // data came from); this input, hashed, goes with this conversion.
-      if (carried_provenance)
-        options.complete_metadata = [digests](Metadata& m) {
-          m.provenance["conversions"].back()["sources"] = digests->sources();
-        };
-      else
-        options.complete_metadata = SourceDigests::filler(digests);
+      options.complete_metadata = SourceDigests::filler(digests);
       if (!shape.quantity.empty()) options.metadata.quantity = shape.quantity;
       options.metadata.value_unit = shape.value_unit;
       if (shape.has_geometry) {

@@ -118,20 +118,10 @@ bool voxel_size_marked_unknown(const std::string& provenance) {
 
 nlohmann::json provenance_after_conversion(const DenseVolume& shape, const std::string& command,
                                            const std::string& input, const std::string& input_format) {
-  nlohmann::json p;
-  const nlohmann::json now = default_provenance();
-  if (shape.provenance.empty()) {
-    p = now;
-    p["command"] = command;
-    p["sources"] = {{{"path", input}, {"format", input_format}, {"sample_type", sample_type_name(shape.type)}}};
-  } else {
-    p = parse_provenance(shape.provenance);
-    nlohmann::json step = {{"command", command}, {"source", {{"path", input}, {"format", input_format}}}};
-    for (const char* key : {"software", "created"})
-      if (now.contains(key)) step[key] = now[key];
-    if (!p.contains("conversions") || !p["conversions"].is_array()) p["conversions"] = nlohmann::json::array();
-    p["conversions"].push_back(step);
-  }
+  nlohmann::json p = default_provenance();
+  p["command"] = command;
+  p["sources"] = {{{"path", input}, {"format", input_format}, {"sample_type", sample_type_name(shape.type)}}};
+  if (!shape.provenance.empty()) p["derived_from"] = parse_provenance(shape.provenance);
   if (shape.has_geometry)
     p.erase("voxel_size_known");
   else

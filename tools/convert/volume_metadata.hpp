@@ -33,11 +33,12 @@ void apply_metadata_json(const nlohmann::json& json, const std::string& where, D
 // Whether a provenance JSON text says "voxel_size_known": false.
 bool voxel_size_marked_unknown(const std::string& provenance);
 
-// The provenance an output carries: the source's, with this conversion
-// appended to "conversions" ({command, software, created, source {path,
-// format}}); or, when the source has none, a fresh one (software, created,
-// command, sources [{path, format, sample_type}]). "voxel_size_known": false
-// is set or removed to match shape.has_geometry.
+// The provenance an output carries: this conversion's (software, created,
+// command, sources [{path, format, sample_type}]: the direct input, as
+// ivol verify --against expects), with the source's own provenance, when it
+// has one, kept whole under "derived_from" (which may hold its own
+// derived_from, further back). "voxel_size_known": false is set to match
+// shape.has_geometry.
 nlohmann::json provenance_after_conversion(const DenseVolume& shape, const std::string& command,
                                            const std::string& input, const std::string& input_format);
 
