@@ -12,6 +12,7 @@
 #include "output_rules.hpp"
 #include "report.hpp"
 #include "sizes.hpp"
+#include "volume_metadata.hpp"
 
 namespace ivol::cli {
 namespace {
@@ -31,11 +32,39 @@ struct ConvertSettings {
   unsigned level = 0;
   bool force = false;
   bool allow_lossy = false;
+  bool allow_gaps = false;
 };
 
 std::string describe(const convert::DenseVolume& v) {
   return std::string(convert::sample_type_name(v.type)) + " " + std::to_string(v.dims[0]) + "x" +
          std::to_string(v.dims[1]) + "x" + std::to_string(v.dims[2]);
+}
+
+// The explicit options win over what the input says; the shape then carries
+// the provenance the output is to have.
+void settle_metadata(convert::DenseVolume& shape, const ConvertSettings& s, Format from, const std::string& command) {
+  apply_geometry(shape, s.voxel_size, s.origin, s.unit);
+  if (!s.quantity.empty()) shape.quantity = s.quantity;
+  if (!s.value_unit.empty()) shape.value_unit = s.value_unit;
+  if (!s.quantity.empty() || !s.value_unit.empty())
+    shape.quantity_from = !s.quantity.empty() && !s.value_unit.empty() ? "--quantity, --value-unit"
+                          : !s.quantity.empty()                        ? "--quantity"
+                                                                       : "--value-unit";
+  shape.provenance = convert::provenance_after_conversion(shape, command, s.input, format_name(from)).dump();
+}
+
+// Where geometry came from, after the summary line; an unknown voxel size
+// is a warning (on stderr; --quiet prints nothing but errors, and the output
+// records it anyway). A raw output keeps none of it: said too.
+void print_geometry(const convert::DenseVolume& shape, const ConvertSettings& s, Format to, std::ostream& say,
+                    bool quiet) {
+  if (quiet) return;
+  const bool raw = to == Format::Raw;
+  if (!shape.has_geometry)
+    std::cerr << "ivol convert: warning: " << s.input << " gives no voxel size and --voxel-size was not given"
+              << (raw ? "\n" : "; the output records it as unknown (provenance voxel_size_known = false)\n");
+  for (const std::string& line : convert::geometry_summary(shape)) say << "  " << line << "\n";
+  if (raw) say << "  (a raw file keeps no geometry or metadata: note them down)\n";
 }
 
 }  // namespace
@@ -71,6 +100,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
   geometry->add_option("--origin", s->origin, "X,Y,Z of the centre of voxel 0")
       ->check(checked([](const std::string& v) { parse_triple(v, "--origin", false); }));
   geometry->add_option("--unit", s->unit, "Length unit, e.g. mm");
+  cmd->add_flag("--allow-gaps", s->allow_gaps, "TIFF folder: convert although slice numbers are missing");
   cmd->add_option("--dataset", s->dataset, "HDF5 dataset")->capture_default_str();
   cmd->add_option("--grid", s->grid, "OpenVDB grid (default: the first float grid)");
   cmd->add_option("--background", s->background, "OpenVDB output: background value")->check(number_in(-3.4e38, 3.4e38));
@@ -125,12 +155,15 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     foreign.raw.type = parse_sample_type(s->type, "--type");
     foreign.raw.big_endian = s->endian == "big";
     foreign.raw.header_bytes = s->header_bytes;
+    foreign.allow_gaps = s->allow_gaps;
 
     if (to == Format::Ivol) {
       bool rounded = false;  // by the reader (HDF5 float64), already said
-      const auto source = open_source(s->input, from, foreign, &rounded);
-      convert::DenseVolume shape = source->shape();
-      apply_geometry(shape, s->voxel_size, s->origin, s->unit);
+      auto opened = open_source(s->input, from, foreign, &rounded);
+      convert::DenseVolume shape = convert::shape_of(opened->shape());
+      settle_metadata(shape, *s, from, global.command_line);
+      // finish_import takes the geometry from the source's shape: give it ours.
+      const auto source = convert::reshaped_slabs(std::move(opened), shape);
       convert::ImportOptions options;
       if (!s->encoding.empty()) options.encoding = parse_encoding(s->encoding);
       if (!s->keep.empty()) options.keep = parse_keep(s->keep, "--keep");
@@ -141,8 +174,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       // the keep mask, the subtrees being built): give a quarter to the slab.
       options.slab_budget_bytes = foreign.memory_bytes / 4;
       options.memory_bytes = foreign.memory_bytes;
-      options.metadata.provenance = default_provenance();
-      options.metadata.provenance["command"] = global.command_line;
+      options.metadata.provenance = nlohmann::json::parse(shape.provenance);
       // Hashed on a thread of its own while the conversion reads the same files.
       // With what reads the source again (ivol verify --against).
       nlohmann::json how = {{"format", format_name(from)}, {"sample_type", convert::sample_type_name(shape.type)}};
@@ -152,12 +184,16 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       auto digests =
           std::make_shared<SourceDigests>(std::vector<std::string>{s->input}, std::vector<nlohmann::json>{how});
       options.complete_metadata = SourceDigests::filler(digests);
-      if (!s->quantity.empty()) options.metadata.quantity = s->quantity;
-      if (!s->value_unit.empty()) options.metadata.value_unit = s->value_unit;
+      if (!shape.quantity.empty()) options.metadata.quantity = shape.quantity;
+      options.metadata.value_unit = shape.value_unit;
       if (shape.has_geometry) {
         options.metadata.voxel_size = shape.voxel_size;
         options.metadata.origin = shape.origin;
         options.metadata.unit = shape.unit;
+      } else {  // an .ivol file needs a voxel size: one pixel, marked unknown
+        options.metadata.voxel_size = {1.0, 1.0, 1.0};
+        options.metadata.origin = {0.0, 0.0, 0.0};
+        options.metadata.unit = "pixel";
       }
       options.progress = progress_bar("ivol convert", global.quiet);
       options.allow_lossy = s->allow_lossy;
@@ -187,13 +223,14 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
             << static_cast<double>(bytes) / r.file_bytes << "x smaller" << (r.lossless && !rounded ? ", lossless" : "")
             << ") in " << seconds << " s\n";
       }
+      print_geometry(shape, *s, to, say, global.quiet);
       return kExitOk;
     }
 
     if (from != Format::Ivol) {
       const auto source = open_source(s->input, from, foreign);
-      convert::DenseVolume shape = source->shape();
-      apply_geometry(shape, s->voxel_size, s->origin, s->unit);
+      convert::DenseVolume shape = convert::shape_of(source->shape());
+      settle_metadata(shape, *s, from, global.command_line);
       // Sized before the output exists: a refusal leaves nothing behind.
       const std::uint64_t slice = convert::slab_bytes(shape.dims, 1, shape.type, s->input);
       const std::uint64_t budget = convert::memory_budget(foreign.memory_bytes);
@@ -213,6 +250,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       }
       sink->finish();
       if (!global.quiet) say << s->input << " -> " << s->output << " (" << describe(shape) << ")\n";
+      print_geometry(shape, *s, to, say, global.quiet);
       return kExitOk;
     }
 
@@ -223,7 +261,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     check_vdb_type(to, type, "--out-type");
     const Box box = full_box(reader.layout().dims, s->level);
     convert::DenseVolume shape = convert::export_shape(reader, box, s->level, type);
-    apply_geometry(shape, s->voxel_size, s->origin, s->unit);
+    settle_metadata(shape, *s, from, global.command_line);
     const std::string what = s->input + " -> " + s->output + " as " + convert::sample_type_name(type);
     const convert::LossCheck check = exactness_check(s->allow_lossy, what, type, natural, "--out-type");
     check_before_streaming(s->output, reader, box, s->level, type, check, false);
@@ -237,6 +275,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       say << s->input << " -> " << s->output << " (" << format_name(to) << " " << describe(shape)
           << (s->level ? ", level of detail " + std::to_string(s->level) : std::string())
           << (loss.exact() ? "" : ", lossy") << ")\n";
+    print_geometry(shape, *s, to, say, global.quiet);
     return kExitOk;
   };
 }

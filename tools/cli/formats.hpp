@@ -29,6 +29,7 @@ struct ForeignOptions {
   // False: refuse an OpenVDB grid that would not hold every value, and an
   // HDF5 float64 input (read as float32).
   bool allow_lossy = true;
+  bool allow_gaps = false;                 // TIFF folder with missing slice numbers
 };
 
 // The format written to `path`: `name` (--to) or the extension, which must

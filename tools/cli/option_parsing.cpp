@@ -167,9 +167,11 @@ void apply_geometry(convert::DenseVolume& volume, const std::string& voxel_size,
     for (double v : volume.voxel_size)
       if (!(v > 0)) bad("--voxel-size", voxel_size, "positive");
     volume.has_geometry = true;
+    volume.voxel_size_from = "--voxel-size";
   }
-  if (!origin.empty()) volume.origin = parse_triple(origin, "--origin", false), volume.has_geometry = true;
-  if (!unit.empty()) volume.unit = unit, volume.has_geometry = true;
+  // Origin and unit alone do not make a voxel size known.
+  if (!origin.empty()) volume.origin = parse_triple(origin, "--origin", false), volume.origin_from = "--origin";
+  if (!unit.empty()) volume.unit = unit, volume.unit_from = "--unit";
 }
 
 }  // namespace ivol::cli

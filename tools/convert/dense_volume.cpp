@@ -95,4 +95,23 @@ DenseVolume make_dense(const Dims& dims, SampleType type) {
   return v;
 }
 
+DenseVolume shape_of(const DenseVolume& volume) {
+  DenseVolume shape;
+  shape.dims = volume.dims;
+  shape.type = volume.type;
+  shape.voxel_size = volume.voxel_size;
+  shape.origin = volume.origin;
+  shape.unit = volume.unit;
+  shape.has_geometry = volume.has_geometry;
+  shape.quantity = volume.quantity;
+  shape.value_unit = volume.value_unit;
+  shape.provenance = volume.provenance;
+  shape.voxel_size_from = volume.voxel_size_from;
+  shape.origin_from = volume.origin_from;
+  shape.unit_from = volume.unit_from;
+  shape.quantity_from = volume.quantity_from;
+  shape.notes = volume.notes;
+  return shape;
+}
+
 }  // namespace ivol::convert

@@ -27,11 +27,26 @@ struct DenseVolume {
   std::string unit = "mm";
   bool has_geometry = false;  // the source gave voxel size / origin
 
+  // What the source says about its values and history; empty where it says
+  // nothing. provenance is a JSON object's text (ivol's metadata §11).
+  std::string quantity;
+  std::string value_unit;
+  std::string provenance;
+  // Where voxel_size, origin and unit came from, for the conversion summary
+  // (e.g. "OME-TIFF PhysicalSize"); empty: the source does not say.
+  std::string voxel_size_from;
+  std::string origin_from;
+  std::string unit_from;
+  std::string quantity_from;       // of quantity and value_unit
+  std::vector<std::string> notes;  // what the reader noticed (skipped files, ...)
+
   std::uint64_t voxel_count() const { return ivol::voxel_count(dims); }
   double value(std::uint64_t index) const;  // any sample type, as a number
   std::vector<float> to_float() const;
 };
 
 DenseVolume make_dense(const Dims& dims, SampleType type);
+// Everything but the samples: dims, type, geometry, metadata and notes.
+DenseVolume shape_of(const DenseVolume& volume);
 
 }  // namespace ivol::convert

@@ -12,6 +12,7 @@
 #include "hdf5_support.hpp"
 #include "ivol/error.hpp"
 #include "staged_file.hpp"
+#include "volume_metadata.hpp"
 
 namespace ivol::convert {
 namespace {
@@ -146,29 +147,93 @@ std::string read_string(hid_t object, const char* name, const std::string& conte
   return std::string(buffer.data());  // fixed-length strings may be NUL-padded
 }
 
-// voxel_size / pixel_size / origin / unit, as documented in the header.
-void read_geometry(hid_t dataset, const std::string& context, DenseVolume& volume) {
+// DXchange keeps the pixel size on the sample plane with the detector:
+// /measurement/instrument/detector/actual_pixel_size_x (and _y), with a
+// "units" attribute, metres without one (DXchange's rule for lengths).
+bool read_dxchange_pixel_size(hid_t file, const std::string& context, DenseVolume& volume) {
+  const char* group = "/measurement/instrument/detector";
+  const std::string x_name = std::string(group) + "/actual_pixel_size_x";
+  const std::string y_name = std::string(group) + "/actual_pixel_size_y";
+  auto exists = [&](const std::string& name) {
+    return H5Lexists(file, "/measurement", H5P_DEFAULT) > 0 &&
+           H5Lexists(file, "/measurement/instrument", H5P_DEFAULT) > 0 && H5Lexists(file, group, H5P_DEFAULT) > 0 &&
+           H5Lexists(file, name.c_str(), H5P_DEFAULT) > 0;
+  };
+  if (!exists(x_name)) return false;
+  auto read_length = [&](const std::string& name, std::string& unit) {
+    const std::string where = context + ": " + name;
+    Handle dataset(H5Dopen2(file, name.c_str(), H5P_DEFAULT), H5Dclose);
+    if (!dataset.valid()) throw Error(ErrorClass::Malformed, where + ": not a dataset");
+    Handle space(H5Dget_space(dataset.get()), H5Sclose);
+    Handle type(H5Dget_type(dataset.get()), H5Tclose);
+    const H5T_class_t type_class = H5Tget_class(type.get());
+    if ((type_class != H5T_FLOAT && type_class != H5T_INTEGER) || H5Sget_simple_extent_npoints(space.get()) != 1)
+      throw Error(ErrorClass::Malformed, where + ": not a single number");
+    double value = 0;
+    if (H5Dread(dataset.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, &value) < 0)
+      throw Error(ErrorClass::Malformed, where + ": cannot read" + hdf5_reason());
+    unit = "m";
+    for (const char* unit_name : {"units", "unit"})
+      if (attribute_exists(dataset.get(), unit_name)) {
+        unit = read_string(dataset.get(), unit_name, where);
+        break;
+      }
+    const double factor = length_unit_factor(normalise_length_unit(unit), "mm");
+    if (!(factor > 0))
+      throw Error(ErrorClass::Malformed, where + ": unit '" + unit + "' is not a length unit ivol knows");
+    const double mm = value * factor;
+    if (!(mm > 0) || !std::isfinite(mm)) throw Error(ErrorClass::Malformed, where + ": must be positive and finite");
+    return mm;
+  };
+  std::string x_unit, y_unit;
+  const double x = read_length(x_name, x_unit);
+  const double z = exists(y_name) ? read_length(y_name, y_unit) : x;
+  // A reconstruction's slices lie across the rotation axis: x and y both
+  // come from the detector's horizontal pixel, z from its vertical one.
+  volume.voxel_size = {x, x, z};
+  volume.unit = "mm";
+  volume.has_geometry = true;
+  volume.voxel_size_from = "DXchange " + x_name + (exists(y_name) ? " and _y" : " (z taken as x)") + ", in " + x_unit +
+                           (x_unit == "m" ? " (no units attribute: DXchange's metres)" : "");
+  volume.unit_from = "DXchange pixel size, converted to mm";
+  return true;
+}
+
+// voxel_size / pixel_size / origin / unit / quantity / value_unit /
+// provenance, as documented in the header.
+void read_geometry(hid_t file, hid_t dataset, const std::string& context, DenseVolume& volume) {
+  if (attribute_exists(dataset, "quantity")) volume.quantity = read_string(dataset, "quantity", context);
+  if (attribute_exists(dataset, "value_unit")) volume.value_unit = read_string(dataset, "value_unit", context);
+  if (!volume.quantity.empty() || !volume.value_unit.empty())
+    volume.quantity_from = "HDF5 attributes quantity, value_unit";
+  if (attribute_exists(dataset, "provenance")) volume.provenance = read_string(dataset, "provenance", context);
   const char* size_name = attribute_exists(dataset, "voxel_size")   ? "voxel_size"
                           : attribute_exists(dataset, "pixel_size") ? "pixel_size"
                                                                     : nullptr;
-  if (!size_name) return;
+  if (!size_name) {
+    read_dxchange_pixel_size(file, context, volume);
+    return;
+  }
   std::vector<double> zyx = read_numbers(dataset, size_name, context);
   if (zyx.size() == 1) zyx.assign(3, zyx[0]);
   for (double s : zyx)
     if (!(s > 0) || !std::isfinite(s))
       throw Error(ErrorClass::Malformed, context + ": attribute " + size_name + " must be positive and finite");
   volume.voxel_size = {zyx[2], zyx[1], zyx[0]};
+  volume.voxel_size_from = std::string("HDF5 attribute ") + size_name;
   if (attribute_exists(dataset, "origin")) {
     const std::vector<double> origin = read_numbers(dataset, "origin", context);
     if (origin.size() != 3) throw Error(ErrorClass::Malformed, context + ": attribute origin needs 3 values (z, y, x)");
     volume.origin = {origin[2], origin[1], origin[0]};
+    volume.origin_from = "HDF5 attribute origin";
   }
   for (const char* unit_name : {"unit", "units"})
     if (attribute_exists(dataset, unit_name)) {
       volume.unit = read_string(dataset, unit_name, context);
+      volume.unit_from = std::string("HDF5 attribute ") + unit_name;
       break;
     }
-  volume.has_geometry = true;
+  volume.has_geometry = !voxel_size_marked_unknown(volume.provenance);
 }
 
 void describe_layout(hid_t dataset, Hdf5SourceInfo& source) {
@@ -248,7 +313,7 @@ class Hdf5SlabReader final : public SlabReader {
     shape_.dims = {static_cast<std::uint32_t>(shape[2]), static_cast<std::uint32_t>(shape[1]),
                    static_cast<std::uint32_t>(shape[0])};
     shape_.type = mapping_.sample;
-    read_geometry(dataset_.get(), context_, shape_);
+    read_geometry(file_.get(), dataset_.get(), context_, shape_);
     if (source) {
       source->stored_type = mapping_.stored_name;
       source->narrowed_to_f32 = mapping_.narrowed;
@@ -285,11 +350,8 @@ std::unique_ptr<SlabReader> open_hdf5_slabs_in_process(const std::string& path, 
 
 DenseVolume read_hdf5(const std::string& path, const std::string& dataset_name, Hdf5SourceInfo* source) {
   auto reader = open_hdf5_slabs(path, dataset_name, source);
-  DenseVolume volume = make_dense(reader->shape().dims, reader->shape().type);
-  volume.voxel_size = reader->shape().voxel_size;
-  volume.origin = reader->shape().origin;
-  volume.unit = reader->shape().unit;
-  volume.has_geometry = reader->shape().has_geometry;
+  DenseVolume volume = shape_of(reader->shape());
+  volume.data.resize(volume.voxel_count() * sample_size(volume.type));
   reader->read(0, volume.dims[2], volume.data.data());
   return volume;
 }
@@ -420,6 +482,9 @@ class Hdf5SlabWriter final : public SlabWriter {
       write_numbers(dataset_.get(), "origin", {o[2], o[1], o[0]}, context_);
       write_string(dataset_.get(), "unit", shape_.unit, context_);
     }
+    if (!shape_.quantity.empty()) write_string(dataset_.get(), "quantity", shape_.quantity, context_);
+    if (!shape_.value_unit.empty()) write_string(dataset_.get(), "value_unit", shape_.value_unit, context_);
+    if (!shape_.provenance.empty()) write_string(dataset_.get(), "provenance", shape_.provenance, context_);
     // Chunks are compressed and written when the dataset closes and the
     // file flushes, not in H5Dwrite: on a full disk these are the calls
     // that fail, and unchecked they gave exit 0 and a file of zeros.
@@ -449,9 +514,7 @@ class Hdf5SlabWriter final : public SlabWriter {
 
 std::unique_ptr<SlabWriter> create_hdf5_slabs(const std::string& path, const DenseVolume& shape,
                                               const std::string& dataset, int deflate_level) {
-  DenseVolume geometry = shape;
-  geometry.data.clear();
-  return std::make_unique<Hdf5SlabWriter>(path, geometry, dataset, deflate_level);
+  return std::make_unique<Hdf5SlabWriter>(path, shape_of(shape), dataset, deflate_level);
 }
 
 void write_hdf5(const DenseVolume& volume, const std::string& path, const std::string& dataset_name,

@@ -14,8 +14,18 @@
 //   origin      float64 x 3, (z, y, x), world position of the centre of voxel
 //               (0, 0, 0); absent means (0, 0, 0);
 //   unit        string (also read: units), e.g. "mm"; absent keeps "mm".
-// has_geometry is true when voxel_size or pixel_size is present. write_hdf5
-// writes voxel_size, origin and unit only for a volume with has_geometry.
+//   quantity, value_unit
+//               strings: what the values are (ivol's value.quantity and
+//               value.unit), e.g. "linear_attenuation", "1/mm";
+//   provenance  string: a JSON object, ivol's provenance (volume_metadata.hpp).
+// Without voxel_size and pixel_size, DXchange's
+// /measurement/instrument/detector/actual_pixel_size_x (and _y, for z) give
+// the voxel size: x = y = actual_pixel_size_x, z = actual_pixel_size_y, in
+// their "units" attribute (metres without one), converted to mm.
+// has_geometry is true when one of those is present, unless the provenance
+// says "voxel_size_known": false. write_hdf5 writes voxel_size, origin and
+// unit only for a volume with has_geometry; quantity, value_unit and
+// provenance when they are not empty.
 #pragma once
 
 #include <array>

@@ -333,8 +333,13 @@ DenseVolume export_shape(const Reader& reader, const Box& box, unsigned lod, Sam
   out.type = type;
   const Metadata& m = reader.metadata();
   const double scale = std::ldexp(1.0, static_cast<int>(lod));
-  out.has_geometry = true;
+  out.has_geometry = !(m.provenance.contains("voxel_size_known") && m.provenance["voxel_size_known"] == false);
   out.unit = m.unit;
+  out.voxel_size_from = out.origin_from = out.unit_from = "the .ivol metadata";
+  out.quantity = m.quantity;
+  out.quantity_from = "the .ivol metadata";
+  out.value_unit = m.value_unit;
+  if (!m.provenance.empty()) out.provenance = m.provenance.dump();
   for (int a = 0; a < 3; ++a) {
     out.voxel_size[a] = m.voxel_size[a] * scale;
     // Centre of the box's first cell: the centre of the 2^lod voxels it covers.

@@ -113,12 +113,7 @@ class MemorySlabReader final : public SlabReader {
  public:
   MemorySlabReader(DenseVolume owned, const DenseVolume* viewed)
       : owned_(std::move(owned)), volume_(viewed ? *viewed : owned_) {
-    shape_.dims = volume_.dims;
-    shape_.type = volume_.type;
-    shape_.voxel_size = volume_.voxel_size;
-    shape_.origin = volume_.origin;
-    shape_.unit = volume_.unit;
-    shape_.has_geometry = volume_.has_geometry;
+    shape_ = shape_of(volume_);
   }
   void read(std::uint32_t z0, std::uint32_t count, void* out) override {
     const std::uint64_t slice = slab_bytes(volume_.dims, 1, volume_.type, "a volume in memory");

@@ -8,6 +8,7 @@
 
 #include "dense_volume.hpp"
 #include "raw_io.hpp"
+#include "tiff_folder.hpp"
 
 namespace ivol::convert {
 
@@ -33,7 +34,7 @@ class SlabWriter {
 };
 
 std::unique_ptr<SlabReader> open_raw_slabs(const std::string& path, const RawLayout& layout);
-std::unique_ptr<SlabReader> open_tiff_slabs(const std::string& path_or_folder);
+std::unique_ptr<SlabReader> open_tiff_slabs(const std::string& path_or_folder, const TiffFolderOptions& options = {});
 // A volume already in memory (formats read whole, e.g. OpenVDB): owned, or
 // only viewed (the volume must outlive the reader).
 std::unique_ptr<SlabReader> memory_slabs(DenseVolume volume);

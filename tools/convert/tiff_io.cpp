@@ -13,6 +13,8 @@
 #include "sizes.hpp"
 #include "slab_io.hpp"
 #include "staged_file.hpp"
+#include "tiff_folder.hpp"
+#include "tiff_metadata.hpp"
 
 namespace ivol::convert {
 namespace {
@@ -38,6 +40,7 @@ void install_handlers() {
     return true;
   }();
   (void)once;
+  register_ivol_tiff_tag();
 }
 
 [[noreturn]] void fail(const std::string& where, const std::string& what) {
@@ -171,27 +174,37 @@ namespace {
 // back (for the halo of a slab) reopens.
 class TiffSlabReader final : public SlabReader {
  public:
-  explicit TiffSlabReader(const std::string& path) {
+  TiffSlabReader(const std::string& path, const TiffFolderOptions& options) {
     if (std::filesystem::is_directory(path)) {
-      for (const auto& name : natural_sorted_files(path)) files_.push_back(path + "/" + name);
-      if (files_.empty()) fail(path, "the folder holds no .tif or .tiff files");
+      TiffFolder folder = scan_tiff_folder(path, options);
+      files_ = std::move(folder.files);
+      shape_.notes = std::move(folder.notes);
     } else {
       files_.push_back(path);
     }
-    // Count the pages and check that they agree.
+    // Count the pages and check that they agree; a page is named by its own
+    // file (and its page within that file when the file has several).
+    std::string first_where;
     for (std::size_t f = 0; f < files_.size(); ++f) {
       TiffHandle tif = open_tiff(files_[f], "r");
+      if (f == 0) read_tiff_metadata(tif.get(), files_[0], shape_);
+      tdir_t page_in_file = 0;
       do {
-        const std::string where = files_[f] + " page " + std::to_string(pages_.size());
+        const bool several = page_in_file > 0 || !TIFFLastDirectory(tif.get());
+        const std::string where = files_[f] + (several ? " page " + std::to_string(page_in_file) : std::string());
         const PageFormat page = page_format(tif.get(), where);
-        if (pages_.empty())
+        if (pages_.empty()) {
           format_ = page;
-        else if (page.width != format_.width || page.height != format_.height || page.type != format_.type)
-          fail(where, std::to_string(page.width) + "x" + std::to_string(page.height) + " " +
-                          sample_type_name(page.type) + " differs from the first page's " +
-                          std::to_string(format_.width) + "x" + std::to_string(format_.height) + " " +
-                          sample_type_name(format_.type));
+          first_where = where;
+        } else if (page.width != format_.width || page.height != format_.height || page.type != format_.type) {
+          throw Error(ErrorClass::Malformed, where + ": " + std::to_string(page.width) + "x" +
+                                                 std::to_string(page.height) + " " + sample_type_name(page.type) +
+                                                 " differs from " + first_where + ": " + std::to_string(format_.width) +
+                                                 "x" + std::to_string(format_.height) + " " +
+                                                 sample_type_name(format_.type));
+        }
         pages_.push_back({f, TIFFCurrentDirectory(tif.get())});
+        ++page_in_file;
       } while (TIFFReadDirectory(tif.get()));
     }
     shape_.dims = Dims{format_.width, format_.height, static_cast<std::uint32_t>(pages_.size())};
@@ -238,7 +251,7 @@ class TiffSlabReader final : public SlabReader {
 class TiffSlabWriter final : public SlabWriter {
  public:
   TiffSlabWriter(const std::string& path, const DenseVolume& shape, bool compress)
-      : path_(path), dims_(shape.dims), type_(shape.type), compress_(compress), staged_(path) {
+      : path_(path), shape_(shape_of(shape)), dims_(shape.dims), type_(shape.type), compress_(compress), staged_(path) {
     install_handlers();
     // BigTIFF well before the 4 GiB limit of classic TIFF.
     const bool big = slab_bytes(dims_, dims_[2], type_, path) > (3ull << 30);
@@ -266,6 +279,7 @@ class TiffSlabWriter final : public SlabWriter {
       TIFFSetField(tif, TIFFTAG_ROWSPERSTRIP, rows_per_strip);
       TIFFSetField(tif, TIFFTAG_SUBFILETYPE, FILETYPE_PAGE);
       TIFFSetField(tif, TIFFTAG_PAGENUMBER, z_, dims_[2]);
+      write_tiff_metadata(tif, shape_, z_, dims_[2]);
       if (compress_) {
         TIFFSetField(tif, TIFFTAG_COMPRESSION, COMPRESSION_ADOBE_DEFLATE);
         // Horizontal differencing helps integer slices; the floating-point
@@ -310,6 +324,7 @@ class TiffSlabWriter final : public SlabWriter {
   }
 
   std::string path_;
+  DenseVolume shape_;
   Dims dims_;
   SampleType type_;
   bool compress_;
@@ -320,15 +335,18 @@ class TiffSlabWriter final : public SlabWriter {
 
 }  // namespace
 
-std::unique_ptr<SlabReader> open_tiff_slabs(const std::string& path) { return std::make_unique<TiffSlabReader>(path); }
+std::unique_ptr<SlabReader> open_tiff_slabs(const std::string& path, const TiffFolderOptions& options) {
+  return std::make_unique<TiffSlabReader>(path, options);
+}
 
 std::unique_ptr<SlabWriter> create_tiff_slabs(const std::string& path, const DenseVolume& shape, bool compress) {
   return std::make_unique<TiffSlabWriter>(path, shape, compress);
 }
 
-DenseVolume read_tiff(const std::string& path) {
-  auto reader = open_tiff_slabs(path);
-  DenseVolume v = make_dense(reader->shape().dims, reader->shape().type);
+DenseVolume read_tiff(const std::string& path, const TiffFolderOptions& options) {
+  auto reader = open_tiff_slabs(path, options);
+  DenseVolume v = shape_of(reader->shape());
+  v.data.resize(v.voxel_count() * sample_size(v.type));
   reader->read(0, v.dims[2], v.data.data());
   return v;
 }

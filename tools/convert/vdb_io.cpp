@@ -18,6 +18,7 @@
 #include "ivol/error.hpp"
 #include "sizes.hpp"
 #include "staged_file.hpp"
+#include "volume_metadata.hpp"
 
 namespace ivol::convert {
 namespace {
@@ -207,7 +208,21 @@ VdbVolume read_vdb(const std::string& path, const std::string& grid_name, std::u
   // Geometry first: a refused transform should not cost a large allocation.
   DenseVolume geometry;
   read_geometry(grid->transform(), box.min(), context, geometry);
-  if (const auto unit = grid->getMetadata<openvdb::StringMetadata>("unit")) geometry.unit = unit->value();
+  geometry.voxel_size_from = "OpenVDB transform";
+  geometry.origin_from = "OpenVDB transform at the first active voxel";
+  if (const auto unit = grid->getMetadata<openvdb::StringMetadata>("unit")) {
+    geometry.unit = unit->value();
+    geometry.unit_from = "OpenVDB grid metadata unit";
+  }
+  const std::pair<const char*, std::string*> texts[] = {
+      {"quantity", &geometry.quantity}, {"value_unit", &geometry.value_unit}, {"provenance", &geometry.provenance}};
+  for (const auto& [key, field] : texts)
+    if (const auto text = grid->getMetadata<openvdb::StringMetadata>(key)) *field = text->value();
+  if (!geometry.quantity.empty() || !geometry.value_unit.empty())
+    geometry.quantity_from = "OpenVDB grid metadata quantity, value_unit";
+  // A grid ivol wrote from a volume of unknown voxel size has an identity
+  // transform that means nothing.
+  if (voxel_size_marked_unknown(geometry.provenance)) geometry.has_geometry = false;
 
   // The grid is read whole: float32 samples and two flags per voxel.
   const std::string what = context + ": the active bounding box (" + span + "), " + dims_text(dims) + " voxels,";
@@ -216,10 +231,11 @@ VdbVolume read_vdb(const std::string& path, const std::string& grid_name, std::u
   out.volume = make_dense(dims, SampleType::Float32);
   checked_resize(out.active, voxels, what + " (active flags)");
   checked_resize(out.from_tile, voxels, what + " (tile flags)");
-  out.volume.voxel_size = geometry.voxel_size;
-  out.volume.origin = geometry.origin;
-  out.volume.unit = geometry.unit;
-  out.volume.has_geometry = true;
+  DenseVolume shape = shape_of(geometry);
+  shape.dims = out.volume.dims;
+  shape.type = out.volume.type;
+  shape.data = std::move(out.volume.data);
+  out.volume = std::move(shape);
   // The byte buffer comes from operator new, aligned for float.
   copy_values(*grid, box, out);
   return out;
@@ -296,7 +312,11 @@ LossTally write_vdb(const DenseVolume& volume, const std::string& path, float ba
                                                      [](float value) { return value >= 0.0f && value <= 1.0f; });
   grid->setGridClass(fog ? openvdb::GRID_FOG_VOLUME : openvdb::GRID_UNKNOWN);
   grid->setCreator("ivol");
-  grid->insertMeta("unit", openvdb::StringMetadata(volume.unit));
+  if (volume.has_geometry) grid->insertMeta("unit", openvdb::StringMetadata(volume.unit));
+  const std::pair<const char*, const std::string*> texts[] = {
+      {"quantity", &volume.quantity}, {"value_unit", &volume.value_unit}, {"provenance", &volume.provenance}};
+  for (const auto& [key, text] : texts)
+    if (!text->empty()) grid->insertMeta(key, openvdb::StringMetadata(*text));
   grid->setSaveFloatAsHalf(half);
   values = {};
 

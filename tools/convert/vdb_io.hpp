@@ -9,6 +9,10 @@
 // translation, no rotation, shear or mirroring; a frustum is refused):
 // voxel_size is the scale along each axis and origin the world position of
 // the centre of index min. write_vdb does the reverse with min = (0, 0, 0).
+// Grid metadata (strings), both ways: "unit" (length unit of the transform;
+// written only with has_geometry), "quantity", "value_unit" and
+// "provenance" (ivol's provenance JSON; "voxel_size_known": false there
+// makes the transform meaningless: has_geometry false).
 #pragma once
 
 #include <cstdint>

@@ -32,6 +32,9 @@ WorkerHandler volume_handler(const std::string& path, const std::string& dataset
       reply.put(shape.dims).put(shape.type).put(shape.voxel_size).put(shape.origin).put_string(shape.unit);
       reply.put(shape.has_geometry).put_string(source.stored_type).put(source.narrowed_to_f32).put(source.chunked);
       reply.put(source.chunk).put_string(source.filters);
+      reply.put_string(shape.quantity).put_string(shape.value_unit).put_string(shape.provenance);
+      reply.put_string(shape.voxel_size_from).put_string(shape.origin_from).put_string(shape.unit_from);
+      reply.put_string(shape.quantity_from);
       out.reply = std::move(reply.bytes());
       return;
     }
@@ -67,6 +70,13 @@ class IsolatedHdf5SlabReader final : public SlabReader {
     info.chunked = reply.get<bool>();
     info.chunk = reply.get<std::array<unsigned long long, 3>>();
     info.filters = reply.get_string();
+    shape_.quantity = reply.get_string();
+    shape_.value_unit = reply.get_string();
+    shape_.provenance = reply.get_string();
+    shape_.voxel_size_from = reply.get_string();
+    shape_.origin_from = reply.get_string();
+    shape_.unit_from = reply.get_string();
+    shape_.quantity_from = reply.get_string();
     if (source) *source = std::move(info);
   }
 

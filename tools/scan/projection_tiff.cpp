@@ -256,9 +256,11 @@ std::vector<std::string> resolve_tiff_files(const std::string& source) {
   std::error_code ec;
   std::vector<std::string> files;
   if (std::filesystem::is_directory(source, ec)) {
-    for (const std::string& name : natural_sorted_files(source)) files.push_back(source + "/" + name);
-    if (files.empty()) fail(source, "the folder holds no .tif or .tiff files");
-    return files;
+    // One file per view, checked as a volume's slices are: a missing view
+    // would shift every later angle. A glob names the files to use instead.
+    TiffFolderOptions options;
+    options.gap_hint = "every view needs its projection; name the files to use with a pattern (\"folder/p*.tif\")";
+    return scan_tiff_folder(source, options).files;
   }
   if (source.find_first_of("*?[") == std::string::npos) return {source};
   glob_t matches{};
