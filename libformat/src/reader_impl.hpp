@@ -98,7 +98,12 @@ struct Reader::Impl {
       throw;
     }
     ++stats.blocks_decoded;
-    cache.insert(index, data);
+    // The hints count against the cache's budget: a block the cache lets go
+    // is let go here too, else one block per level and stream stays held.
+    for (const std::size_t evicted : cache.insert(index, data))
+      for (auto& per_stream : hint)
+        for (Hint& h : per_stream)
+          if (h.block == evicted) h = Hint{};
     return data;
   }
 
