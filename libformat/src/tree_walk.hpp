@@ -4,7 +4,9 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <cstdlib>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "ivol/error.hpp"
@@ -70,8 +72,49 @@ std::uint32_t lookup_bits(Access& access, const VolumeLayout& layout, const Leve
 // coordinates of level of detail `lod`.
 // Where a salvaging walk met damage: the region it filled from a coarser
 // level instead.
-struct SalvageLog {
-  std::vector<DamagedRegion>& regions;
+// Entries are merged per cause (a damaged block fails with the same message
+// at every node that needs it): one entry per block, its region the box
+// around all it spoiled, not one per voxel. At most kMaxEntries causes are
+// listed; the last entry gathers the rest.
+class SalvageLog {
+ public:
+  static constexpr std::size_t kMaxEntries = 1000;
+  explicit SalvageLog(std::vector<DamagedRegion>& regions) : regions_(regions) {
+    for (std::size_t n = 0; n < regions_.size(); ++n) by_message_.emplace(regions_[n].message, n);
+    // A list already full (an earlier read of the same export) goes on
+    // counting in its overflow entry.
+    if (regions_.size() == kMaxEntries) overflow_ = std::strtoull(regions_.back().message.c_str(), nullptr, 10);
+  }
+  void add(const Box& region, unsigned level, const std::string& message) {
+    auto it = by_message_.find(message);
+    if (it == by_message_.end()) {
+      if (regions_.size() + 1 >= kMaxEntries) {
+        // The overflow entry: its message counts the causes left out.
+        if (regions_.size() + 1 == kMaxEntries) regions_.push_back({region, level, ""});
+        DamagedRegion& rest = regions_.back();
+        ++overflow_;
+        rest.message = std::to_string(overflow_) + " more damaged part(s) of the file, not listed";
+        grow(rest, region, level);
+        return;
+      }
+      by_message_.emplace(message, regions_.size());
+      regions_.push_back({region, level, message});
+      return;
+    }
+    grow(regions_[it->second], region, level);
+  }
+
+ private:
+  static void grow(DamagedRegion& entry, const Box& region, unsigned level) {
+    for (int a = 0; a < 3; ++a) {
+      entry.region.lo[a] = std::min(entry.region.lo[a], region.lo[a]);
+      entry.region.hi[a] = std::max(entry.region.hi[a], region.hi[a]);
+    }
+    entry.level = std::min(entry.level, level);
+  }
+  std::vector<DamagedRegion>& regions_;
+  std::unordered_map<std::string, std::size_t> by_message_;
+  std::uint64_t overflow_ = 0;
 };
 
 // Calls sink(region, bits) for every leaf (or node of the target level) that
@@ -84,6 +127,25 @@ template <class Access, class Sink>
 void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ranges, const Box& box, unsigned lod,
               Sink&& sink, SalvageLog* salvage = nullptr) {
   const unsigned target = layout.depth - lod;
+  // Node numbering (spec §8.3, §8.4) for the levels the walk descends: in
+  // octant order, the nodes of a level come in breadth-first order, so each
+  // node's children follow those of the node of its level met before it
+  // (a DAG, nodes sharing children, breaks this), and a read of a whole
+  // level meets every node: each first_inner_child is then exactly the
+  // running count, and the counts add up to the level table's.
+  const Box whole = full_box(layout.dims, lod);
+  bool exact = whole.lo == box.lo && whole.hi == box.hi;
+  std::vector<std::uint64_t> next_child(target);
+  for (unsigned l = 0; l < target; ++l) next_child[l] = ranges.first_inner[l + 1];
+  auto check_order = [&](unsigned level, std::uint64_t index, std::uint64_t word) {
+    const std::uint64_t first = first_inner_child(word);
+    if (exact ? first != next_child[level] : first < next_child[level])
+      throw Error(ErrorClass::Malformed, "node " + std::to_string(index) + " (level " + std::to_string(level) +
+                                             "): first_inner_child is " + std::to_string(first) +
+                                             ", breadth-first order requires " + (exact ? "" : "at least ") +
+                                             std::to_string(next_child[level]));
+    next_child[level] = first + popcount8(child_mask(word));
+  };
   struct Frame {
     unsigned level;
     std::uint32_t i, j, k;
@@ -92,7 +154,8 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
     std::uint32_t fallback;  // bits of the nearest readable ancestor (salvage)
   };
   auto log = [&](const Box& region, unsigned level, const Error& e) {
-    salvage->regions.push_back({region, level, e.what()});
+    salvage->add(region, level, e.what());
+    exact = false;  // a skipped subtree's children are not counted
   };
   // A value, or in salvage mode the fallback when it cannot be read.
   auto value_or = [&](std::uint64_t index, std::uint32_t fallback, const Box& region, unsigned level) {
@@ -135,6 +198,7 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
     try {
       word = access.node_word(f.inner);
       check_node_word(layout, ranges, f.level, f.inner, word);
+      check_order(f.level, f.inner, word);
     } catch (const Error& e) {
       if (!salvage) throw;
       log(region, f.level, e);
@@ -169,6 +233,13 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
                        1 + 8 * f.inner + cu, child_inner, own});
     }
   }
+  if (!exact) return;
+  for (unsigned l = 0; l < target; ++l)
+    if (next_child[l] != ranges.first_inner[l + 2])
+      throw Error(ErrorClass::Malformed, "level table: inner_count[" + std::to_string(l + 1) + "] is " +
+                                             std::to_string(layout.inner_count[l + 1]) +
+                                             " but the child masks of level " + std::to_string(l) + " name " +
+                                             std::to_string(next_child[l] - ranges.first_inner[l + 1]));
 }
 
 // Writes `bits` (width bytes each) or physical floats into a [z][y][x] buffer
