@@ -27,35 +27,51 @@ std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigne
     });
     return bits;
   }
-  Box full;
-  for (int a = 0; a < 3; ++a) {
-    full.lo[a] = box.lo[a] << lod;
-    full.hi[a] = static_cast<std::uint32_t>(std::min<std::uint64_t>(std::uint64_t{box.hi[a]} << lod, v.dims[a]));
-  }
-  const std::vector<std::uint32_t> fine = grid_bits(impl, full, 0);
-  const std::uint64_t fx = full.hi[0] - full.lo[0], fy = full.hi[1] - full.lo[1];
+  // A level of detail accumulates the sums of one layer of output cells at a
+  // time, from runs of equal voxels along x: memory in proportion to the
+  // output, never to the full-resolution region under it. Each cell's sum
+  // still takes its voxels one by one in the order z, then y, then x, so the
+  // result is bit for bit the sequential sum of spec §12.3.
+  const std::uint64_t nx = box.hi[0] - box.lo[0], ny = box.hi[1] - box.lo[1];
+  const std::uint64_t x_lo = std::uint64_t{box.lo[0]} << lod;
+  const auto x_hi = static_cast<std::uint32_t>(std::min<std::uint64_t>(std::uint64_t{box.hi[0]} << lod, v.dims[0]));
   std::vector<std::uint32_t> bits(box.voxel_count());
+  std::vector<double> sums(nx * ny);
   std::size_t n = 0;
-  for (std::uint32_t k = box.lo[2]; k < box.hi[2]; ++k)
-    for (std::uint32_t j = box.lo[1]; j < box.hi[1]; ++j)
-      for (std::uint32_t i = box.lo[0]; i < box.hi[0]; ++i) {
-        double sum = 0.0;
-        std::uint64_t count = 0;
-        const std::uint32_t c[3] = {i, j, k};
-        std::uint64_t lo[3], hi[3];
-        for (int a = 0; a < 3; ++a) {
-          lo[a] = std::uint64_t{c[a]} << lod;
-          hi[a] = std::min<std::uint64_t>((std::uint64_t{c[a]} + 1) << lod, v.dims[a]);
-        }
-        for (std::uint64_t z = lo[2]; z < hi[2]; ++z)
-          for (std::uint64_t y = lo[1]; y < hi[1]; ++y)
-            for (std::uint64_t x = lo[0]; x < hi[0]; ++x) {
-              sum = sum +
-                    decode_value(v.encoding, fine[((z - full.lo[2]) * fy + (y - full.lo[1])) * fx + (x - full.lo[0])]);
-              ++count;
-            }
-        bits[n++] = encode_value(v.encoding, sum / static_cast<double>(count));
+  for (std::uint32_t k = box.lo[2]; k < box.hi[2]; ++k) {
+    std::fill(sums.begin(), sums.end(), 0.0);
+    const std::uint64_t z_lo = std::uint64_t{k} << lod;
+    const std::uint64_t z_hi = std::min<std::uint64_t>((std::uint64_t{k} + 1) << lod, v.dims[2]);
+    const std::uint64_t y_lo = std::uint64_t{box.lo[1]} << lod;
+    const std::uint64_t y_hi = std::min<std::uint64_t>(std::uint64_t{box.hi[1]} << lod, v.dims[1]);
+    for (std::uint64_t z = z_lo; z < z_hi; ++z)
+      for (std::uint64_t y = y_lo; y < y_hi; ++y) {
+        const Box row{{static_cast<std::uint32_t>(x_lo), static_cast<std::uint32_t>(y), static_cast<std::uint32_t>(z)},
+                      {x_hi, static_cast<std::uint32_t>(y + 1), static_cast<std::uint32_t>(z + 1)}};
+        double* cells = sums.data() + ((y >> lod) - box.lo[1]) * nx;
+        // for_each_cell visits a row's cells in increasing x.
+        grid.for_each_cell(row, [&](const Box& region, std::uint64_t index) {
+          const double value = decode_value(v.encoding, impl.value_bits(index));
+          for (std::uint64_t x = region.lo[0]; x < region.hi[0]; ++x) {
+            double& sum = cells[(x >> lod) - box.lo[0]];
+            sum = sum + value;
+          }
+        });
       }
+    const std::uint64_t count_z = z_hi - z_lo;
+    for (std::uint32_t j = box.lo[1]; j < box.hi[1]; ++j) {
+      const std::uint64_t count_y =
+          std::min<std::uint64_t>((std::uint64_t{j} + 1) << lod, v.dims[1]) - (std::uint64_t{j} << lod);
+      for (std::uint32_t i = box.lo[0]; i < box.hi[0]; ++i) {
+        const std::uint64_t count_x =
+            std::min<std::uint64_t>((std::uint64_t{i} + 1) << lod, v.dims[0]) - (std::uint64_t{i} << lod);
+        // The exact number of voxels (up to 2^93), rounded once.
+        __extension__ typedef unsigned __int128 u128;
+        const auto count = static_cast<double>(static_cast<u128>(count_z) * count_y * count_x);
+        bits[n++] = encode_value(v.encoding, sums[(j - box.lo[1]) * nx + (i - box.lo[0])] / count);
+      }
+    }
+  }
   return bits;
 }
 
@@ -104,7 +120,7 @@ std::vector<float> Reader::read_box(const Box& box, unsigned lod, std::vector<Da
   }
   detail::ImplAccess access{impl_.get()};
   std::optional<detail::SalvageLog> log;
-  if (damaged) log.emplace(detail::SalvageLog{*damaged});
+  if (damaged) log.emplace(*damaged);
   if (encoding_width(v.encoding) == 2) {
     // Physical values of all 65536 codes, once per call: cheaper than
     // decoding each voxel when the box is large.
@@ -145,7 +161,7 @@ std::vector<std::uint8_t> Reader::read_box_bits(const Box& box, unsigned lod, st
   }
   detail::ImplAccess access{impl_.get()};
   std::optional<detail::SalvageLog> log;
-  if (damaged) log.emplace(detail::SalvageLog{*damaged});
+  if (damaged) log.emplace(*damaged);
   detail::walk_box(
       access, v, impl_->ranges, box, lod,
       [&](const Box& region, std::uint32_t bits) {
