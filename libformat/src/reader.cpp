@@ -49,6 +49,26 @@ std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigne
         const Box row{{static_cast<std::uint32_t>(x_lo), static_cast<std::uint32_t>(y), static_cast<std::uint32_t>(z)},
                       {x_hi, static_cast<std::uint32_t>(y + 1), static_cast<std::uint32_t>(z + 1)}};
         double* cells = sums.data() + ((y >> lod) - box.lo[1]) * nx;
+        if (v.kind == StructureKind::Regular) {
+          // A row of a regular grid is a run of consecutive values: take them
+          // a block at a time rather than a cell at a time.
+          const std::size_t width = encoding_width(v.encoding);
+          std::uint64_t index = (z * v.dims[1] + y) * v.dims[0] + x_lo;
+          for (std::uint64_t x = x_lo; x < x_hi;) {
+            std::uint64_t run = 0;
+            const std::uint8_t* p = impl.elements(3, index, &run);
+            run = std::min<std::uint64_t>(run, x_hi - x);
+            for (std::uint64_t i = 0; i < run; ++i, p += width) {
+              const std::uint32_t bits =
+                  width == 4 ? layout::load<std::uint32_t>(p) : std::uint32_t{layout::load<std::uint16_t>(p)};
+              double& sum = cells[((x + i) >> lod) - box.lo[0]];
+              sum = sum + decode_value(v.encoding, bits);
+            }
+            x += run;
+            index += run;
+          }
+          continue;
+        }
         // for_each_cell visits a row's cells in increasing x.
         grid.for_each_cell(row, [&](const Box& region, std::uint64_t index) {
           const double value = decode_value(v.encoding, impl.value_bits(index));

@@ -134,6 +134,15 @@ struct Reader::Impl {
     return h.data->data() + (element - blk.first_element) * width;
   }
 
+  // Like element(), and *available = how many elements from `element` on
+  // lie in the same decoded block, consecutive.
+  const std::uint8_t* elements(std::uint8_t stream, std::uint64_t element, std::uint64_t* available) {
+    const std::uint8_t* p = this->element(stream, element);
+    const Hint& h = hint[stream][last_level[stream]];
+    *available = h.first + h.count - element;
+    return p;
+  }
+
   std::uint64_t node_word(std::uint64_t index) { return layout::load<std::uint64_t>(element(2, index)); }
 
   std::uint32_t value_bits(std::uint64_t index) {
@@ -152,6 +161,13 @@ struct Reader::Impl {
         throw Error(ErrorClass::InvalidArgument, file.path() + ": box " + box.to_string() +
                                                      " is empty or outside the volume at level of detail " +
                                                      std::to_string(lod));
+    // A valid file may be 2^31 voxels a side: Box::voxel_count (64 bits)
+    // would wrap, and an output sized by it would be overrun.
+    __extension__ typedef unsigned __int128 u128;
+    const u128 voxels = u128{box.hi[0] - box.lo[0]} * (box.hi[1] - box.lo[1]) * (box.hi[2] - box.lo[2]);
+    if (voxels > (u128{1} << 62))
+      throw Error(ErrorClass::InvalidArgument,
+                  file.path() + ": box " + box.to_string() + " holds more than 2^62 voxels, too many for one read");
   }
 };
 

@@ -162,7 +162,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   try {
     ivol::Reader reader(path);
     const ivol::Dims d = reader.layout().dims;
-    if (ivol::voxel_count(d) <= (1u << 16)) {
+    // Per axis first: the product of three sizes up to 2^31 wraps 64 bits.
+    if (d[0] <= (1u << 16) && d[1] <= (1u << 16) && d[2] <= (1u << 16) && ivol::voxel_count(d) <= (1u << 16)) {
       reader.read_lod(0);
       if (reader.layout().depth > 0) reader.read_lod(1);
     }
