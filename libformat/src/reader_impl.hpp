@@ -134,6 +134,22 @@ struct Reader::Impl {
     return h.data->data() + (element - blk.first_element) * width;
   }
 
+  // The error of the block holding `element` of `stream` if that block
+  // already failed, found without throwing: a salvaging walk meets a damaged
+  // block at every voxel it holds, and an exception each time cost more than
+  // the rest of the read.
+  const Error* known_failure(std::uint8_t stream, std::uint64_t element) const {
+    if (failures.empty()) return nullptr;
+    const Hint& last = hint[stream][last_level[stream]];
+    if (last.data && element - last.first < last.count) return nullptr;
+    const auto& list = stream_blocks[stream];
+    auto it = std::upper_bound(list.begin(), list.end(), element,
+                               [&](std::uint64_t e, std::size_t b) { return e < info.blocks[b].first_element; });
+    if (it == list.begin()) return nullptr;
+    const auto failed = failures.find(*(it - 1));
+    return failed == failures.end() ? nullptr : &failed->second;
+  }
+
   // Like element(), and *available = how many elements from `element` on
   // lie in the same decoded block, consecutive.
   const std::uint8_t* elements(std::uint8_t stream, std::uint64_t element, std::uint64_t* available) {
@@ -177,6 +193,7 @@ struct ImplAccess {
   Reader::Impl* impl;
   std::uint64_t node_word(std::uint64_t i) const { return impl->node_word(i); }
   std::uint32_t value_bits(std::uint64_t i) const { return impl->value_bits(i); }
+  const Error* known_failure(std::uint8_t stream, std::uint64_t i) const { return impl->known_failure(stream, i); }
 };
 
 }  // namespace detail

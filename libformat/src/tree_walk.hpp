@@ -85,23 +85,27 @@ class SalvageLog {
     // counting in its overflow entry.
     if (regions_.size() == kMaxEntries) overflow_ = std::strtoull(regions_.back().message.c_str(), nullptr, 10);
   }
-  void add(const Box& region, unsigned level, const std::string& message) {
-    auto it = by_message_.find(message);
-    if (it == by_message_.end()) {
-      if (regions_.size() + 1 >= kMaxEntries) {
-        // The overflow entry: its message counts the causes left out.
-        if (regions_.size() + 1 == kMaxEntries) regions_.push_back({region, level, ""});
-        DamagedRegion& rest = regions_.back();
-        ++overflow_;
-        rest.message = std::to_string(overflow_) + " more damaged part(s) of the file, not listed";
-        grow(rest, region, level);
-        return;
+  // `message` is compared by address first: a block that failed once fails
+  // with the same stored error at every voxel.
+  void add(const Box& region, unsigned level, const char* message) {
+    if (message != last_message_) {
+      last_message_ = message;
+      const std::string text(message);
+      auto it = by_message_.find(text);
+      if (it == by_message_.end()) {
+        if (regions_.size() + 1 >= kMaxEntries) {
+          // The overflow entry: its message counts the causes left out.
+          if (regions_.size() + 1 == kMaxEntries) regions_.push_back({region, level, ""});
+          ++overflow_;
+          regions_.back().message = std::to_string(overflow_) + " more damaged part(s) of the file, not listed";
+        } else {
+          regions_.push_back({region, level, text});
+        }
+        it = by_message_.emplace(text, regions_.size() - 1).first;
       }
-      by_message_.emplace(message, regions_.size());
-      regions_.push_back({region, level, message});
-      return;
+      last_index_ = it->second;
     }
-    grow(regions_[it->second], region, level);
+    grow(regions_[last_index_], region, level);
   }
 
  private:
@@ -113,8 +117,10 @@ class SalvageLog {
     entry.level = std::min(entry.level, level);
   }
   std::vector<DamagedRegion>& regions_;
-  std::unordered_map<std::string, std::size_t> by_message_;
+  std::unordered_map<std::string, std::size_t> by_message_;  // the causes left out too, at the last entry
   std::uint64_t overflow_ = 0;
+  const char* last_message_ = nullptr;
+  std::size_t last_index_ = 0;
 };
 
 // Calls sink(region, bits) for every leaf (or node of the target level) that
@@ -160,6 +166,10 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
   // A value, or in salvage mode the fallback when it cannot be read.
   auto value_or = [&](std::uint64_t index, std::uint32_t fallback, const Box& region, unsigned level) {
     if (!salvage) return access.value_bits(index);
+    if (const Error* known = access.known_failure(3, index)) {
+      log(region, level, *known);
+      return fallback;
+    }
     try {
       return access.value_bits(index);
     } catch (const Error& e) {
@@ -195,6 +205,12 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
     // whatever below it cannot be read.
     const std::uint32_t own = salvage ? value_or(f.value_index, f.fallback, region, f.level) : 0;
     std::uint64_t word;
+    if (salvage)
+      if (const Error* known = access.known_failure(2, f.inner)) {
+        log(region, f.level, *known);
+        sink(region, own);
+        continue;
+      }
     try {
       word = access.node_word(f.inner);
       check_node_word(layout, ranges, f.level, f.inner, word);

@@ -75,7 +75,7 @@ struct FileInfo {
 // detail, `level` the octree level where the damage was met. One entry per
 // cause (a damaged block, a broken node), `region` the box around all it
 // spoiled; after 999 causes the last entry gathers the rest, its message
-// counting them.
+// counting them (once per read that met them, when reads share a list).
 struct DamagedRegion {
   Box region;
   unsigned level = 0;
