@@ -32,6 +32,15 @@ std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigne
   // output, never to the full-resolution region under it. Each cell's sum
   // still takes its voxels one by one in the order z, then y, then x, so the
   // result is bit for bit the sequential sum of spec §12.3.
+  __extension__ typedef unsigned __int128 u128;
+  u128 under = 1;  // full-resolution voxels under the box
+  for (int a = 0; a < 3; ++a)
+    under *= std::min<std::uint64_t>(std::uint64_t{box.hi[a]} << lod, v.dims[a]) - (std::uint64_t{box.lo[a]} << lod);
+  if (under > impl.grid_lod_voxels)
+    throw Error(ErrorClass::LimitExceeded,
+                impl.file.path() + ": level of detail " + std::to_string(lod) + " of " + box.to_string() +
+                    " sums the grid's full-resolution voxels under it, more than this reader's limit of " +
+                    std::to_string(impl.grid_lod_voxels) + " (ReaderOptions::grid_lod_voxels)");
   const std::uint64_t nx = box.hi[0] - box.lo[0], ny = box.hi[1] - box.lo[1];
   const std::uint64_t x_lo = std::uint64_t{box.lo[0]} << lod;
   const auto x_hi = static_cast<std::uint32_t>(std::min<std::uint64_t>(std::uint64_t{box.hi[0]} << lod, v.dims[0]));
@@ -85,8 +94,7 @@ std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigne
       for (std::uint32_t i = box.lo[0]; i < box.hi[0]; ++i) {
         const std::uint64_t count_x =
             std::min<std::uint64_t>((std::uint64_t{i} + 1) << lod, v.dims[0]) - (std::uint64_t{i} << lod);
-        // The exact number of voxels (up to 2^93), rounded once.
-        __extension__ typedef unsigned __int128 u128;
+        // The exact number of voxels, rounded once.
         const auto count = static_cast<double>(static_cast<u128>(count_z) * count_y * count_x);
         bits[n++] = encode_value(v.encoding, sums[(j - box.lo[1]) * nx + (i - box.lo[0])] / count);
       }

@@ -23,6 +23,7 @@ struct Reader::Impl {
   detail::LevelRanges ranges;
   detail::BlockCache cache;
   IoStats stats;
+  std::uint64_t grid_lod_voxels = 0;                // ReaderOptions::grid_lod_voxels
   std::uint64_t bytes_baseline = 0;                 // file.bytes_read at the last reset
   std::unordered_map<std::size_t, Error> failures;  // blocks that failed their checks
   std::optional<detail::GridStructure> grid;        // structures of spec §8A
@@ -41,7 +42,11 @@ struct Reader::Impl {
   std::size_t last_level[6] = {0, 0, 0, 0, 0, 0};  // the hint that served the last lookup
 
   Impl(const std::string& path, const ReaderOptions& options)
-      : file(path), info(detail::read_file_structure(file)), ranges(info.layout), cache(options.cache_bytes) {
+      : file(path),
+        info(detail::read_file_structure(file)),
+        ranges(info.layout),
+        cache(options.cache_bytes),
+        grid_lod_voxels(options.grid_lod_voxels) {
     for (std::size_t b = 0; b < info.blocks.size(); ++b)
       if (detail::is_known_stream(info.blocks[b].stream, info.layout.kind))
         stream_blocks[info.blocks[b].stream].push_back(b);

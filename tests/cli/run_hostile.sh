@@ -94,6 +94,8 @@ f="$work/rectilinear_2p29.ivol"
 # A level of detail of a grid sums the full-resolution voxels under it (spec
 # §12.3): 2^27 of them for these 8 voxels of level 8, in memory for 8.
 run "rectilinear_2p29: extract --level 8" 0 "" -- "$IVOL" -q extract "$f" --box 0,0,0,2,2,2 --level 8 -o "$out/e.raw"
+run "rectilinear_2p29: extract --level 20" 2 "more than this reader's limit" -- \
+  "$IVOL" -q extract "$f" --box 0,0,0,1,1,1 --level 20 -o "$out/e.raw"
 run "rectilinear_2p29: convert (too large)" any "" -- "$IVOL" -q convert "$f" "$out/c.raw"
 # Salvage: a bounded list, one entry per damaged block, not per voxel.
 f="$work/salvage_zeroed.ivol"

@@ -19,7 +19,8 @@
 //   size is bounded by its decoded size before it is read (spec §7);
 // - for a salvaging read, at most SalvageLog's 1000 DamagedRegion entries.
 // Time follows from the voxels asked for (for a level of detail of a grid,
-// the full-resolution voxels under it) and the blocks they need; a cache
+// the full-resolution voxels under it, at most grid_lod_voxels) and the
+// blocks they need; a cache
 // smaller than the blocks one path through the tree needs (one per level and
 // stream) makes reads slower, never larger.
 #pragma once
@@ -39,6 +40,11 @@ struct ReaderOptions {
   // Decoded blocks kept in memory, in bytes: a budget, not a count; the block
   // in use is held even when it alone exceeds it.
   std::uint64_t cache_bytes = 256ull << 20;
+  // A level of detail of a grid (spec §8A) sums the full-resolution voxels
+  // under it (§12.3): a read whose box covers more is refused
+  // (LimitExceeded) rather than run for hours. 2^38 is 64 times a 4000^3
+  // volume, a few minutes.
+  std::uint64_t grid_lod_voxels = 1ull << 38;
 };
 
 // One entry of the block table (spec §6.3).
