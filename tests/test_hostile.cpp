@@ -145,7 +145,7 @@ TEST(Hostile, ClaimedIndexSizeIsBoundedBeforeReading) {
 }
 
 TEST(Hostile, UnknownStreamBlockCrcIsCheckedInParts) {
-  const std::string path = make("unknown_stream_4gib");
+  const std::string path = make("unknown_stream_2gib");
   const ChildRun run = in_child([&] {
     Reader reader(path);  // ignorable: the reader skips it
     const bool value_ok = reader.voxel_value(0, 0, 0) == 1.0;
@@ -158,31 +158,32 @@ TEST(Hostile, UnknownStreamBlockCrcIsCheckedInParts) {
 }
 
 TEST(Hostile, LevelOfDetailOfALargeGridHoldsTheOutputNotTheRegion) {
-  const std::string path = make("regular_1024_zeros");
+  const std::string path = make("regular_grid_2gib");
   const ChildRun run = in_child([&] {
     Reader reader(path);
-    const std::vector<float> lod = reader.read_lod(8);
-    return lod == std::vector<float>(64, 0.0f);
+    // One layer of level of detail 8 (4x4x2): 256 full-resolution slices.
+    const std::vector<float> lod = reader.read_box(Box{{0, 0, 1}, {4, 4, 2}}, 8);
+    return lod == std::vector<float>(16, 0.0f);
   });
   EXPECT_TRUE(run.ok);
   // The cache's 256 MiB and the 64 MiB block in use; the region under the
-  // 4x4x4 result is 4 GiB.
+  // 16 voxels asked for is 1 GiB.
   EXPECT_LT(run.peak_kib, 450 * kMiB);
 }
 
 TEST(Hostile, CacheBudgetIsInBytes) {
-  const std::string path = make("regular_1024_zeros");
+  const std::string path = make("regular_grid_2gib");
   for (const std::uint64_t budget : {std::uint64_t{0}, std::uint64_t{256} << 20}) {
     const ChildRun run = in_child([&] {
       ReaderOptions options;
       options.cache_bytes = budget;
       Reader reader(path, options);
-      // An x-slice needs one voxel of every row: all 64 blocks, in order.
+      // An x-slice needs one voxel of every row: all 32 blocks, in order.
       const std::vector<float> slice = reader.read_slice(Axis::X, 1023);
-      return slice.size() == 1024u * 1024u && reader.io_stats().blocks_decoded == 65;  // and the metadata
+      return slice.size() == 1024u * 512u && reader.io_stats().blocks_decoded == 33;  // and the metadata
     });
     EXPECT_TRUE(run.ok) << budget;
-    // The budget plus the block in use (64 MiB); 64 blocks of 64 MiB are 4 GiB.
+    // The budget plus the block in use (64 MiB); 32 blocks of 64 MiB are 2 GiB.
     EXPECT_LT(run.peak_kib, static_cast<long>(budget >> 10) + 200 * kMiB) << budget;
   }
 }

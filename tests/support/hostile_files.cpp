@@ -14,7 +14,8 @@
 namespace ivol::test::hostile {
 namespace {
 
-const std::string kMetadata = R"({"voxel_size":[1,1,1],"unit":"mm","origin":[0,0,0],"value":{"quantity":"grey_value"}})";
+const std::string kMetadata =
+    R"({"voxel_size":[1,1,1],"unit":"mm","origin":[0,0,0],"value":{"quantity":"grey_value"}})";
 
 template <class T>
 void put(std::vector<std::uint8_t>& out, std::size_t at, T v) {
@@ -163,19 +164,20 @@ Container dag_octree() {
   return c;
 }
 
-// A regular grid of 1024^3 zeros (float32): 64 values blocks of 64 MiB
-// decoded, about 2 KB of zstd each. A valid file.
+// A regular grid of 1024x1024x512 zeros (float32): 32 values blocks of 64
+// MiB decoded (2 GiB), about 2 KB of zstd each. A valid file.
 Container regular_zeros() {
   Container c;
   c.kind = 2;
   c.depth = 10;
-  c.dims[0] = c.dims[1] = c.dims[2] = 1024;
+  c.dims[0] = c.dims[1] = 1024;
+  c.dims[2] = 512;
   c.inner_count.assign(11, 0);
   c.blocks.push_back(metadata_block(kMetadata));
   constexpr std::uint32_t kPerBlock = 1u << 24;  // 64 MiB of float32
   const std::vector<float> zeros(kPerBlock, 0.0f);
   const Block one = encoded(3, 0, 0, kPerBlock, 4, zeros.data());
-  for (std::uint64_t b = 0; b < 64; ++b) {
+  for (std::uint64_t b = 0; b < 32; ++b) {
     Block blk = one;
     blk.first = b * kPerBlock;
     c.blocks.push_back(std::move(blk));
@@ -240,8 +242,8 @@ std::vector<HostileFile> catalogue() {
       {"dag_octree", "every node of a level names the same children: 4 GiB of voxels from 73 nodes"},
       {"zstd_block_4gib", "a values block claiming 4 GiB stored for 4 decoded bytes", true, true},
       {"index_6gib", "the footer claims a 6 GiB index after 200 bytes of blocks", true, true},
-      {"unknown_stream_4gib", "an ignorable block of an unknown stream of 4 GiB, CRC wrong", false, true},
-      {"regular_1024_zeros", "a valid 1024^3 regular grid in 64 blocks of 64 MiB (zeros)", false},
+      {"unknown_stream_2gib", "an ignorable block of an unknown stream of 2 GiB, CRC wrong", false, true},
+      {"regular_grid_2gib", "a valid 1024x1024x512 regular grid in 32 blocks of 64 MiB (zeros)", false},
       {"rectilinear_2p29", "a valid rectilinear grid of 2^29 voxels per side, one cell", false},
       {"salvage_zeroed", "160^3 noise with 40 % of its blocks zeroed (for extract --salvage)", false},
   };
@@ -262,17 +264,17 @@ void write(const std::string& name, const std::string& path) {
     Container c = one_voxel(kMetadata);
     c.claimed_index_size = 6ull << 30;
     c.write(path);
-  } else if (name == "unknown_stream_4gib") {
+  } else if (name == "unknown_stream_2gib") {
     Container c = one_voxel(kMetadata);
     Block unknown;
     unknown.stream = 200;
     unknown.flags = 1;  // ignorable
     unknown.count = 1;
-    unknown.stored_size = 0xFFFFFF00u;
+    unknown.stored_size = 0x7FFFFF00u;
     unknown.bytes = {1, 2, 3};
     c.blocks.push_back(unknown);
     c.write(path);
-  } else if (name == "regular_1024_zeros") {
+  } else if (name == "regular_grid_2gib") {
     regular_zeros().write(path);
   } else if (name == "rectilinear_2p29") {
     rectilinear_one_cell().write(path);
