@@ -277,6 +277,11 @@ def read_footer(r, header):
         fail("malformed", "footer: index_offset %d + index_size %d + 32 = %d, expected "
              "the file size %d" % (index_offset, index_size,
                                    index_offset + index_size + 32, r.size))
+    blocks_bytes = index_offset - header.header_size   # §5: each block is >= 1 byte
+    max_index = 4096 + 8 * 32 + 4096 * blocks_bytes
+    if index_size > max_index:
+        fail("malformed", "footer: index_size %d exceeds %d, what %d bytes of blocks allow"
+             % (index_size, max_index, blocks_bytes))
     index = r.read(index_offset, index_size)
     actual = crc32c(index)
     if actual != index_crc:
@@ -613,11 +618,21 @@ def check_block_header(ix, e, stored):
         fail("checksum", "%s: payload_crc is 0x%08X, CRC-32C of the payload is 0x%08X"
              % (where, h.payload_crc, actual))
     return payload
+def zstd_compress_bound(n):
+    """§7: the largest zstd frame of n content bytes (ZSTD_compressBound)."""
+    return n + (n >> 8) + (((128 << 10) - n) >> 11 if n < (128 << 10) else 0)
 
 
 def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
     """§7: read one block, check its CRC, decode it.  Returns the decoded bytes."""
     where = ix.where(e)
+    if e.codec in (1, 2):   # §7: bounded before the stored bytes are read
+        bound = zstd_compress_bound(e.element_count * stream_width(ix, e.stream))
+        if ix.header.framed:   # §7.1: plus the block header
+            bound += BLOCK_HEADER_SIZE
+        if e.stored_size > bound:
+            fail("malformed", "%s: stored_size %d exceeds %d, the largest zstd frame of its "
+                 "decoded size" % (where, e.stored_size, bound))
     stored = r.read(e.file_offset, e.stored_size)
     actual = crc32c(stored)
     if actual != e.crc:   # §7: the CRC is checked before decoding
@@ -785,6 +800,36 @@ def _has_lone_surrogate(v):
     return False
 
 
+MAX_METADATA_DEPTH = 128                                                # §11
+
+
+def json_nesting_depth(text, limit=MAX_METADATA_DEPTH):
+    """§11: how deep arrays and objects nest (the top level counts 1), by a
+    scan that skips strings; stops counting once past `limit`."""
+    depth = deepest = 0
+    in_string = False
+    i, n = 0, len(text)
+    while i < n:
+        c = text[i]
+        if in_string:
+            if c == "\\":
+                i += 1
+            elif c == '"':
+                in_string = False
+        elif c == '"':
+            in_string = True
+        elif c in "[{":
+            depth += 1
+            if depth > deepest:
+                deepest = depth
+                if deepest > limit:
+                    return deepest
+        elif c in "]}" and depth > 0:
+            depth -= 1
+        i += 1
+    return deepest
+
+
 def read_metadata(r, ix):
     """§11: the metadata block (stream 1) holds a JSON object."""
     e = ix.metadata_block
@@ -796,6 +841,10 @@ def read_metadata(r, ix):
         text = data.decode("utf-8")
     except UnicodeDecodeError as err:
         fail("malformed", "%s: not valid UTF-8 (byte %d)" % (where, err.start))
+    depth = json_nesting_depth(text)
+    if depth > MAX_METADATA_DEPTH:   # §11, before the (recursive) parser runs
+        fail("malformed", "%s: arrays and objects nest deeper than %d"
+             % (where, MAX_METADATA_DEPTH))
     try:
         meta = json.loads(text, object_pairs_hook=_object_without_duplicates,
                           parse_constant=_reject_constant, parse_int=_parse_int)

@@ -455,6 +455,24 @@ def _check_byte_planes():
     assert byte_planes(data, 1) == data
 
 
+def zstd_bound(n):
+    """§7: the largest zstd frame of n content bytes (ZSTD_compressBound)."""
+    return n + (n >> 8) + (((128 << 10) - n) >> 11 if n < (128 << 10) else 0)
+
+
+def padded_zframe(data, size):
+    """A valid zstd frame of `data` (single raw block, content size, no
+    checksum) padded with empty raw blocks to at least `size` bytes: legal
+    RFC 8878, but longer than any compressor writes."""
+    header = bytes([0x28, 0xB5, 0x2F, 0xFD, 0xA0]) + struct.pack("<I", len(data))  # FCS 4 bytes, single segment
+    body = b""
+    empty = struct.pack("<I", 0 << 3 | 0 << 1 | 0)[:3]       # raw, not last, size 0
+    while len(header) + len(body) + 3 + len(data) < size:
+        body += empty
+    last = struct.pack("<I", len(data) << 3 | 0 << 1 | 1)[:3]  # raw, last
+    return header + body + last + data
+
+
 def zframe(data, checksum=True, content_size=True):
     level = 19 if len(data) <= (1 << 20) else 3
     c = zstandard.ZstdCompressor(level=level, write_checksum=checksum,
@@ -811,6 +829,25 @@ def check_metadata(txt):
         s = txt.decode("utf-8")
     except UnicodeDecodeError:
         _fail("malformed", "metadata.utf8")
+    depth = deepest = 0
+    in_str = esc = False
+    for ch in s:                    # §11: nesting at most 128, found before parsing
+        if in_str:
+            if esc:
+                esc = False
+            elif ch == "\\":
+                esc = True
+            elif ch == '"':
+                in_str = False
+        elif ch == '"':
+            in_str = True
+        elif ch in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif ch in "]}":
+            depth -= 1
+    if deepest > 128:
+        _fail("malformed", "metadata.depth")
     try:
         obj = json.loads(s, object_pairs_hook=_no_dups, parse_constant=_reject_constant)
     except json.JSONDecodeError:
@@ -929,6 +966,8 @@ def read_ivol(data, verify=True):
     io, isz = u64(data, f), u64(data, f + 8)
     if io < hs or io + isz + 32 != n:
         _fail("malformed", "index_range")
+    if isz > 4096 + 8 * 32 + 4096 * (io - hs):
+        _fail("malformed", "index_size_bound")
     idx = data[io:io + isz]
     if crc32c(idx) != u32(data, f + 16):
         _fail("checksum", "index_crc")
@@ -1011,6 +1050,8 @@ def read_ivol(data, verify=True):
                 _fail("malformed", "block.too_large", "block %d" % b)
             if codec == 0 and ss != cnt * width[stream] + (32 if framed else 0):
                 _fail("malformed", "block.stored_size", "block %d" % b)
+            if codec in (1, 2) and ss > zstd_bound(cnt * width[stream]):
+                _fail("malformed", "block.stored_bound", "block %d" % b)
         elif not flags & 1:
             _fail("unsupported-feature", "stream", "block %d stream %d" % (b, stream))
         entries.append(e)
@@ -1694,6 +1735,15 @@ def gen():
               "UTF-8 (2-, 3- and 4-byte sequences), \\u escapes incl. a surrogate pair, a big integer, "
               "and unknown keys that must be ignored; pretty-printed with a trailing newline.")
 
+    # metadata nested exactly 128 deep (§11): the top-level object, "user" and 126 arrays
+    m = dict(DEFAULT_META)
+    m["user"] = {"deep": json.loads("[" * 126 + "]" * 126)}
+    text = meta_bytes(m)
+    d, *_ = simple_file(BASE, UINT16, meta=text)
+    add_valid("metadata_depth_128", d, BASE, UINT16,
+              "Metadata whose arrays and objects nest 128 deep, the limit of §11: the top-level object, "
+              "the object \"user\" and 126 nested arrays.")
+
     # sample
     src = sample_source()
     d, lay, t, bl = simple_file(src, UINT16, codec=CODEC_STORED, scale=0.5, offset=-1024.0,
@@ -2093,6 +2143,17 @@ def gen():
     inv("block_count_2g_values", d, "malformed", "block.too_large",
         "A values block whose entry declares element_count = 2^31 (4 GiB decoded); the frame is small. "
         "Must be refused without allocating (stream coverage is also broken).")
+    bl = level_blocks(bt, CODEC_ZSTD)
+    bl.append(meta_block(DEFAULT_META))
+    need = len(bl[vblk].data)
+    bl[vblk].stored = padded_zframe(bl[vblk].data, zstd_bound(need) + 1)
+    assert len(bl[vblk].stored) > zstd_bound(need)
+    d, _ = assemble(bt, bl)
+    inv("block_stored_over_zstd_bound", d, "malformed", "block.stored_bound",
+        "A values block (codec 1) of %d decoded bytes stored as a valid zstd frame of %d bytes, more "
+        "than ZSTD_compressBound (%d): the frame's one raw block is preceded by empty raw blocks. "
+        "Must be refused from the index (§7), before the block is read: otherwise a stored_size of "
+        "4 GiB would be read whole." % (need, len(bl[vblk].stored), zstd_bound(need)))
     text = meta_bytes(DEFAULT_META)
     text = text + b" " * (MIB16 + 1 - len(text))
     d, *_ = simple_file(small, BINARY16, meta=text)
@@ -2252,6 +2313,12 @@ def gen():
         bl.append(meta_block(text))
         return assemble(bt, bl)[0]
 
+    m = dict(DEFAULT_META)
+    m["user"] = {"deep": json.loads("[" * 127 + "]" * 127)}
+    inv("metadata_depth_129", meta_file(m), "malformed", "metadata.depth",
+        "Metadata nested 129 deep (the top-level object, \"user\" and 127 arrays), one more than §11 "
+        "allows; a reader refuses it before it parses (a few hundred bytes of brackets nested 100 000 "
+        "deep would exhaust a recursive parser's stack).")
     inv("metadata_not_json", meta_file(b"{'voxel_size': [0.05, 0.05, 0.05], 'unit': 'mm'}"), "malformed",
         "metadata.json", "Metadata text is a Python dict literal with single quotes, not JSON.")
     inv("metadata_truncated_json", meta_file(meta_bytes(DEFAULT_META)[:-1]), "malformed", "metadata.json",

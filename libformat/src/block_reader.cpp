@@ -3,6 +3,7 @@
 #include <zstd.h>
 #include <zstd_errors.h>
 
+#include <algorithm>
 #include <cstring>
 
 #include "framing.hpp"
@@ -14,29 +15,67 @@ namespace {
 
 constexpr unsigned char kZstdMagic[4] = {0x28, 0xB5, 0x2F, 0xFD};
 
+std::string crc_text(std::uint32_t actual, std::uint32_t expected) {
+  char text[96];
+  std::snprintf(text, sizeof text, "CRC-32C is 0x%08X but the index says 0x%08X", actual, expected);
+  return text;
+}
+
+std::string block_part(const RandomAccessFile& file, const BlockInfo& block, std::size_t index) {
+  return file.path() + ": block " + std::to_string(index) + " (" + stream_name(block.stream) + ", level " +
+         std::to_string(block.level) + ", elements " + std::to_string(block.first_element) + " .. " +
+         std::to_string(block.first_element + block.element_count) + ", offset " + std::to_string(block.file_offset) +
+         "): ";
+}
+
 }  // namespace
+
+void check_block_crc(RandomAccessFile& file, const BlockInfo& block, std::size_t index) {
+  const std::uint32_t actual = crc32c_of_range(file, block.file_offset, block.stored_size);
+  if (actual != block.crc)
+    throw Error(ErrorClass::Checksum, block_part(file, block, index) + crc_text(actual, block.crc));
+}
+
+std::uint32_t crc32c_of_range(RandomAccessFile& file, std::uint64_t offset, std::uint64_t size) {
+  constexpr std::size_t kChunk = 1u << 20;
+  std::vector<std::uint8_t> chunk(static_cast<std::size_t>(std::min<std::uint64_t>(size, kChunk)));
+  std::uint32_t crc = 0;
+  for (std::uint64_t done = 0; done < size;) {
+    const auto n = static_cast<std::size_t>(std::min<std::uint64_t>(size - done, kChunk));
+    file.read(offset + done, chunk.data(), n);
+    crc = crc32c_extend(crc, chunk.data(), n);
+    done += n;
+  }
+  return crc;
+}
 
 std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const BlockInfo& block, std::size_t index,
                                                 std::size_t width, bool known, bool framed) {
-  const std::string part = file.path() + ": block " + std::to_string(index) + " (" + stream_name(block.stream) +
-                           ", level " + std::to_string(block.level) + ", elements " +
-                           std::to_string(block.first_element) + " .. " +
-                           std::to_string(block.first_element + block.element_count) + ", offset " +
-                           std::to_string(block.file_offset) + "): ";
+  const std::string part = block_part(file, block, index);
+  // A block of a stream this reader does not know (ignorable, or the index
+  // would have been refused) has no size limit but the file's (spec §6.4):
+  // its CRCs are checked while streaming, before anything is allocated for
+  // it, and nothing of it is returned.
+  if (!known) {
+    check_block_crc(file, block, index);
+    if (framed) {  // spec §7.1, from the header and a streamed payload CRC
+      if (block.stored_size <= 32)
+        throw Error(ErrorClass::Malformed, part + "stored_size " + std::to_string(block.stored_size) +
+                                               " leaves no room for a payload");
+      const std::vector<std::uint8_t> header = file.read(block.file_offset, 32);
+      check_block_header(header.data(), block.stored_size, block, part,
+                         crc32c_of_range(file, block.file_offset + 32, block.stored_size - 32));
+    }
+    return {};
+  }
+  // Known streams: the index bounded stored_size by the decoded size (spec §7).
   std::vector<std::uint8_t> stored = file.read(block.file_offset, block.stored_size);
   const std::uint32_t actual = crc32c(stored.data(), stored.size());
-  if (actual != block.crc) {
-    char text[96];
-    std::snprintf(text, sizeof text, "CRC-32C is 0x%08X but the index says 0x%08X", actual, block.crc);
-    throw Error(ErrorClass::Checksum, part + text);
-  }
+  if (actual != block.crc) throw Error(ErrorClass::Checksum, part + crc_text(actual, block.crc));
   if (framed) {  // spec §7.1: the block header repeats the index entry; the payload follows it
     check_block_header(stored.data(), stored.size(), block, part);
     stored.erase(stored.begin(), stored.begin() + 32);
   }
-  // A block of a stream this reader does not know (ignorable, or the index
-  // would have been refused): its CRC is all that can be checked.
-  if (!known) return stored;
   const std::size_t decoded_size = std::size_t{block.element_count} * width;
   if (block.codec == 0) return stored;
   if (block.codec != 1 && block.codec != 2)
@@ -86,19 +125,23 @@ BlockData BlockCache::find(std::size_t block) {
   return it->second.data;
 }
 
-void BlockCache::insert(std::size_t block, BlockData data) {
-  if (entries_.count(block)) return;
+std::vector<std::size_t> BlockCache::insert(std::size_t block, BlockData data) {
+  std::vector<std::size_t> evicted;
+  if (entries_.count(block)) return evicted;
   used_ += data->size();
   order_.push_front(block);
   entries_.emplace(block, Entry{std::move(data), order_.begin()});
-  // Keep at least a handful of blocks whatever the budget, so that a walk
-  // touching one block per level does not thrash.
-  while (used_ > capacity_ && entries_.size() > 64) {
+  // The budget is a byte budget: a count of blocks kept whatever their size
+  // let 64 blocks of 64 MiB (a few hundred bytes of zstd each) take 4 GiB.
+  // The block just inserted stays, since its caller is about to use it.
+  while (used_ > capacity_ && entries_.size() > 1) {
     const std::size_t victim = order_.back();
     order_.pop_back();
     used_ -= entries_[victim].data->size();
     entries_.erase(victim);
+    evicted.push_back(victim);
   }
+  return evicted;
 }
 
 }  // namespace ivol::detail

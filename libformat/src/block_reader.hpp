@@ -20,14 +20,22 @@ namespace ivol::detail {
 // block header, checked against `block` and not part of what is returned.
 std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const BlockInfo& block, std::size_t index,
                                                 std::size_t width, bool known, bool framed);
+// Checks block `index`'s CRC a chunk at a time (Error(Checksum) if it fails),
+// holding 1 MiB whatever its stored size.
+void check_block_crc(RandomAccessFile& file, const BlockInfo& block, std::size_t index);
+std::uint32_t crc32c_of_range(RandomAccessFile& file, std::uint64_t offset, std::uint64_t size);
 
 using BlockData = std::shared_ptr<const std::vector<std::uint8_t>>;
 
+// Decoded blocks up to a byte budget, least recently used first out; the
+// block inserted last is kept even when it alone exceeds the budget.
 class BlockCache {
  public:
   explicit BlockCache(std::uint64_t capacity_bytes) : capacity_(capacity_bytes) {}
   BlockData find(std::size_t block);
-  void insert(std::size_t block, BlockData data);
+  // Returns the blocks evicted to make room, so that the caller can drop
+  // other references to them (the memory is freed only then).
+  std::vector<std::size_t> insert(std::size_t block, BlockData data);
 
  private:
   struct Entry {

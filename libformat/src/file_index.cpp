@@ -1,9 +1,12 @@
 #include "file_index.hpp"
 
+#include <zstd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 
+#include "block_reader.hpp"
 #include "framing.hpp"
 #include "ivol/crc32c.hpp"
 #include "ivol/error.hpp"
@@ -139,23 +142,39 @@ class StructureReader {
       fail(ErrorClass::Malformed, "footer",
            "index at offset " + std::to_string(info_.index_offset) + " with size " + std::to_string(info_.index_size) +
                " does not end where the footer begins (" + std::to_string(room) + ")");
+    // The largest index the blocks before it allow: every block takes at
+    // least one byte, an entry at most 4096 (spec §6). A claimed index
+    // beyond it is refused before a byte of it is read.
+    const std::uint64_t blocks_bytes = info_.index_offset - info_.header_size;
+    const std::uint64_t fixed_most = layout::kMaxIndexFixedSize + 8ull * (layout::kMaxDepth + 1);
+    // index_size > fixed_most + 4096 * blocks_bytes, without overflow.
+    if (info_.index_size > fixed_most &&
+        (info_.index_size - fixed_most - 1) / layout::kMaxBlockEntrySize >= blocks_bytes)
+      fail(ErrorClass::Malformed, "footer",
+           "index_size " + std::to_string(info_.index_size) + " exceeds what " + std::to_string(blocks_bytes) +
+               " bytes of blocks allow (4352 + 4096 per byte)");
   }
 
   void read_index() {
     if (info_.index_size < layout::kIndexFixedSize)
       fail(ErrorClass::Malformed, "index", "index_size " + std::to_string(info_.index_size) + " is smaller than 48");
-    const auto index = file_.read(info_.index_offset, static_cast<std::size_t>(info_.index_size));
-    const std::uint32_t actual = crc32c(index.data(), index.size());
+    // The CRC first, a chunk at a time; then the fixed part and the level
+    // table, and the block table entry by entry: what is held is bounded by
+    // the entries the index really has, not by its claimed size.
+    const std::uint32_t actual = crc32c_of_range(file_, info_.index_offset, info_.index_size);
     if (actual != index_crc_)
       fail(ErrorClass::Checksum, "index",
            "CRC-32C is " + hex32(actual) + " but the footer's index_crc says " + hex32(index_crc_));
-    const unsigned char* p = index.data();
-    if (std::memcmp(p, layout::kIndexSignature.data(), 4) != 0)
+    const auto head = file_.read(info_.index_offset, layout::kIndexFixedSize);
+    if (std::memcmp(head.data(), layout::kIndexSignature.data(), 4) != 0)
       fail(ErrorClass::Malformed, "index", "does not start with IVIX");
-    const std::uint32_t fixed_size = load<std::uint32_t>(p + layout::kIndexFixedSizeField);
-    if (fixed_size < layout::kIndexFixedSize || fixed_size > layout::kMaxIndexFixedSize || fixed_size > index.size())
+    const std::uint32_t fixed_size = load<std::uint32_t>(head.data() + layout::kIndexFixedSizeField);
+    if (fixed_size < layout::kIndexFixedSize || fixed_size > layout::kMaxIndexFixedSize ||
+        fixed_size > info_.index_size)
       fail(ErrorClass::Malformed, "index",
            "fixed_size " + std::to_string(fixed_size) + " is outside 48 .. 4096 or the index");
+    const auto fixed = file_.read(info_.index_offset, fixed_size);
+    const unsigned char* p = fixed.data();
     const std::uint8_t structure = p[layout::kIndexStructureKind];
     if (structure < 1 || structure > 4)
       fail(ErrorClass::UnsupportedFeature, "index",
@@ -194,15 +213,16 @@ class StructureReader {
       fail(ErrorClass::Malformed, "index", "block_entry_size " + std::to_string(entry_size) + " is outside 32 .. 4096");
     const std::uint64_t expected =
         std::uint64_t{fixed_size} + 8ull * (v.depth + 1) + std::uint64_t{block_count} * entry_size;
-    if (expected != index.size())
+    if (expected != info_.index_size)
       fail(ErrorClass::Malformed, "index",
-           "index_size is " + std::to_string(index.size()) + " but its fields need " + std::to_string(expected));
+           "index_size is " + std::to_string(info_.index_size) + " but its fields need " + std::to_string(expected));
     if (info_.framed() &&
         std::memcmp(p + layout::kIndexStructureKind, &header_[layout::kHeaderDescriptor], layout::kDescriptorSize) != 0)
       fail(ErrorClass::Malformed, "header",
            "the volume descriptor (bytes 36..67) differs from the index's fixed part (bytes 8..39)");
-    read_level_table(p + fixed_size);
-    read_block_table(p + fixed_size + 8ull * (v.depth + 1), block_count, entry_size);
+    const auto levels = file_.read(info_.index_offset + fixed_size, 8ull * (v.depth + 1));
+    read_level_table(levels.data());
+    read_block_table(info_.index_offset + fixed_size + 8ull * (v.depth + 1), block_count, entry_size);
   }
 
   void read_level_table(const unsigned char* p) {
@@ -231,14 +251,23 @@ class StructureReader {
     }
   }
 
-  void read_block_table(const unsigned char* p, std::uint32_t count, std::uint32_t entry_size) {
+  void read_block_table(std::uint64_t table_offset, std::uint32_t count, std::uint32_t entry_size) {
     const VolumeLayout& v = info_.layout;
-    info_.blocks.resize(count);
     std::uint64_t expected_offset = info_.header_size;
     std::size_t metadata_blocks = 0;
+    // Entries are read 1 MiB at a time and kept only as BlockInfo: a claimed
+    // block_count costs nothing until its entries pass their checks.
+    const std::uint32_t per_chunk = std::max<std::uint32_t>(1, (1u << 20) / entry_size);
+    std::vector<std::uint8_t> chunk;
+    std::uint32_t chunk_first = 0;
     for (std::uint32_t b = 0; b < count; ++b) {
-      const unsigned char* e = p + std::uint64_t{b} * entry_size;
-      BlockInfo& blk = info_.blocks[b];
+      if (b == 0 || b - chunk_first == per_chunk) {
+        chunk_first = b;
+        chunk = file_.read(table_offset + std::uint64_t{b} * entry_size,
+                           std::size_t{std::min(per_chunk, count - b)} * entry_size);
+      }
+      const unsigned char* e = chunk.data() + std::size_t{b - chunk_first} * entry_size;
+      BlockInfo& blk = info_.blocks.emplace_back();
       blk.file_offset = load<std::uint64_t>(e + layout::kEntryFileOffset);
       blk.first_element = load<std::uint64_t>(e + layout::kEntryFirstElement);
       blk.element_count = load<std::uint32_t>(e + layout::kEntryElementCount);
@@ -279,6 +308,14 @@ class StructureReader {
         bad(ErrorClass::Malformed, "a stored block of " + std::to_string(blk.element_count) + " elements must be " +
                                        std::to_string(decoded + frame) + " bytes, not " +
                                        std::to_string(blk.stored_size));
+      // No zstd frame of `decoded` bytes is longer than ZSTD_compressBound
+      // (plus the block header in a framed file): a larger stored_size is
+      // refused before the block is read (spec §7).
+      if (blk.codec != 0 && blk.stored_size > ZSTD_compressBound(decoded) + frame)
+        bad(ErrorClass::Malformed, "stored_size " + std::to_string(blk.stored_size) + " exceeds " +
+                                       std::to_string(ZSTD_compressBound(decoded) + frame) +
+                                       ", the largest zstd frame of its " + std::to_string(decoded) +
+                                       " decoded bytes" + (frame ? " and the block header" : ""));
       if (blk.level > v.depth) bad(ErrorClass::Malformed, "level " + std::to_string(blk.level) + " is deeper than D");
       std::uint64_t lo = 0;
       std::uint64_t hi = 0;

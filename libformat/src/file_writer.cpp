@@ -156,6 +156,9 @@ void FileWriter::write_metadata(const Metadata& metadata) {
   std::string json = metadata.to_json().dump();
   if (json.size() > layout::kMaxMetadataBytes)
     throw Error(ErrorClass::InvalidArgument, path_ + ": metadata exceeds 16 MiB");
+  if (json_nesting_depth(json, kMaxMetadataDepth) > kMaxMetadataDepth)
+    throw Error(ErrorClass::InvalidArgument, path_ + ": metadata nests arrays and objects deeper than " +
+                                                 std::to_string(kMaxMetadataDepth) + " levels");
   WriteOptions metadata_options;
   append(
       encode_block(Stream::Metadata, 0, 0, static_cast<std::uint32_t>(json.size()), 1, json.data(), metadata_options));

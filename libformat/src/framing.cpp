@@ -62,6 +62,11 @@ std::string hex32(std::uint32_t v) {
 }  // namespace
 
 void check_block_header(const std::uint8_t* p, std::size_t size, const BlockInfo& e, const std::string& part) {
+  check_block_header(p, size, e, part, crc32c(p + layout::kBlockHeaderSize, size - layout::kBlockHeaderSize));
+}
+
+void check_block_header(const std::uint8_t* p, std::uint64_t size, const BlockInfo& e, const std::string& part,
+                        std::uint32_t payload_crc) {
   // The block table requires stored_size > 32 for framed files; checked again
   // here so that this function stands on its own.
   if (size <= layout::kBlockHeaderSize)
@@ -85,7 +90,6 @@ void check_block_header(const std::uint8_t* p, std::size_t size, const BlockInfo
   mismatch("first_element", layout::load<std::uint64_t>(p + layout::kBlockFirstElement), e.first_element);
   mismatch("element_count", layout::load<std::uint32_t>(p + layout::kBlockElementCount), e.element_count);
   mismatch("payload_size", layout::load<std::uint32_t>(p + layout::kBlockPayloadSize), size - layout::kBlockHeaderSize);
-  const std::uint32_t payload_crc = crc32c(p + layout::kBlockHeaderSize, size - layout::kBlockHeaderSize);
   const std::uint32_t stored_payload_crc = layout::load<std::uint32_t>(p + layout::kBlockPayloadCrc);
   if (payload_crc != stored_payload_crc)
     throw Error(ErrorClass::Checksum, part + "payload CRC-32C is " + hex32(payload_crc) + " but payload_crc says " +

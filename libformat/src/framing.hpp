@@ -33,5 +33,9 @@ bool parse_block_header(const unsigned char* p, BlockHeader& out);
 // index entry (spec §7.1): `part` names the block in messages. The stored
 // bytes' CRC has been checked already.
 void check_block_header(const std::uint8_t* stored, std::size_t size, const BlockInfo& entry, const std::string& part);
+// The same, from the 32 header bytes alone, for a block of `size` stored bytes
+// whose payload's CRC-32C the caller computed (a block too large to hold).
+void check_block_header(const std::uint8_t* header, std::uint64_t size, const BlockInfo& entry, const std::string& part,
+                        std::uint32_t payload_crc);
 
 }  // namespace ivol::detail

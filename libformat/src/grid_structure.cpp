@@ -36,9 +36,6 @@ GridStructure::GridStructure(const VolumeLayout& layout, std::vector<std::uint32
           list.push_back(b);
           if (b == d[a]) break;
         }
-        interval_of_[a].resize(d[a]);
-        for (std::size_t i = 0; i + 1 < list.size(); ++i)
-          for (std::uint32_t x = list[i]; x < list[i + 1]; ++x) interval_of_[a][x] = static_cast<std::uint32_t>(i);
         const std::uint64_t n = list.size() - 1;
         if (total > (std::uint64_t{1} << 56) / n) fail("borders", "more than 2^56 cells");
         total *= n;

@@ -3,6 +3,7 @@
 // Internal to libformat.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <string>
@@ -28,10 +29,17 @@ class GridStructure {
   void for_each_cell(const Box& box, F&& visit) const;
 
  private:
+  // Rectilinear: the interval of axis `a` holding coordinate x, found in the
+  // borders (a table per voxel would cost memory in proportion to the
+  // declared size, however few the intervals).
+  std::uint32_t interval_of(int a, std::uint32_t x) const {
+    const auto& list = borders_[a];
+    return static_cast<std::uint32_t>(std::upper_bound(list.begin(), list.end(), x) - list.begin() - 1);
+  }
+
   VolumeLayout layout_;
-  std::array<std::vector<std::uint32_t>, 3> borders_;      // rectilinear
-  std::array<std::vector<std::uint32_t>, 3> interval_of_;  // rectilinear: interval of each coordinate
-  std::vector<std::uint64_t> cells_;                       // nested: cell words
+  std::array<std::vector<std::uint32_t>, 3> borders_;  // rectilinear
+  std::vector<std::uint64_t> cells_;                   // nested: cell words
   std::uint64_t cell_edge_ = 0;
   Dims cell_grid_{};
 };
@@ -48,7 +56,7 @@ void GridStructure::for_each_cell(const Box& box, F&& visit) const {
       return;
     case StructureKind::Rectilinear: {
       std::uint32_t lo[3], hi[3];
-      for (int a = 0; a < 3; ++a) lo[a] = interval_of_[a][box.lo[a]], hi[a] = interval_of_[a][box.hi[a] - 1];
+      for (int a = 0; a < 3; ++a) lo[a] = interval_of(a, box.lo[a]), hi[a] = interval_of(a, box.hi[a] - 1);
       const std::uint64_t nx = borders_[0].size() - 1, ny = borders_[1].size() - 1;
       for (std::uint32_t k = lo[2]; k <= hi[2]; ++k)
         for (std::uint32_t j = lo[1]; j <= hi[1]; ++j)

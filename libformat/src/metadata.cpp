@@ -1,5 +1,6 @@
 #include "ivol/metadata.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <ctime>
@@ -48,6 +49,35 @@ json optional_object(const json& j, const char* key) {
 }  // namespace
 
 const char* library_version() { return IVOL_VERSION_STRING; }
+
+// A scan of the bytes, before any parser sees them: nlohmann's parser, the
+// copies of Metadata and whoever prints it all recurse once per level, and
+// 100 000 brackets (a few hundred bytes) overflow the stack. Stops counting
+// past `limit`.
+std::size_t json_nesting_depth(const std::string& text, std::size_t limit) {
+  std::size_t depth = 0;
+  std::size_t deepest = 0;
+  bool in_string = false;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (in_string) {
+      if (c == '\\')
+        ++i;  // the escaped character cannot end the string
+      else if (c == '"')
+        in_string = false;
+      continue;
+    }
+    if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      deepest = std::max(deepest, ++depth);
+      if (deepest > limit) return deepest;
+    } else if ((c == ']' || c == '}') && depth > 0) {
+      --depth;
+    }
+  }
+  return deepest;
+}
 
 json default_provenance() {
   char created[32];
@@ -102,6 +132,8 @@ Metadata Metadata::parse(const std::string& text) {
   if (text.size() >= 3 && static_cast<unsigned char>(text[0]) == 0xEF && static_cast<unsigned char>(text[1]) == 0xBB &&
       static_cast<unsigned char>(text[2]) == 0xBF)
     fail("the JSON text starts with a byte-order mark");
+  if (json_nesting_depth(text, kMaxMetadataDepth) > kMaxMetadataDepth)
+    fail("arrays and objects are nested deeper than " + std::to_string(kMaxMetadataDepth) + " levels");
   // Track the keys of every open object to refuse duplicates, which
   // nlohmann::json would otherwise resolve silently.
   std::vector<std::set<std::string>> open_objects;

@@ -13,6 +13,7 @@ struct MemoryAccess {
   const Octree& tree;
   std::uint64_t node_word(std::uint64_t i) const { return tree.node_word(i); }
   std::uint32_t value_bits(std::uint64_t i) const { return tree.value_bits(i); }
+  const Error* known_failure(std::uint8_t, std::uint64_t) const { return nullptr; }  // nothing fails in memory
 };
 
 }  // namespace

@@ -40,46 +40,125 @@ std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigne
     });
     return bits;
   }
-  Box full;
-  for (int a = 0; a < 3; ++a) {
-    full.lo[a] = box.lo[a] << lod;
-    full.hi[a] = static_cast<std::uint32_t>(std::min<std::uint64_t>(std::uint64_t{box.hi[a]} << lod, v.dims[a]));
-  }
-  std::vector<DamagedRegion> fine_damage;
-  detail::SalvageLog fine_log{fine_damage};
-  const std::vector<std::uint32_t> fine = grid_bits(impl, full, 0, salvage ? &fine_log : nullptr);
-  fine_log.flush();
-  for (const DamagedRegion& d : fine_damage) {  // into the coordinates of the level of detail
-    Box coarse;
+  // A level of detail accumulates the sums of one layer of output cells at a
+  // time, from runs of equal voxels along x: memory in proportion to the
+  // output, never to the full-resolution region under it. Each cell's sum
+  // still takes its voxels one by one in the order z, then y, then x, so the
+  // result is bit for bit the sequential sum of spec §12.3.
+  __extension__ typedef unsigned __int128 u128;
+  u128 under = 1;  // full-resolution voxels under the box
+  for (int a = 0; a < 3; ++a)
+    under *= std::min<std::uint64_t>(std::uint64_t{box.hi[a]} << lod, v.dims[a]) - (std::uint64_t{box.lo[a]} << lod);
+  if (under > impl.grid_lod_voxels)
+    throw Error(ErrorClass::LimitExceeded,
+                impl.file.path() + ": level of detail " + std::to_string(lod) + " of " + box.to_string() +
+                    " sums the grid's full-resolution voxels under it, more than this reader's limit of " +
+                    std::to_string(impl.grid_lod_voxels) + " (ReaderOptions::grid_lod_voxels)");
+  if (salvage) {
+    // A salvaged grid: the full-resolution region is read once (within the
+    // limit above), so that each cell that did not survive is met and listed
+    // once; it reads as the stored code 0.
+    Box full;
     for (int a = 0; a < 3; ++a) {
-      coarse.lo[a] = d.region.lo[a] >> lod;
-      coarse.hi[a] = static_cast<std::uint32_t>((std::uint64_t{d.region.hi[a]} + (1ull << lod) - 1) >> lod);
+      full.lo[a] = box.lo[a] << lod;
+      full.hi[a] = static_cast<std::uint32_t>(std::min<std::uint64_t>(std::uint64_t{box.hi[a]} << lod, v.dims[a]));
     }
-    salvage->add(coarse, 0, d.message);
-  }
-  const std::uint64_t fx = full.hi[0] - full.lo[0], fy = full.hi[1] - full.lo[1];
-  std::vector<std::uint32_t> bits(box.voxel_count());
-  std::size_t n = 0;
-  for (std::uint32_t k = box.lo[2]; k < box.hi[2]; ++k)
-    for (std::uint32_t j = box.lo[1]; j < box.hi[1]; ++j)
-      for (std::uint32_t i = box.lo[0]; i < box.hi[0]; ++i) {
-        double sum = 0.0;
-        std::uint64_t count = 0;
-        const std::uint32_t c[3] = {i, j, k};
-        std::uint64_t lo[3], hi[3];
-        for (int a = 0; a < 3; ++a) {
-          lo[a] = std::uint64_t{c[a]} << lod;
-          hi[a] = std::min<std::uint64_t>((std::uint64_t{c[a]} + 1) << lod, v.dims[a]);
-        }
-        for (std::uint64_t z = lo[2]; z < hi[2]; ++z)
-          for (std::uint64_t y = lo[1]; y < hi[1]; ++y)
-            for (std::uint64_t x = lo[0]; x < hi[0]; ++x) {
-              sum = sum +
-                    decode_value(v.encoding, fine[((z - full.lo[2]) * fy + (y - full.lo[1])) * fx + (x - full.lo[0])]);
-              ++count;
-            }
-        bits[n++] = encode_value(v.encoding, sum / static_cast<double>(count));
+    std::vector<DamagedRegion> fine_damage;
+    detail::SalvageLog fine_log{fine_damage};
+    const std::vector<std::uint32_t> fine = grid_bits(impl, full, 0, salvage ? &fine_log : nullptr);
+    fine_log.flush();
+    for (const DamagedRegion& d : fine_damage) {  // into the coordinates of the level of detail
+      Box coarse;
+      for (int a = 0; a < 3; ++a) {
+        coarse.lo[a] = d.region.lo[a] >> lod;
+        coarse.hi[a] = static_cast<std::uint32_t>((std::uint64_t{d.region.hi[a]} + (1ull << lod) - 1) >> lod);
       }
+      salvage->add(coarse, 0, d.message);
+    }
+    const std::uint64_t fx = full.hi[0] - full.lo[0], fy = full.hi[1] - full.lo[1];
+    std::vector<std::uint32_t> bits(box.voxel_count());
+    std::size_t n = 0;
+    for (std::uint32_t k = box.lo[2]; k < box.hi[2]; ++k)
+      for (std::uint32_t j = box.lo[1]; j < box.hi[1]; ++j)
+        for (std::uint32_t i = box.lo[0]; i < box.hi[0]; ++i) {
+          double sum = 0.0;
+          std::uint64_t count = 0;
+          const std::uint32_t c[3] = {i, j, k};
+          std::uint64_t lo[3], hi[3];
+          for (int a = 0; a < 3; ++a) {
+            lo[a] = std::uint64_t{c[a]} << lod;
+            hi[a] = std::min<std::uint64_t>((std::uint64_t{c[a]} + 1) << lod, v.dims[a]);
+          }
+          for (std::uint64_t z = lo[2]; z < hi[2]; ++z)
+            for (std::uint64_t y = lo[1]; y < hi[1]; ++y)
+              for (std::uint64_t x = lo[0]; x < hi[0]; ++x) {
+                sum = sum + decode_value(v.encoding,
+                                         fine[((z - full.lo[2]) * fy + (y - full.lo[1])) * fx + (x - full.lo[0])]);
+                ++count;
+              }
+          bits[n++] = encode_value(v.encoding, sum / static_cast<double>(count));
+        }
+    return bits;
+  }
+  const std::uint64_t nx = box.hi[0] - box.lo[0], ny = box.hi[1] - box.lo[1];
+  const std::uint64_t x_lo = std::uint64_t{box.lo[0]} << lod;
+  const auto x_hi = static_cast<std::uint32_t>(std::min<std::uint64_t>(std::uint64_t{box.hi[0]} << lod, v.dims[0]));
+  std::vector<std::uint32_t> bits(box.voxel_count());
+  std::vector<double> sums(nx * ny);
+  std::size_t n = 0;
+  for (std::uint32_t k = box.lo[2]; k < box.hi[2]; ++k) {
+    std::fill(sums.begin(), sums.end(), 0.0);
+    const std::uint64_t z_lo = std::uint64_t{k} << lod;
+    const std::uint64_t z_hi = std::min<std::uint64_t>((std::uint64_t{k} + 1) << lod, v.dims[2]);
+    const std::uint64_t y_lo = std::uint64_t{box.lo[1]} << lod;
+    const std::uint64_t y_hi = std::min<std::uint64_t>(std::uint64_t{box.hi[1]} << lod, v.dims[1]);
+    for (std::uint64_t z = z_lo; z < z_hi; ++z)
+      for (std::uint64_t y = y_lo; y < y_hi; ++y) {
+        const Box row{{static_cast<std::uint32_t>(x_lo), static_cast<std::uint32_t>(y), static_cast<std::uint32_t>(z)},
+                      {x_hi, static_cast<std::uint32_t>(y + 1), static_cast<std::uint32_t>(z + 1)}};
+        double* cells = sums.data() + ((y >> lod) - box.lo[1]) * nx;
+        if (v.kind == StructureKind::Regular) {
+          // A row of a regular grid is a run of consecutive values: take them
+          // a block at a time rather than a cell at a time.
+          const std::size_t width = encoding_width(v.encoding);
+          std::uint64_t index = (z * v.dims[1] + y) * v.dims[0] + x_lo;
+          for (std::uint64_t x = x_lo; x < x_hi;) {
+            std::uint64_t run = 0;
+            const std::uint8_t* p = impl.elements(3, index, &run);
+            run = std::min<std::uint64_t>(run, x_hi - x);
+            for (std::uint64_t i = 0; i < run; ++i, p += width) {
+              const std::uint32_t bits =
+                  width == 4 ? layout::load<std::uint32_t>(p) : std::uint32_t{layout::load<std::uint16_t>(p)};
+              double& sum = cells[((x + i) >> lod) - box.lo[0]];
+              sum = sum + decode_value(v.encoding, bits);
+            }
+            x += run;
+            index += run;
+          }
+          continue;
+        }
+        // for_each_cell visits a row's cells in increasing x.
+        grid.for_each_cell(row, [&](const Box& region, std::uint64_t index) {
+          const double value = decode_value(v.encoding, impl.value_bits(index));
+          for (std::uint64_t x = region.lo[0]; x < region.hi[0]; ++x) {
+            double& sum = cells[(x >> lod) - box.lo[0]];
+            sum = sum + value;
+          }
+        });
+      }
+    const std::uint64_t count_z = z_hi - z_lo;
+    for (std::uint32_t j = box.lo[1]; j < box.hi[1]; ++j) {
+      const std::uint64_t count_y =
+          std::min<std::uint64_t>((std::uint64_t{j} + 1) << lod, v.dims[1]) - (std::uint64_t{j} << lod);
+      for (std::uint32_t i = box.lo[0]; i < box.hi[0]; ++i) {
+        const std::uint64_t count_x =
+            std::min<std::uint64_t>((std::uint64_t{i} + 1) << lod, v.dims[0]) - (std::uint64_t{i} << lod);
+        // The exact number of voxels, rounded once.
+        const auto count = static_cast<double>(static_cast<u128>(count_z) * count_y * count_x);
+        bits[n++] = encode_value(v.encoding, sums[(j - box.lo[1]) * nx + (i - box.lo[0])] / count);
+      }
+    }
+  }
   return bits;
 }
 

@@ -25,6 +25,7 @@ struct Reader::Impl {
   detail::LevelRanges ranges;
   detail::BlockCache cache;
   IoStats stats;
+  std::uint64_t grid_lod_voxels = 0;                // ReaderOptions::grid_lod_voxels
   std::uint64_t bytes_baseline = 0;                 // file.bytes_read at the last reset
   std::unordered_map<std::size_t, Error> failures;  // blocks that failed their checks
   std::optional<detail::GridStructure> grid;        // structures of spec §8A
@@ -46,7 +47,8 @@ struct Reader::Impl {
       : file(path),
         info(detail::read_or_salvage(file, options.salvage, salvaged_metadata)),
         ranges(info.layout),
-        cache(options.cache_bytes) {
+        cache(options.cache_bytes),
+        grid_lod_voxels(options.grid_lod_voxels) {
     for (std::size_t b = 0; b < info.blocks.size(); ++b)
       if (detail::is_known_stream(info.blocks[b].stream, info.layout.kind))
         stream_blocks[info.blocks[b].stream].push_back(b);
@@ -118,7 +120,12 @@ struct Reader::Impl {
       throw;
     }
     ++stats.blocks_decoded;
-    cache.insert(index, data);
+    // The hints count against the cache's budget: a block the cache lets go
+    // is let go here too, else one block per level and stream stays held.
+    for (const std::size_t evicted : cache.insert(index, data))
+      for (auto& per_stream : hint)
+        for (Hint& h : per_stream)
+          if (h.block == evicted) h = Hint{};
     return data;
   }
 
@@ -158,6 +165,29 @@ struct Reader::Impl {
                 file.path() + ": " + stream_name(stream) + " elements " + std::to_string(from) + " .. " +
                     (next ? std::to_string(next->first_element) : std::string("the end")) +
                     (info.salvage ? " were not found" : " are in no block"));
+  // The error of the block holding `element` of `stream` if that block
+  // already failed, found without throwing: a salvaging walk meets a damaged
+  // block at every voxel it holds, and an exception each time cost more than
+  // the rest of the read.
+  const Error* known_failure(std::uint8_t stream, std::uint64_t element) const {
+    if (failures.empty()) return nullptr;
+    const Hint& last = hint[stream][last_level[stream]];
+    if (last.data && element - last.first < last.count) return nullptr;
+    const auto& list = stream_blocks[stream];
+    auto it = std::upper_bound(list.begin(), list.end(), element,
+                               [&](std::uint64_t e, std::size_t b) { return e < info.blocks[b].first_element; });
+    if (it == list.begin()) return nullptr;
+    const auto failed = failures.find(*(it - 1));
+    return failed == failures.end() ? nullptr : &failed->second;
+  }
+
+  // Like element(), and *available = how many elements from `element` on
+  // lie in the same decoded block, consecutive.
+  const std::uint8_t* elements(std::uint8_t stream, std::uint64_t element, std::uint64_t* available) {
+    const std::uint8_t* p = this->element(stream, element);
+    const Hint& h = hint[stream][last_level[stream]];
+    *available = h.first + h.count - element;
+    return p;
   }
 
   std::uint64_t node_word(std::uint64_t index) { return layout::load<std::uint64_t>(element(2, index)); }
@@ -178,6 +208,13 @@ struct Reader::Impl {
         throw Error(ErrorClass::InvalidArgument, file.path() + ": box " + box.to_string() +
                                                      " is empty or outside the volume at level of detail " +
                                                      std::to_string(lod));
+    // A valid file may be 2^31 voxels a side: Box::voxel_count (64 bits)
+    // would wrap, and an output sized by it would be overrun.
+    __extension__ typedef unsigned __int128 u128;
+    const u128 voxels = u128{box.hi[0] - box.lo[0]} * (box.hi[1] - box.lo[1]) * (box.hi[2] - box.lo[2]);
+    if (voxels > (u128{1} << 62))
+      throw Error(ErrorClass::InvalidArgument,
+                  file.path() + ": box " + box.to_string() + " holds more than 2^62 voxels, too many for one read");
   }
 };
 
@@ -187,6 +224,7 @@ struct ImplAccess {
   Reader::Impl* impl;
   std::uint64_t node_word(std::uint64_t i) const { return impl->node_word(i); }
   std::uint32_t value_bits(std::uint64_t i) const { return impl->value_bits(i); }
+  const Error* known_failure(std::uint8_t stream, std::uint64_t i) const { return impl->known_failure(stream, i); }
 };
 
 }  // namespace detail

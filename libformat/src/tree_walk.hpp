@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <cstdlib>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -157,6 +158,25 @@ template <class Access, class Sink>
 void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ranges, const Box& box, unsigned lod,
               Sink&& sink, SalvageLog* salvage = nullptr) {
   const unsigned target = layout.depth - lod;
+  // Node numbering (spec §8.3, §8.4) for the levels the walk descends: in
+  // octant order, the nodes of a level come in breadth-first order, so each
+  // node's children follow those of the node of its level met before it
+  // (a DAG, nodes sharing children, breaks this), and a read of a whole
+  // level meets every node: each first_inner_child is then exactly the
+  // running count, and the counts add up to the level table's.
+  const Box whole = full_box(layout.dims, lod);
+  bool exact = whole.lo == box.lo && whole.hi == box.hi;
+  std::vector<std::uint64_t> next_child(target);
+  for (unsigned l = 0; l < target; ++l) next_child[l] = ranges.first_inner[l + 1];
+  auto check_order = [&](unsigned level, std::uint64_t index, std::uint64_t word) {
+    const std::uint64_t first = first_inner_child(word);
+    if (exact ? first != next_child[level] : first < next_child[level])
+      throw Error(ErrorClass::Malformed, "node " + std::to_string(index) + " (level " + std::to_string(level) +
+                                             "): first_inner_child is " + std::to_string(first) +
+                                             ", breadth-first order requires " + (exact ? "" : "at least ") +
+                                             std::to_string(next_child[level]));
+    next_child[level] = first + popcount8(child_mask(word));
+  };
   struct Frame {
     unsigned level;
     std::uint32_t i, j, k;
@@ -164,10 +184,17 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
     std::uint64_t inner;
     std::uint32_t fallback;  // bits of the nearest readable ancestor (salvage)
   };
-  auto log = [&](const Box& region, unsigned level, const Error& e) { salvage->add(region, level, e.what()); };
+  auto log = [&](const Box& region, unsigned level, const Error& e) {
+    salvage->add(region, level, e.what());
+    exact = false;  // a skipped subtree's children are not counted
+  };
   // A value, or in salvage mode the fallback when it cannot be read.
   auto value_or = [&](std::uint64_t index, std::uint32_t fallback, const Box& region, unsigned level) {
     if (!salvage) return access.value_bits(index);
+    if (const Error* known = access.known_failure(3, index)) {
+      log(region, level, *known);
+      return fallback;
+    }
     try {
       return access.value_bits(index);
     } catch (const Error& e) {
@@ -203,9 +230,16 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
     // whatever below it cannot be read.
     const std::uint32_t own = salvage ? value_or(f.value_index, f.fallback, region, f.level) : 0;
     std::uint64_t word;
+    if (salvage)
+      if (const Error* known = access.known_failure(2, f.inner)) {
+        log(region, f.level, *known);
+        sink(region, own);
+        continue;
+      }
     try {
       word = access.node_word(f.inner);
       check_node_word(layout, ranges, f.level, f.inner, word);
+      check_order(f.level, f.inner, word);
     } catch (const Error& e) {
       if (!salvage) throw;
       log(region, f.level, e);
@@ -240,6 +274,13 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
                        1 + 8 * f.inner + cu, child_inner, own});
     }
   }
+  if (!exact) return;
+  for (unsigned l = 0; l < target; ++l)
+    if (next_child[l] != ranges.first_inner[l + 2])
+      throw Error(ErrorClass::Malformed, "level table: inner_count[" + std::to_string(l + 1) + "] is " +
+                                             std::to_string(layout.inner_count[l + 1]) +
+                                             " but the child masks of level " + std::to_string(l) + " name " +
+                                             std::to_string(next_child[l] - ranges.first_inner[l + 1]));
 }
 
 // Writes `bits` (width bytes each) or physical floats into a [z][y][x] buffer

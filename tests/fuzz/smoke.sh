@@ -10,4 +10,5 @@ if ! command -v clang++ >/dev/null || ! echo 'extern "C" int LLVMFuzzerTestOneIn
   exit 77
 fi
 export IVOL_FUZZ_DIR=${IVOL_FUZZ_DIR:-$(mktemp -d)}
+# run.sh sets -rss_limit_mb=2048 -malloc_limit_mb=1024 -timeout=20.
 bash "$root/tests/fuzz/run.sh" -max_total_time="${IVOL_FUZZ_SECONDS:-30}" -print_final_stats=1 2>&1 | tail -15

@@ -8,6 +8,10 @@
 
 namespace ivol {
 
+// Arrays and objects nest at most this deep in the metadata, the top-level
+// object counting as 1 (spec §11); deeper text is refused (Malformed).
+constexpr std::size_t kMaxMetadataDepth = 128;
+
 struct Metadata {
   std::array<double, 3> voxel_size{1.0, 1.0, 1.0};
   std::string unit = "mm";
@@ -22,7 +26,8 @@ struct Metadata {
   nlohmann::json to_json() const;
   // Throws Error(Malformed) naming the offending key.
   static Metadata from_json(const nlohmann::json& json);
-  // Parses the metadata block's bytes (UTF-8 JSON, no BOM, no duplicate keys).
+  // Parses the metadata block's bytes (UTF-8 JSON, no BOM, no duplicate keys,
+  // nesting at most kMaxMetadataDepth).
   static Metadata parse(const std::string& text);
 };
 
@@ -31,6 +36,9 @@ struct Metadata {
 // that is set (reproducible-builds.org), so that a file can be made again
 // byte for byte.
 nlohmann::json default_provenance();
+// How deep arrays and objects nest in a JSON text (the top level counts 1),
+// without parsing it; counting stops once past `limit`.
+std::size_t json_nesting_depth(const std::string& text, std::size_t limit);
 const char* library_version();
 
 }  // namespace ivol

@@ -4,6 +4,25 @@
 // A Reader is not thread-safe; open one Reader per thread (they share nothing
 // but the file). Every block read is checked against its CRC-32C; every node
 // visited is checked against the rules of spec §8. Errors are ivol::Error.
+//
+// Resources (spec §13, Resources). Whatever a file claims, a Reader
+// allocates only:
+// - at open: the parsed index (a BlockInfo per block table entry: the index
+//   is checked a MiB at a time, and a claimed index_size is bounded by the
+//   bytes of blocks before it), the metadata (at most 16 MiB, nested at most
+//   kMaxMetadataDepth), and for the grids of spec §8A their borders or cell
+//   words (in proportion to those streams' elements, not to the volume);
+// - per request: its output (box.voxel_count() values), and for a level of
+//   detail of a grid one double per output voxel of one output layer;
+// - decoded blocks up to ReaderOptions::cache_bytes, or the one block in use
+//   when it is larger: a block is at most 64 MiB decoded, and its stored
+//   size is bounded by its decoded size before it is read (spec §7);
+// - for a salvaging read, at most SalvageLog's 1000 DamagedRegion entries.
+// Time follows from the voxels asked for (for a level of detail of a grid,
+// the full-resolution voxels under it, at most grid_lod_voxels) and the
+// blocks they need; a cache
+// smaller than the blocks one path through the tree needs (one per level and
+// stream) makes reads slower, never larger.
 #pragma once
 
 #include <cstdint>
@@ -19,7 +38,14 @@
 namespace ivol {
 
 struct ReaderOptions {
-  std::uint64_t cache_bytes = 256ull << 20;  // decoded blocks kept in memory
+  // Decoded blocks kept in memory, in bytes: a budget, not a count; the block
+  // in use is held even when it alone exceeds it.
+  std::uint64_t cache_bytes = 256ull << 20;
+  // A level of detail of a grid (spec §8A) sums the full-resolution voxels
+  // under it (§12.3): a read whose box covers more is refused
+  // (LimitExceeded) rather than run for hours. 2^38 is 64 times a 4000^3
+  // volume, a few minutes.
+  std::uint64_t grid_lod_voxels = 1ull << 38;
   // When the footer or index cannot be used (a cut copy, a damaged tail):
   // rebuild the index from the framed blocks of a format 1.3 file (spec §18)
   // instead of failing. The Reader then reads what survived; read_box with
