@@ -165,6 +165,8 @@ struct Reader::Impl {
                 file.path() + ": " + stream_name(stream) + " elements " + std::to_string(from) + " .. " +
                     (next ? std::to_string(next->first_element) : std::string("the end")) +
                     (info.salvage ? " were not found" : " are in no block"));
+  }
+
   // The error of the block holding `element` of `stream` if that block
   // already failed, found without throwing: a salvaging walk meets a damaged
   // block at every voxel it holds, and an exception each time cost more than
