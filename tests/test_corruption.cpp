@@ -140,10 +140,12 @@ TEST_F(Corruption, SalvageFillsDamagedRegionsFromCoarserLevels) {
     const Dims d = reader.layout().dims;
     std::vector<DamagedRegion> damaged;
     const std::vector<float> salvaged = reader.read_box(full_box(d), 0, &damaged);
-    // One damaged block, one entry: the box around every region it spoiled.
-    ASSERT_EQ(damaged.size(), 1u) << "stream " << int(stream);
-    EXPECT_NE(damaged[0].message.find("block " + std::to_string(victim) + " ("), std::string::npos)
-        << damaged[0].message;
+    // One damaged block, one cause: its entries are the few exact boxes its
+    // regions merge into (not one entry per voxel), each naming the block.
+    ASSERT_FALSE(damaged.empty()) << "stream " << int(stream);
+    EXPECT_LE(damaged.size(), 64u) << "stream " << int(stream);
+    for (const DamagedRegion& r : damaged)
+      EXPECT_NE(r.message.find("block " + std::to_string(victim) + " ("), std::string::npos) << r.message;
     std::vector<std::uint8_t> hit(salvaged.size(), 0);
     std::vector<std::vector<float>> coarse(depth + 1);
     for (unsigned lod = 1; lod <= depth; ++lod) coarse[lod] = intact.read_lod(lod);
