@@ -19,6 +19,7 @@
 #include <thread>
 
 #include "commands.hpp"
+#include "fixity.hpp"
 #include "ivol/error.hpp"
 #include "ivol/recon/geometry.hpp"
 #include "ivol/recon/phantom.hpp"
@@ -86,15 +87,6 @@ double round_3(double x) {
   const int e = static_cast<int>(std::floor(std::log10(x))) - 2;
   const double scale = std::pow(10.0, std::abs(e));
   return e < 0 ? std::round(x * scale) / scale : std::round(x / scale) * scale;
-}
-
-std::string shell_quote(const std::string& s) {
-  if (!s.empty() && s.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-+=./,:@%") ==
-                        std::string::npos)
-    return s;
-  std::string out = "'";
-  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return out + "'";
 }
 
 bool has_extension(const std::string& path, std::initializer_list<const char*> extensions) {
