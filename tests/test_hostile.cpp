@@ -24,6 +24,14 @@ using namespace ivol;
 namespace hostile = ivol::test::hostile;
 
 constexpr long kMiB = 1024;  // ru_maxrss is in KiB
+// AddressSanitizer keeps up to 256 MiB of freed memory in quarantine (its
+// default quarantine_size_mb) and shadows what is live: the bounds below are
+// what the reader holds, plus that in the sanitizer build.
+#if defined(__SANITIZE_ADDRESS__)
+constexpr long kSanitizerSlack = 320 * kMiB;
+#else
+constexpr long kSanitizerSlack = 0;
+#endif
 
 struct ChildRun {
   bool ok = false;       // the function returned without a failed expectation
@@ -133,7 +141,7 @@ TEST(Hostile, ZstdStoredSizeIsBoundedBeforeReading) {
     return first_problem(path).first == ErrorClass::Malformed && !::testing::Test::HasFailure();
   });
   EXPECT_TRUE(run.ok);
-  EXPECT_LT(run.peak_kib, 200 * kMiB);
+  EXPECT_LT(run.peak_kib, 200 * kMiB + kSanitizerSlack);
 }
 
 TEST(Hostile, ClaimedIndexSizeIsBoundedBeforeReading) {
@@ -143,7 +151,7 @@ TEST(Hostile, ClaimedIndexSizeIsBoundedBeforeReading) {
     return !::testing::Test::HasFailure();
   });
   EXPECT_TRUE(run.ok);
-  EXPECT_LT(run.peak_kib, 200 * kMiB);
+  EXPECT_LT(run.peak_kib, 200 * kMiB + kSanitizerSlack);
 }
 
 TEST(Hostile, UnknownStreamBlockCrcIsCheckedInParts) {
@@ -156,7 +164,7 @@ TEST(Hostile, UnknownStreamBlockCrcIsCheckedInParts) {
            problem.second.find("block 2 (unknown stream") != std::string::npos;
   });
   EXPECT_TRUE(run.ok);
-  EXPECT_LT(run.peak_kib, 200 * kMiB);
+  EXPECT_LT(run.peak_kib, 200 * kMiB + kSanitizerSlack);
 }
 
 TEST(Hostile, LevelOfDetailOfALargeGridHoldsTheOutputNotTheRegion) {
@@ -170,7 +178,7 @@ TEST(Hostile, LevelOfDetailOfALargeGridHoldsTheOutputNotTheRegion) {
   EXPECT_TRUE(run.ok);
   // The cache's 256 MiB and the 64 MiB block in use; the region under the
   // 16 voxels asked for is 1 GiB.
-  EXPECT_LT(run.peak_kib, 450 * kMiB);
+  EXPECT_LT(run.peak_kib, 450 * kMiB + kSanitizerSlack);
 }
 
 TEST(Hostile, CacheBudgetIsInBytes) {
@@ -186,7 +194,7 @@ TEST(Hostile, CacheBudgetIsInBytes) {
     });
     EXPECT_TRUE(run.ok) << budget;
     // The budget plus the block in use (64 MiB); 32 blocks of 64 MiB are 2 GiB.
-    EXPECT_LT(run.peak_kib, static_cast<long>(budget >> 10) + 200 * kMiB) << budget;
+    EXPECT_LT(run.peak_kib, static_cast<long>(budget >> 10) + 200 * kMiB + kSanitizerSlack) << budget;
   }
 }
 
@@ -215,7 +223,7 @@ TEST(Hostile, HugeRectilinearGridOpensWithoutAPerVoxelTable) {
            reader.read_box(Box{{last - 1, 0, 5}, {last + 1, 2, 6}}) == std::vector<float>(4, 2.5f);
   });
   EXPECT_TRUE(run.ok);
-  EXPECT_LT(run.peak_kib, 100 * kMiB);  // a table per voxel: 6 GiB
+  EXPECT_LT(run.peak_kib, 100 * kMiB + kSanitizerSlack);  // a table per voxel: 6 GiB
   EXPECT_LT(run.seconds, 10.0);
 }
 
