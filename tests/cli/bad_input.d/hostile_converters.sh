@@ -87,13 +87,22 @@ tifffile.imwrite(d + "/pages.tif", (np.arange(100000) % 251).astype(np.uint8).re
 PY
 bad hostile-tiff-65535-strip     2 "(limit-exceeded)" -- timeout 60 "$IVOL" convert "$hostile/strip.tif" "$out/x.ivol"
 bad hostile-tiff-65535-strip-raw 2 "(limit-exceeded)" -- timeout 60 "$IVOL" convert "$hostile/strip.tif" "$out/x.raw"
-bad hostile-tiff-bomb            2 "(limit-exceeded)" -- timeout 60 prlimit --as=2147483648 "$IVOL" convert "$hostile/bomb.tif" "$out/x.ivol" --memory 256
+# Under a 2 GiB address-space cap, except in the sanitizer build, whose
+# shadow memory alone reserves terabytes of address space.
+as_cap=(prlimit --as=2147483648)
+[ "${IVOL_SANITIZED:-0}" = 1 ] && as_cap=()
+bad hostile-tiff-bomb            2 "(limit-exceeded)" -- timeout 60 "${as_cap[@]}" "$IVOL" convert "$hostile/bomb.tif" "$out/x.ivol" --memory 256
 # 100 000 tiny pages took minutes (each page found from the first).
 hostile_ok hostile-tiff-100k-pages -- timeout 60 "$IVOL" -q convert "$hostile/pages.tif" "$out/x.raw"
 
 # A 4x4x4 HDF5 dataset in one 2 GiB gzip chunk: the libhdf5 child may use
 # 1 GiB by default, so this is a limit, named, not 2 GiB for half a minute.
-if /usr/bin/python3 "$hostile_here/make_huge_chunk_h5.py" "$hostile/huge-chunk.h5"; then
+# The child's limit is not set in the sanitizer build (its shadow memory
+# would hit it), so there the file converts, slowly: the case is for the
+# normal build (HostileConverters.Hdf5ChunkBeyondTheChildsLimit… likewise).
+if [ "${IVOL_SANITIZED:-0}" = 1 ]; then
+  echo "skipped hostile-hdf5-huge-chunk: the libhdf5 child has no memory limit in the sanitizer build"
+elif /usr/bin/python3 "$hostile_here/make_huge_chunk_h5.py" "$hostile/huge-chunk.h5"; then
   bad hostile-hdf5-huge-chunk 2 "huge-chunk.h5" -- timeout 60 "$IVOL" convert "$hostile/huge-chunk.h5" "$out/x.ivol" --dataset /data
   bad hostile-hdf5-huge-chunk-class 2 "(limit-exceeded)" -- timeout 60 "$IVOL" convert "$hostile/huge-chunk.h5" "$out/x.raw" --dataset /data
 else
