@@ -45,6 +45,7 @@ void read_scan(ProjectionReader& scan, int band) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  ivol::convert::serve_if_worker_process();  // libhdf5's child is this binary again
   int size = 512, views = 360, detector = 512, repeats = 3;
   for (int a = 1; a + 1 < argc; a += 2) {
     const std::string name = argv[a];

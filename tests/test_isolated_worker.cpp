@@ -4,7 +4,14 @@
 // unchanged, and the values must be those of the in-process readers.
 #include <gtest/gtest.h>
 #include <hdf5.h>
+#include <fcntl.h>
+#include <pthread.h>
 #include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <memory>
+#include <thread>
 
 #include <cerrno>
 #include <csignal>
@@ -38,14 +45,56 @@ Error error_of(Call call) {
 
 bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
-TEST(IsolatedWorker, RepliesAndBulkDataArriveWhole) {
-  IsolatedWorker worker("subject", "a library", [](std::string_view request, WorkerReply& out) {
+// The worker kinds these tests start: the child is this test binary started
+// again (tests/support/test_main.cpp), so they are registered here.
+const WorkerKind echo_worker("test-echo", [](std::string_view parameters) -> WorkerHandler {
+  const std::string prefix(parameters);
+  return [prefix](std::string_view request, WorkerReply& out) {
     WireReader in{std::string(request)};
     const auto count = in.get<std::uint64_t>();
-    out.reply = "got " + in.get_string();
+    out.reply = prefix + in.get_string();
     out.bulk.resize(count);
     for (std::size_t i = 0; i < count; ++i) out.bulk[i] = static_cast<char>(i * 7 + i / 4099);
-  });
+  };
+});
+
+const WorkerKind failing_worker("test-errors", [](std::string_view) -> WorkerHandler {
+  return [](std::string_view request, WorkerReply&) {
+    if (request == "checksum") throw Error(ErrorClass::Checksum, "x.h5: chunk 3: checksum mismatch");
+    throw std::runtime_error("x.h5: something else");
+  };
+});
+
+const WorkerKind crashing_worker("test-crash", [](std::string_view) -> WorkerHandler {
+  return [](std::string_view request, WorkerReply& out) {
+    if (request == "kill") raise(SIGKILL);
+    if (request == "segv") {
+      volatile int* nowhere = nullptr;
+      *nowhere = 1;  // under a sanitizer the child reports and exits instead
+    }
+    out.reply = "fine";
+  };
+});
+
+// Tells what the child process is: its blocked signals and its descriptors.
+const WorkerKind inspecting_worker("test-inspect", [](std::string_view) -> WorkerHandler {
+  return [](std::string_view request, WorkerReply& out) {
+    if (request == "blocked") {
+      std::ifstream status("/proc/self/status");
+      for (std::string line; std::getline(status, line);)
+        if (line.rfind("SigBlk:", 0) == 0) out.reply = line.substr(7);
+      return;
+    }
+    std::vector<std::string> descriptors;
+    for (const auto& entry : std::filesystem::directory_iterator("/proc/self/fd"))
+      descriptors.push_back(entry.path().filename().string());
+    std::sort(descriptors.begin(), descriptors.end());
+    for (const std::string& d : descriptors) out.reply += d + " ";
+  };
+});
+
+TEST(IsolatedWorker, RepliesAndBulkDataArriveWhole) {
+  IsolatedWorker worker("subject", "a library", "test-echo", "got ");
   for (std::uint64_t count : {std::uint64_t{0}, std::uint64_t{1}, std::uint64_t{48} << 20}) {
     WireWriter request;
     request.put(count).put_string("slab");
@@ -58,10 +107,7 @@ TEST(IsolatedWorker, RepliesAndBulkDataArriveWhole) {
 }
 
 TEST(IsolatedWorker, ChildErrorsComeBackWithTheirClassAndMessage) {
-  IsolatedWorker worker("x.h5", "libhdf5", [](std::string_view request, WorkerReply&) {
-    if (request == "checksum") throw Error(ErrorClass::Checksum, "x.h5: chunk 3: checksum mismatch");
-    throw std::runtime_error("x.h5: something else");
-  });
+  IsolatedWorker worker("x.h5", "libhdf5", "test-errors", "");
   const Error checksum = error_of([&] { worker.call("checksum", "reading"); });
   EXPECT_EQ(checksum.error_class(), ErrorClass::Checksum);
   EXPECT_STREQ(checksum.what(), "x.h5: chunk 3: checksum mismatch");
@@ -73,14 +119,7 @@ TEST(IsolatedWorker, ChildErrorsComeBackWithTheirClassAndMessage) {
 }
 
 TEST(IsolatedWorker, ACrashIsAnErrorNamingTheFileTheRequestAndTheSignal) {
-  IsolatedWorker worker("scan.h5", "libhdf5", [](std::string_view request, WorkerReply& out) {
-    if (request == "kill") raise(SIGKILL);
-    if (request == "segv") {
-      volatile int* nowhere = nullptr;
-      *nowhere = 1;  // under a sanitizer the child reports and exits instead
-    }
-    out.reply = "fine";
-  });
+  IsolatedWorker worker("scan.h5", "libhdf5", "test-crash", "");
   EXPECT_EQ(worker.call("ok", "warming up"), "fine");
   const Error killed = error_of([&] { worker.call("kill", "reading view 3 rows 0..8"); });
   EXPECT_EQ(killed.error_class(), ErrorClass::Malformed);
@@ -90,10 +129,7 @@ TEST(IsolatedWorker, ACrashIsAnErrorNamingTheFileTheRequestAndTheSignal) {
   const Error later = error_of([&] { worker.call("ok", "reading"); });
   EXPECT_TRUE(contains(later.what(), "stopped by an earlier failure")) << later.what();
 
-  IsolatedWorker segv("scan.h5", "libhdf5", [](std::string_view, WorkerReply&) {
-    volatile int* nowhere = nullptr;
-    *nowhere = 1;
-  });
+  IsolatedWorker segv("scan.h5", "libhdf5", "test-crash", "");
   const Error crashed = error_of([&] { segv.call("segv", "opening"); });
   // Under a sanitizer, its handler reports and exits with a status instead.
   EXPECT_TRUE(contains(crashed.what(), "libhdf5 crashed (signal 11") ||
@@ -101,18 +137,67 @@ TEST(IsolatedWorker, ACrashIsAnErrorNamingTheFileTheRequestAndTheSignal) {
       << crashed.what();
 }
 
+TEST(IsolatedWorker, AnUnknownKindIsRefusedBeforeAnyProcessStarts) {
+  const Error e = error_of([] { IsolatedWorker("x.h5", "libhdf5", "no-such-kind", ""); });
+  EXPECT_TRUE(contains(e.what(), "no worker kind \"no-such-kind\"")) << e.what();
+}
+
 TEST(IsolatedWorker, TheChildEndsWithTheWorker) {
   // A child that lived on would keep the parent's descriptors, and the lock
   // on its temporary file, alive.
   pid_t child = -1;
   {
-    IsolatedWorker worker("subject", "a library", [](std::string_view, WorkerReply& out) { out.reply = "here"; });
+    IsolatedWorker worker("subject", "a library", "test-crash", "");
     child = worker.child();
-    EXPECT_EQ(worker.call("", "checking"), "here");
+    EXPECT_EQ(worker.call("", "checking"), "fine");
     EXPECT_EQ(::kill(child, 0), 0);
   }
   EXPECT_NE(::kill(child, 0), 0) << "the child outlived its worker";
   EXPECT_EQ(errno, ESRCH);
+}
+
+// The child is a fresh process, not a copy of the parent: none of the
+// parent's descriptors (an output file, MPI's sockets) and none of its
+// blocked signals (ivol's MPI signal thread blocks them in every other
+// thread) reach it.
+TEST(IsolatedWorker, TheChildIsAFreshProcessWithOnlyItsSocket) {
+  const std::string kept = ivol::test::temp_path("kept-open");
+  const int fd = ::open(kept.c_str(), O_CREAT | O_WRONLY, 0600);  // no O_CLOEXEC
+  ASSERT_GE(fd, 0);
+  sigset_t all, before;
+  sigfillset(&all);
+  pthread_sigmask(SIG_BLOCK, &all, &before);
+  IsolatedWorker worker("subject", "a library", "test-inspect", "");
+  pthread_sigmask(SIG_SETMASK, &before, nullptr);
+  ::close(fd);
+  // 0-2, the socket (3) and the listing's own descriptor.
+  const std::string descriptors = worker.call("descriptors", "listing");
+  EXPECT_EQ(descriptors, "0 1 2 3 4 ") << descriptors;
+  EXPECT_EQ(worker.call("blocked", "reading the signal mask"), "\t0000000000000000");
+}
+
+// Starting a worker while other threads allocate: a fork without exec could
+// copy an allocator lock held by one of them and hang in the child's first
+// malloc (seen with MPI's and PoCL's threads under AddressSanitizer).
+TEST(IsolatedWorker, StartsWhileOtherThreadsAllocate) {
+  std::atomic<bool> stop{false};
+  std::vector<std::thread> busy;
+  for (int t = 0; t < 3; ++t)
+    busy.emplace_back([&stop] {
+      while (!stop.load(std::memory_order_relaxed)) {
+        std::vector<std::unique_ptr<std::string>> held;
+        for (int i = 0; i < 64; ++i) held.push_back(std::make_unique<std::string>(static_cast<std::size_t>(i * 37), 'x'));
+      }
+    });
+  for (int round = 0; round < 20; ++round) {
+    IsolatedWorker worker("subject", "a library", "test-echo", "round ");
+    WireWriter request;
+    request.put(std::uint64_t{1} << 16).put_string(std::to_string(round));
+    std::vector<char> bulk(std::size_t{1} << 16);
+    EXPECT_EQ(worker.call(request.bytes(), "testing", bulk.data(), bulk.size()), "round " + std::to_string(round));
+  }
+  stop = true;
+  for (std::thread& t : busy) t.join();
 }
 
 // --- The HDF5 readers through the worker -------------------------------------

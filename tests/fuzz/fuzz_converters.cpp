@@ -18,6 +18,7 @@
 #include <string>
 
 #include "hdf5_io.hpp"
+#include "isolated_worker.hpp"
 #include "ivol/error.hpp"
 #include "ivol/recon/rtk_geometry_xml.hpp"
 #include "projection_io.hpp"
@@ -25,6 +26,12 @@
 #include "slab_io.hpp"
 #include "tiff_io.hpp"
 #include "vdb_io.hpp"
+
+// libhdf5's child process is this binary started again (isolated_worker.hpp).
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  ivol::convert::serve_if_worker_process();
+  return 0;
+}
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size < 2) return 0;

@@ -4,6 +4,7 @@
 #include <new>
 
 #include "commands.hpp"
+#include "isolated_worker.hpp"
 #include "fixity.hpp"
 #include "ivol/error.hpp"
 #include "ivol/metadata.hpp"
@@ -86,6 +87,9 @@ int run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Started again as the child that runs libhdf5 (isolated_worker.hpp):
+  // serves its parent and exits here.
+  ivol::convert::serve_if_worker_process();
   try {
     return run(argc, argv);
   } catch (const std::exception& e) {

@@ -16,10 +16,24 @@ namespace {
 constexpr const char* kLibrary = "libhdf5";
 constexpr char kOpen = 'o';
 constexpr char kRead = 'r';
+constexpr const char* kVolumeWorker = "hdf5-volume";
+constexpr const char* kProjectionWorker = "hdf5-dxchange";
 
 // --- Volumes ----------------------------------------------------------------
 
-WorkerHandler volume_handler(const std::string& path, const std::string& dataset, std::uint64_t memory_bytes) {
+// The parameters of a volume worker: the file, the dataset, the memory
+// budget its reader checks sizes against.
+std::string volume_parameters(const std::string& path, const std::string& dataset, std::uint64_t memory_bytes) {
+  WireWriter out;
+  out.put_string(path).put_string(dataset).put(memory_bytes);
+  return std::move(out.bytes());
+}
+
+WorkerHandler volume_handler(std::string_view parameters) {
+  WireReader in{std::string(parameters)};
+  const std::string path = in.get_string();
+  const std::string dataset = in.get_string();
+  const auto memory_bytes = in.get<std::uint64_t>();
   auto reader = std::make_shared<std::unique_ptr<SlabReader>>();
   return [path, dataset, memory_bytes, reader](std::string_view request, WorkerReply& out) {
     WireReader in{std::string(request)};
@@ -53,8 +67,8 @@ class IsolatedHdf5SlabReader final : public SlabReader {
   IsolatedHdf5SlabReader(const std::string& path, const std::string& dataset, Hdf5SourceInfo* source,
                          std::uint64_t memory_bytes)
       : dataset_(dataset),
-        worker_(path, kLibrary, volume_handler(path, dataset, memory_bytes ? memory_bytes : kDefaultChildMemory),
-                memory_bytes) {
+        worker_(path, kLibrary, kVolumeWorker,
+                volume_parameters(path, dataset, memory_bytes ? memory_bytes : kDefaultChildMemory), memory_bytes) {
     WireWriter request;
     request.put(kOpen);
     WireReader reply(worker_.call(request.bytes(), "opening dataset " + dataset));
@@ -97,7 +111,18 @@ class IsolatedHdf5SlabReader final : public SlabReader {
 
 // --- DXchange projections ---------------------------------------------------
 
-WorkerHandler projection_handler(const std::string& path, const DxchangeOptions& options) {
+std::string projection_parameters(const std::string& path, const DxchangeOptions& options) {
+  WireWriter out;
+  out.put_string(path).put(options.assume_line_integrals).put(options.minimum_signal);
+  return std::move(out.bytes());
+}
+
+WorkerHandler projection_handler(std::string_view parameters) {
+  WireReader in{std::string(parameters)};
+  const std::string path = in.get_string();
+  DxchangeOptions options;
+  options.assume_line_integrals = in.get<bool>();
+  options.minimum_signal = in.get<double>();
   auto reader = std::make_shared<std::unique_ptr<ProjectionReader>>();
   return [path, options, reader](std::string_view request, WorkerReply& out) {
     WireReader in{std::string(request)};
@@ -168,6 +193,9 @@ class IsolatedDxchangeReader final : public ProjectionReader {
   std::vector<float> line_integrals_;
 };
 
+const WorkerKind volume_worker(kVolumeWorker, volume_handler);
+const WorkerKind projection_worker(kProjectionWorker, projection_handler);
+
 }  // namespace
 
 std::unique_ptr<SlabReader> open_hdf5_slabs(const std::string& path, const std::string& dataset, Hdf5SourceInfo* source,
@@ -176,7 +204,7 @@ std::unique_ptr<SlabReader> open_hdf5_slabs(const std::string& path, const std::
 }
 
 DxchangeProjections open_dxchange_projections(const std::string& path, const DxchangeOptions& options) {
-  auto worker = std::make_unique<IsolatedWorker>(path, kLibrary, projection_handler(path, options));
+  auto worker = std::make_unique<IsolatedWorker>(path, kLibrary, kProjectionWorker, projection_parameters(path, options));
   WireWriter request;
   request.put(kOpen);
   WireReader reply(worker->call(request.bytes(), "opening the DXchange datasets"));

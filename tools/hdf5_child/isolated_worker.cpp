@@ -1,5 +1,6 @@
 #include "isolated_worker.hpp"
 
+#include <fcntl.h>
 #include <sys/prctl.h>
 #include <sys/resource.h>
 #include <sys/socket.h>
@@ -10,8 +11,12 @@
 #include <cerrno>
 #include <csignal>
 #include <cstring>
+#include <cstdio>
+#include <cstdlib>
 #include <fstream>
+#include <map>
 #include <new>
+#include <vector>
 
 #if defined(__has_include)
 #if __has_include(<valgrind/valgrind.h>)
@@ -63,19 +68,6 @@ bool receive_text(int fd, std::string& text) {
   if (!receive_all(fd, &size, sizeof size)) return false;
   text.resize(size);
   return receive_all(fd, text.data(), size);
-}
-
-// The child: the parent's signal handling is not its own, and it must not
-// outlive the parent. It keeps the parent's descriptors: libhdf5's state,
-// copied by the fork, may name files the parent has open, and a descriptor
-// closed here would be reused under it.
-void detach_from_parent(pid_t parent) {
-  prctl(PR_SET_PDEATHSIG, SIGKILL);
-  if (getppid() != parent) _exit(0);
-  sigset_t all;
-  sigfillset(&all);
-  sigprocmask(SIG_UNBLOCK, &all, nullptr);
-  for (int signal_number : {SIGTERM, SIGINT, SIGHUP, SIGPIPE}) std::signal(signal_number, SIG_DFL);
 }
 
 // Sanitizers and valgrind reserve address space of their own as they go;
@@ -169,16 +161,111 @@ std::string describe_end(int status) {
   return "crashed";
 }
 
+std::map<std::string, WorkerFactory>& worker_kinds() {
+  static std::map<std::string, WorkerFactory> kinds;
+  return kinds;
+}
+
+constexpr const char* kWorkerVariable = "IVOL_ISOLATED_WORKER";
+// The socket's number in the child: after the standard streams.
+constexpr int kChildSocket = 3;
+
+// The binary to execute again. Under valgrind /proc/self/exe is valgrind's
+// own tool, while readlink() on it gives the program's path; a binary
+// replaced since it started reads "(deleted)", and /proc/self/exe still
+// names the one that runs.
+std::string own_binary() {
+  std::vector<char> buffer(4096);
+  const ssize_t length = readlink("/proc/self/exe", buffer.data(), buffer.size() - 1);
+  if (length <= 0 || static_cast<std::size_t>(length) >= buffer.size() - 1) return "/proc/self/exe";
+  std::string path(buffer.data(), static_cast<std::size_t>(length));
+  const std::string deleted = " (deleted)";
+  if (path.size() > deleted.size() && path.compare(path.size() - deleted.size(), deleted.size(), deleted) == 0)
+    return "/proc/self/exe";
+  return path;
+}
+
+// Between fork and exec: system calls only (async-signal-safe). The child
+// must not outlive the parent, starts with every signal unblocked and at its
+// default (a blocked or ignored signal survives exec), and keeps only the
+// standard streams and the socket.
+[[noreturn]] void become_worker(pid_t parent, int socket, const char* binary, char* const argv[],
+                                char* const envp[]) {
+  prctl(PR_SET_PDEATHSIG, SIGKILL);
+  if (getppid() != parent) _exit(0);
+  struct sigaction default_action {};
+  default_action.sa_handler = SIG_DFL;
+  for (int number = 1; number < NSIG; ++number) sigaction(number, &default_action, nullptr);
+  sigset_t all;
+  sigfillset(&all);
+  sigprocmask(SIG_UNBLOCK, &all, nullptr);
+  if (socket != kChildSocket) {
+    if (dup2(socket, kChildSocket) < 0) _exit(127);
+  } else {
+    fcntl(kChildSocket, F_SETFD, 0);
+  }
+  close_range(kChildSocket + 1, ~0U, 0);
+  execve(binary, argv, envp);
+  _exit(127);
+}
+
 }  // namespace
 
-IsolatedWorker::IsolatedWorker(std::string subject, std::string library, WorkerHandler handler,
-                               std::uint64_t memory_limit)
+WorkerKind::WorkerKind(const char* name, WorkerFactory factory) { worker_kinds()[name] = factory; }
+
+void serve_if_worker_process() {
+  const char* variable = std::getenv(kWorkerVariable);
+  if (!variable) return;
+  const int fd = std::atoi(variable);
+  unsetenv(kWorkerVariable);  // the worker's own children are not workers
+  std::string kind, parameters;
+  std::uint64_t memory_limit = 0;
+  if (!receive_text(fd, kind) || !receive_text(fd, parameters) ||
+      !receive_all(fd, &memory_limit, sizeof memory_limit))
+    _exit(0);
+  const auto found = worker_kinds().find(kind);
+  if (found == worker_kinds().end()) {
+    // The parent sees the end of the socket and reports the exit status.
+    std::fprintf(stderr, "ivol: internal error: no worker kind \"%s\" in this program\n", kind.c_str());
+    _exit(126);
+  }
+  WorkerHandler handler;
+  try {
+    handler = found->second(parameters);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "ivol: internal error: worker kind \"%s\": %s\n", kind.c_str(), e.what());
+    _exit(126);
+  }
+  serve(fd, handler, memory_limit);
+}
+
+IsolatedWorker::IsolatedWorker(std::string subject, std::string library, const std::string& kind,
+                               const std::string& parameters, std::uint64_t memory_limit)
     : subject_(std::move(subject)),
       library_(std::move(library)),
       memory_limit_(memory_limit ? memory_limit : kDefaultChildMemory) {
+  auto cannot_start = [&](int error) {
+    return Error(ErrorClass::Io,
+                 subject_ + ": cannot start a process for " + library_ + ": " + std::strerror(error));
+  };
+  if (worker_kinds().count(kind) == 0)
+    throw Error(ErrorClass::InvalidArgument, subject_ + ": no worker kind \"" + kind + "\" for " + library_);
   int ends[2];
-  if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, ends) != 0)
-    throw Error(ErrorClass::Io, subject_ + ": cannot start a process for " + library_ + ": " + std::strerror(errno));
+  if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, ends) != 0) throw cannot_start(errno);
+  // Everything the child needs is made here: after the fork it may only
+  // make system calls.
+  const std::string binary = own_binary();
+  std::string argv0 = "ivol-worker:" + kind;
+  char* const argv[] = {argv0.data(), nullptr};
+  std::vector<std::string> environment;
+  for (char** entry = environ; entry && *entry; ++entry)
+    if (std::strncmp(*entry, kWorkerVariable, std::strlen(kWorkerVariable)) != 0 ||
+        (*entry)[std::strlen(kWorkerVariable)] != '=')
+      environment.emplace_back(*entry);
+  environment.push_back(std::string(kWorkerVariable) + "=" + std::to_string(kChildSocket));
+  std::vector<char*> envp;
+  for (std::string& entry : environment) envp.push_back(entry.data());
+  envp.push_back(nullptr);
   const pid_t parent = getpid();
   resident_at_start_ = resident_bytes();
   child_ = fork();
@@ -186,15 +273,14 @@ IsolatedWorker::IsolatedWorker(std::string subject, std::string library, WorkerH
     const int saved = errno;
     close(ends[0]);
     close(ends[1]);
-    throw Error(ErrorClass::Io, subject_ + ": cannot start a process for " + library_ + ": " + std::strerror(saved));
+    throw cannot_start(saved);
   }
-  if (child_ == 0) {
-    close(ends[0]);
-    detach_from_parent(parent);
-    serve(ends[1], handler, memory_limit_);
-  }
+  if (child_ == 0) become_worker(parent, ends[1], binary.c_str(), argv, envp.data());
   close(ends[1]);
   socket_ = ends[0];
+  const std::uint64_t limit = memory_limit_;
+  if (!send_text(socket_, kind) || !send_text(socket_, parameters) || !send_all(socket_, &limit, sizeof limit))
+    fail("starting");
 }
 
 IsolatedWorker::~IsolatedWorker() {
@@ -217,6 +303,12 @@ void IsolatedWorker::fail(const std::string& doing) {
   child_ = -1;
   close(socket_);
   socket_ = -1;
+  // 127: the exec failed; 126: the binary has no such worker kind.
+  if (ended > 0 && WIFEXITED(status) && (WEXITSTATUS(status) == 127 || WEXITSTATUS(status) == 126))
+    throw Error(ErrorClass::Io, subject_ + ": the process for " + library_ + " did not start (" +
+                                    (WEXITSTATUS(status) == 127 ? "ivol's binary could not be executed again"
+                                                                : "ivol's binary has no such worker") +
+                                    ")");
   const std::string how = ended > 0 ? describe_end(status) : "stopped answering";
   // A library that dies when an allocation is refused (a null pointer it
   // did not check) or that the kernel kills for memory ran out of its

@@ -3,21 +3,27 @@
 //
 // Why: Debian 12's libhdf5 1.10.8 reads out of bounds or through a null
 // pointer on some damaged files (tests/fuzz/regressions/libhdf5). ivol cannot
-// fix the library, but it can keep it away from its own memory: the worker
-// forks, the child alone calls the library, and the parent talks to it over
-// a socket. If the child dies (a signal, or a sanitizer's exit), the parent
-// throws ivol::Error(Malformed) naming the file, the request and the signal;
-// a clean ivol::Error in the child is passed back with its class and message.
+// fix the library, but it can keep it away from its own memory: the child
+// alone calls the library, and the parent talks to it over a socket. If the
+// child dies (a signal, or a sanitizer's exit), the parent throws
+// ivol::Error(Malformed) naming the file, the request and the signal; a clean
+// ivol::Error in the child is passed back with its class and message.
 //
-// The child is a fork without exec, so it starts with the parent's memory
-// and descriptors (libhdf5's own state among them, which may name files the
-// parent has open). It reads the file it was started for and writes only to
-// the socket, is killed when the parent dies (PR_SET_PDEATHSIG) or drops the
-// worker, and leaves through _exit, so none of the parent's atexit handlers
-// or buffered output runs twice. Whatever descriptor or lock it shares with
-// the parent thus ends with the parent. Readers start their worker when they
-// are opened, before a converter or a reconstruction allocates its large
-// buffers, so the fork copies little.
+// The child is a fresh process: the parent forks and the child at once
+// executes the program's own binary again (/proc/self/exe), which becomes a
+// worker in serve_if_worker_process() before it does anything else. A fork
+// without exec would inherit the parent's threads' locks (MPI's and OpenCL's
+// threads, an allocator's lock held at the moment of the fork) and could
+// hang in the library's first malloc; only async-signal-safe calls are made
+// between the fork and the exec. The child gets the socket and no other
+// descriptor of the parent's, unblocked signals, is killed when the parent
+// dies (PR_SET_PDEATHSIG) or drops the worker.
+//
+// What the child does is a *worker kind*: a name registered with a factory
+// (WorkerKind) that makes the request handler from the parameters the parent
+// sends first. Every program that starts workers calls
+// serve_if_worker_process() first thing in main() (ivol's main, the tests'
+// main, the fuzz harnesses' LLVMFuzzerInitialize).
 #pragma once
 
 #include <sys/types.h>
@@ -41,6 +47,21 @@ struct WorkerReply {
 };
 using WorkerHandler = std::function<void(std::string_view request, WorkerReply& out)>;
 
+// Makes a worker's handler from the parameters its parent sent. Runs in the
+// child; what it throws ends the child before its first reply.
+using WorkerFactory = WorkerHandler (*)(std::string_view parameters);
+
+// Registers a worker kind under `name` (a namespace-scope object, so the
+// kind exists before main() runs in the child).
+struct WorkerKind {
+  WorkerKind(const char* name, WorkerFactory factory);
+};
+
+// In a process started as a worker (the parent's environment variable
+// IVOL_ISOLATED_WORKER names the socket), serves requests until the parent
+// goes away and exits; returns at once in any other process.
+void serve_if_worker_process();
+
 // What a library in a child process may allocate when the caller gives no
 // budget: a damaged file can ask for gigabytes (a 4x4x4 dataset in one
 // 4 GiB gzip chunk).
@@ -48,14 +69,16 @@ constexpr std::uint64_t kDefaultChildMemory = std::uint64_t{1} << 30;
 
 class IsolatedWorker {
  public:
-  // Starts the child. `subject` names what it works on, for messages (the
+  // Starts the child as a worker of the registered `kind`, made from
+  // `parameters`. `subject` names what it works on, for messages (the
   // file's path); `library` names what runs there ("libhdf5"). The child
   // may allocate `memory_limit` bytes (0: kDefaultChildMemory) beyond what
   // it inherited, plus twice each request's bulk reply (RLIMIT_AS, set
   // before each request; not in sanitizer builds or under valgrind, whose
   // own reservations it would count). An allocation refused there is
   // ivol::Error(LimitExceeded) naming the file and the limit.
-  IsolatedWorker(std::string subject, std::string library, WorkerHandler handler, std::uint64_t memory_limit = 0);
+  IsolatedWorker(std::string subject, std::string library, const std::string& kind, const std::string& parameters,
+                 std::uint64_t memory_limit = 0);
   ~IsolatedWorker();  // closes the socket and reaps the child
   IsolatedWorker(const IsolatedWorker&) = delete;
   IsolatedWorker& operator=(const IsolatedWorker&) = delete;
@@ -76,7 +99,7 @@ class IsolatedWorker {
   std::string subject_;
   std::string library_;
   std::uint64_t memory_limit_ = 0;
-  std::uint64_t resident_at_start_ = 0;  // the child's share of the parent's memory
+  std::uint64_t resident_at_start_ = 0;  // the child's resident memory before its exec (the fork's copy)
   int socket_ = -1;
   pid_t child_ = -1;
 };
