@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "hdf5_io.hpp"
+#include "isolated_worker.hpp"
 #include "projection_io.hpp"
 
 namespace {
