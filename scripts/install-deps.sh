@@ -6,6 +6,8 @@ set -euo pipefail
 packages=(
   build-essential cmake ninja-build pkg-config
   libzstd-dev nlohmann-json3-dev libcli11-dev libtiff-dev libpng-dev
+  # MetaImage and NRRD compressed samples
+  zlib1g-dev
   libgtest-dev valgrind
   # SHA-256 of inputs and outputs (ivol verify --json, provenance): libcrypto
   libssl-dev

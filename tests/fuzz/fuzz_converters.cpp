@@ -18,6 +18,7 @@
 #include <string>
 
 #include "hdf5_io.hpp"
+#include "itk_image_io.hpp"
 #include "isolated_worker.hpp"
 #include "ivol/error.hpp"
 #include "ivol/recon/rtk_geometry_xml.hpp"
@@ -35,7 +36,12 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size < 2) return 0;
-  static const std::string path = "/dev/shm/ivol-fuzz-convert-" + std::to_string(getpid());
+  // First bytes 0xEA..0xEC: ITK images (MetaImage volume, NRRD volume,
+  // MetaImage projections); the others select as below (and as the kept
+  // findings were made).
+  const bool itk = data[0] >= 0xEA && data[0] <= 0xEC;
+  static const std::string base = "/dev/shm/ivol-fuzz-convert-" + std::to_string(getpid());
+  const std::string path = itk ? base + (data[0] == 0xEB ? ".nrrd" : ".mha") : base;
   FILE* f = std::fopen(path.c_str(), "wb");
   if (!f) return 0;
   std::fwrite(data + 1, 1, size - 1, f);
@@ -44,7 +50,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   try {
     using namespace ivol::convert;
     std::unique_ptr<ProjectionReader> projections;
-    switch (data[0] % 8) {
+    if (itk && data[0] == 0xEC) {
+      IntensityOptions intensity;
+      intensity.incident_intensity = 1000.0;
+      projections = open_itk_image_projections(path, StoredQuantity::LineIntegrals, intensity).projections;
+    }
+    switch (itk ? -1 : data[0] % 8) {
       case 4: {
         RawProjectionLayout layout;
         layout.columns = 1 + static_cast<int>(size % 5);
@@ -81,7 +92,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       return 0;
     }
     std::unique_ptr<ivol::convert::SlabReader> reader;
-    switch (data[0] % 4) {
+    if (itk) reader = open_itk_image_slabs(path);
+    switch (itk ? -1 : data[0] % 4) {
       case 0: {
         ivol::convert::RawLayout layout;
         layout.type = static_cast<ivol::convert::SampleType>(data[0] / 4 % 5);

@@ -14,7 +14,7 @@ converters=$(ls "$root"/tools/{convert,scan,hdf5_child}/*.cpp)
 clang++ $flags -DIVOL_VERSION_STRING='"fuzz"' -I"$root/libformat/include" -I"$root/libformat/src" \
   -I"$root/tools/convert" -I"$root/tools/scan" -I"$root/tools/hdf5_child" -I"$root/recon/include" "$root"/libformat/src/*.cpp $converters \
   "$root"/recon/src/{geometry,projections,rtk_geometry_xml}.cpp \
-  "$root/tests/fuzz/fuzz_converters.cpp" -lzstd -ltiff -lopenvdb -ltbb -lImath-3_1 -lpugixml $hdf5_flags \
+  "$root/tests/fuzz/fuzz_converters.cpp" -lzstd -lz -ltiff -lopenvdb -ltbb -lImath-3_1 -lpugixml $hdf5_flags \
   -o "$out/fuzz_converters"
 # Seeds: a tiny file of each format, prefixed with the byte that selects it.
 seed() { { printf "\\x$(printf %02x "$1")"; cat "$2"; } > "$out/corpus-converters/$(basename "$2").$1"; }
@@ -49,6 +49,12 @@ seed 4 "$work/p.raw"
 seed 5 "$work/p.tif"
 seed 6 "$work/p.h5"
 seed 7 "$work/g.xml"
+# ITK images written by SimpleITK, pynrrd and RTK (tests/data/itk).
+seed 234 "$root/tests/data/itk/i16_z.mha"
+seed 234 "$root/tests/data/itk/u16.mha"
+seed 235 "$root/tests/data/itk/u8.nrrd"
+seed 235 "$root/tests/data/itk/i8.nrrd"
+seed 236 "$root/tests/data/itk/rtk/proj.mha"
 # libhdf5 asks malloc for absurd sizes on hostile files and handles the
 # failure; under ASan that must return null as it does in a normal build.
 ASAN_OPTIONS="allocator_may_return_null=1${ASAN_OPTIONS:+:$ASAN_OPTIONS}" \

@@ -256,9 +256,9 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
 
     Reader reader(s->input);
     const convert::SampleType natural =
-        to == Format::Vdb ? convert::natural_float_type(reader) : convert::natural_sample_type(reader);
+        natural_export_type(to, reader);
     const convert::SampleType type = s->out_type.empty() ? natural : parse_sample_type(s->out_type, "--out-type");
-    check_vdb_type(to, type, "--out-type");
+    check_export_type(to, type, "--out-type");
     const Box box = full_box(reader.layout().dims, s->level);
     convert::DenseVolume shape = convert::export_shape(reader, box, s->level, type);
     settle_metadata(shape, *s, from, global.command_line);

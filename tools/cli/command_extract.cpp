@@ -67,9 +67,9 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
       print_salvage(std::cerr, "  ", *reader.info().salvage, reader.layout());
     }
     const convert::SampleType natural =
-        to == Format::Vdb ? convert::natural_float_type(reader) : convert::natural_sample_type(reader);
+        natural_export_type(to, reader);
     const convert::SampleType type = s->type.empty() ? natural : parse_sample_type(s->type, "--type");
-    check_vdb_type(to, type, "--type");
+    check_export_type(to, type, "--type");
     const Box box = parse_box(s->box, "--box");
     ForeignOptions options;
     options.big_endian = s->endian == "big";

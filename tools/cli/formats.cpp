@@ -7,6 +7,7 @@
 
 #include "exactness.hpp"
 #include "hdf5_io.hpp"
+#include "itk_image_io.hpp"
 #include "ivol/binary16.hpp"
 #include "ivol/error.hpp"
 #include "option_parsing.hpp"
@@ -96,6 +97,10 @@ const char* format_name(Format format) {
       return "hdf5";
     case Format::Vdb:
       return "vdb";
+    case Format::MetaImage:
+      return "mha";
+    case Format::Nrrd:
+      return "nrrd";
   }
   return "?";
 }
@@ -108,18 +113,21 @@ std::optional<Format> format_of(const std::string& key) {
   if (key == "tiff" || key == "tif" || key == ".tif" || key == ".tiff") return Format::Tiff;
   if (key == "hdf5" || key == ".h5" || key == ".hdf5" || key == ".hdf") return Format::Hdf5;
   if (key == "vdb" || key == ".vdb") return Format::Vdb;
+  if (key == "mha" || key == "mhd" || key == "metaimage" || key == ".mha" || key == ".mhd") return Format::MetaImage;
+  if (key == "nrrd" || key == "nhdr" || key == ".nrrd" || key == ".nhdr") return Format::Nrrd;
   return std::nullopt;
 }
 
 const char* kKnown =
-    "(extensions .ivol .raw .bin .vol .tif .tiff .h5 .hdf5 .vdb, or a folder of TIFF files; or name it)";
+    "(extensions .ivol .raw .bin .vol .tif .tiff .h5 .hdf5 .vdb .mha .mhd .nrrd .nhdr, or a folder of TIFF files; or "
+    "name it)";
 
 }  // namespace
 
 Format detect_format(const std::string& path, const std::string& name, const char* option) {
   if (!name.empty()) {
     if (const auto f = format_of(name)) return *f;
-    throw UsageError(option, "'" + name + "' is not ivol, raw, tiff, hdf5 or vdb");
+    throw UsageError(option, "'" + name + "' is not ivol, raw, tiff, hdf5, vdb, mha or nrrd");
   }
   if (is_stdio(path)) return Format::Raw;
   if (const auto f = format_of(lower_extension(path))) return *f;
@@ -177,6 +185,9 @@ std::unique_ptr<convert::SlabReader> open_source(const std::string& path, Format
     }
     case Format::Vdb:
       return convert::memory_slabs(convert::read_vdb(path, options.grid, options.memory_bytes).volume);
+    case Format::MetaImage:
+    case Format::Nrrd:
+      return convert::open_itk_image_slabs(path);
     case Format::Ivol:
       break;
   }
@@ -198,13 +209,27 @@ std::unique_ptr<convert::SlabWriter> create_sink(const std::string& path, Format
       return convert::create_hdf5_slabs(path, shape, options.dataset);
     case Format::Vdb:
       return std::make_unique<VdbSink>(path, shape, options.background, options.memory_bytes, options.allow_lossy);
+    case Format::MetaImage:
+    case Format::Nrrd:
+      return convert::create_itk_image_slabs(path, shape);
     case Format::Ivol:
       break;
   }
   throw Error(ErrorClass::InvalidArgument, path + ": .ivol is not a dense format");
 }
 
-void check_vdb_type(Format to, convert::SampleType type, const char* option) {
+convert::SampleType natural_export_type(Format to, const Reader& reader) {
+  if (to == Format::Vdb) return convert::natural_float_type(reader);
+  const convert::SampleType natural = convert::natural_sample_type(reader);
+  if ((to == Format::MetaImage || to == Format::Nrrd) && natural == convert::SampleType::Float16)
+    return convert::SampleType::Float32;
+  return natural;
+}
+
+void check_export_type(Format to, convert::SampleType type, const char* option) {
+  if ((to == Format::MetaImage || to == Format::Nrrd) && type == convert::SampleType::Float16)
+    throw UsageError(option, std::string("MetaImage and NRRD have no binary16 type; ") + option +
+                                 " f32 holds every value exactly");
   if (to == Format::Vdb && type != convert::SampleType::Float32 && type != convert::SampleType::Float16)
     throw UsageError(option, std::string("OpenVDB grids hold float32 (") + option + " f32) or half-float (" + option +
                                  " f16) values, not " + convert::sample_type_name(type));

@@ -11,10 +11,14 @@
 
 namespace ivol::cli {
 
-enum class Format { Ivol, Raw, Tiff, Hdf5, Vdb };
+enum class Format { Ivol, Raw, Tiff, Hdf5, Vdb, MetaImage, Nrrd };
 
 const char* format_name(Format format);
-// By `name` when given (ivol, raw, tiff, hdf5, vdb), else by the path's
+// The sample type an export to `to` keeps every value of the .ivol file in:
+// float for OpenVDB, float32 where the format has no binary16 (MetaImage,
+// NRRD), else the file's own.
+convert::SampleType natural_export_type(Format to, const Reader& reader);
+// By `name` when given (ivol, raw, tiff, hdf5, vdb, mha, nrrd), else by the path's
 // extension (a folder is a TIFF stack). Throws InvalidArgument naming `option`.
 Format detect_format(const std::string& path, const std::string& name, const char* option);
 
@@ -50,7 +54,7 @@ std::unique_ptr<convert::SlabWriter> create_sink(const std::string& path, Format
 
 // OpenVDB grids hold floats: refuses an integer `type` for OpenVDB output,
 // naming `option` (UsageError).
-void check_vdb_type(Format to, convert::SampleType type, const char* option);
+void check_export_type(Format to, convert::SampleType type, const char* option);
 
 // What export_from_ivol runs before finishing the output: unless
 // `allow_lossy`, refuses a conversion that changed a value, naming `what`,

@@ -1,7 +1,10 @@
 #include "scan_input.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <optional>
 
 #include "ivol/error.hpp"
 #include "ivol/recon/rtk_geometry_xml.hpp"
@@ -13,6 +16,16 @@ namespace {
 
 // Every complaint here is about the command line (exit 1).
 [[noreturn]] void bad(const std::string& message) { throw UsageError("", message); }
+
+// Header values are written with a few digits; the same value typed on the
+// command line agrees to a part in 10^6.
+bool close_to(double a, double b) { return std::abs(a - b) <= 1e-6 * std::max({1.0, std::abs(a), std::abs(b)}); }
+
+std::string number_text(double v) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.9g", v);
+  return text;
+}
 
 std::string lower_extension(const std::string& path) {
   std::string e = std::filesystem::path(path).extension().string();
@@ -27,16 +40,19 @@ std::string detect_format(const ScanSettings& s) {
   if (e == ".h5" || e == ".hdf5" || e == ".hdf" || e == ".nxs") return "hdf5";
   if (e == ".tif" || e == ".tiff") return "tiff";
   if (e == ".raw" || e == ".bin") return "raw";
-  bad(s.projections + ": cannot tell the format from the name; give --format raw|tiff|hdf5");
+  if (e == ".mha" || e == ".mhd" || e == ".nrrd" || e == ".nhdr") return "itk";
+  bad(s.projections + ": cannot tell the format from the name; give --format raw|tiff|hdf5|itk");
 }
 
 }  // namespace
 
 void add_scan_options(CLI::App* cmd, ScanSettings& s) {
-  cmd->add_option("PROJECTIONS", s.projections, "Projections: raw file, TIFF file/folder/glob, or HDF5 (DXchange)")
+  cmd->add_option("PROJECTIONS", s.projections,
+                  "Projections: raw file, TIFF file/folder/glob, HDF5 (DXchange), or an ITK image stack (MetaImage "
+                  ".mha/.mhd, NRRD .nrrd/.nhdr, as RTK writes them)")
       ->required();
-  cmd->add_option("--format", s.format, "raw, tiff or hdf5 (default: by extension)")
-      ->check(CLI::IsMember({"raw", "tiff", "hdf5"}));
+  cmd->add_option("--format", s.format, "raw, tiff, hdf5 or itk (default: by extension)")
+      ->check(CLI::IsMember({"raw", "tiff", "hdf5", "itk"}));
   auto* raw = cmd->add_option_group("raw projections");
   raw->add_option("--detector", s.detector, "C,R: detector columns and rows")->check(checked([](const std::string& v) {
     for (double c : parse_numbers(v, "--detector", 2, 2))
@@ -54,15 +70,16 @@ void add_scan_options(CLI::App* cmd, ScanSettings& s) {
       ->check(number_in(0, 1e30));
   auto* geometry = cmd->add_option_group("geometry");
   geometry->add_option("--geometry", s.geometry_xml, "RTK geometry XML (ThreeDCircularProjectionGeometry)");
-  geometry->add_option("--pitch", s.pitch, "U or U,V: detector pixel pitch in mm")
-      ->required()
+  geometry
+      ->add_option("--pitch", s.pitch,
+                   "U or U,V: detector pixel pitch in mm (default: an ITK image's spacing; required otherwise)")
       ->check(checked([](const std::string& v) {
         for (double p : parse_numbers(v, "--pitch", 1, 2))
           if (!(p > 0)) throw UsageError("--pitch", "'" + v + "' is not positive");
       }));
   geometry
       ->add_option("--projection-origin", s.projection_origin,
-                   "U,V: RTK projection image origin in mm (default: centred)")
+                   "U,V: RTK projection image origin in mm (default: an ITK image's origin, else centred)")
       ->check(checked([](const std::string& v) { parse_numbers(v, "--projection-origin", 2, 2); }));
   geometry->add_option("--sid", s.sid, "Source to isocentre distance, mm (without --geometry)")
       ->check(number_in(0, 1e9, true));
@@ -88,6 +105,12 @@ OpenedScan open_scan(const ScanSettings& s) {
   const bool intensities = s.intensities || !s.flats.empty() || s.incident > 0;
   const auto quantity = intensities ? convert::StoredQuantity::Intensities : convert::StoredQuantity::LineIntegrals;
   std::vector<double> theta_deg;
+  // What an ITK image's header says of the detector: values and the field.
+  struct HeaderPair {
+    double u = 0, v = 0;
+    std::string field;
+  };
+  std::optional<HeaderPair> header_pitch, header_origin;
   if (format == "raw") {
     if (s.detector.empty() || s.views == 0) bad("raw projections need --detector C,R and --views V");
     const std::vector<double> d = parse_numbers(s.detector, "--detector", 2, 2);
@@ -101,6 +124,14 @@ OpenedScan open_scan(const ScanSettings& s) {
     scan.projections = convert::open_raw_projections(s.projections, layout, intensity);
   } else if (format == "tiff") {
     scan.projections = convert::open_tiff_projections(s.projections, quantity, intensity);
+  } else if (format == "itk") {
+    convert::ItkImageScan image = convert::open_itk_image_projections(s.projections, quantity, intensity);
+    scan.projections = std::move(image.projections);
+    if (!image.unit.empty() && image.unit != "mm" && (image.has_pitch || image.has_origin))
+      bad(s.projections + ": the image's space units are '" + image.unit +
+          "'; ivol's geometry is in mm: give --pitch and --projection-origin in mm");
+    if (image.has_pitch) header_pitch = {image.pitch[0], image.pitch[1], image.pitch_field};
+    if (image.has_origin) header_origin = {image.origin[0], image.origin[1], image.origin_field};
   } else {
     convert::DxchangeOptions options;
     options.assume_line_integrals = !intensities;
@@ -110,24 +141,59 @@ OpenedScan open_scan(const ScanSettings& s) {
   }
   recon::ProjectionSource& p = *scan.projections;
 
-  const std::vector<double> pitch = parse_numbers(s.pitch, "--pitch", 1, 2);
-  recon::Detector detector{p.columns(), p.rows(), pitch[0], pitch.size() > 1 ? pitch[1] : pitch[0]};
+  // The pitch: --pitch, else the image's spacing. Both given and different
+  // is a mistake in one of them.
+  std::string pitch_from = "--pitch";
+  std::vector<double> pitch;
+  if (!s.pitch.empty()) {
+    pitch = parse_numbers(s.pitch, "--pitch", 1, 2);
+    if (pitch.size() == 1) pitch.push_back(pitch[0]);
+    if (header_pitch && (!close_to(pitch[0], header_pitch->u) || !close_to(pitch[1], header_pitch->v)))
+      bad("--pitch " + s.pitch + " disagrees with " + s.projections + "'s " + header_pitch->field + " (" +
+          number_text(header_pitch->u) + ", " + number_text(header_pitch->v) +
+          " mm); leave --pitch out to use the image's");
+  } else if (header_pitch) {
+    pitch = {header_pitch->u, header_pitch->v};
+    pitch_from = s.projections + " " + header_pitch->field;
+  } else {
+    bad("--pitch is required: the detector pixel pitch in mm (" + s.projections + " does not give it)");
+  }
+  recon::Detector detector{p.columns(), p.rows(), pitch[0], pitch[1]};
   if (!(detector.pitch_u > 0) || !(detector.pitch_v > 0)) bad("--pitch: must be positive");
+  // The projection origin: --projection-origin, else the image's origin,
+  // else the centred one.
+  const double centred_u = -0.5 * (detector.columns - 1) * detector.pitch_u;
+  const double centred_v = -0.5 * (detector.rows - 1) * detector.pitch_v;
+  double origin_u = centred_u, origin_v = centred_v;
+  std::string origin_from = "centred";
+  if (!s.projection_origin.empty()) {
+    const std::vector<double> o = parse_numbers(s.projection_origin, "--projection-origin", 2, 2);
+    origin_u = o[0];
+    origin_v = o[1];
+    origin_from = "--projection-origin";
+    if (header_origin && (!close_to(o[0], header_origin->u) || !close_to(o[1], header_origin->v)))
+      bad("--projection-origin " + s.projection_origin + " disagrees with " + s.projections + "'s " +
+          header_origin->field + " (" + number_text(header_origin->u) + ", " + number_text(header_origin->v) +
+          " mm); leave it out to use the image's");
+  } else if (header_origin) {
+    origin_u = header_origin->u;
+    origin_v = header_origin->v;
+    origin_from = s.projections + " " + header_origin->field;
+  }
   if (!s.geometry_xml.empty()) {
-    double origin_u = -0.5 * (detector.columns - 1) * detector.pitch_u;
-    double origin_v = -0.5 * (detector.rows - 1) * detector.pitch_v;
-    if (!s.projection_origin.empty()) {
-      const std::vector<double> o = parse_numbers(s.projection_origin, "--projection-origin", 2, 2);
-      origin_u = o[0];
-      origin_v = o[1];
-    }
     scan.geometry = recon::read_rtk_geometry_xml(s.geometry_xml, detector, origin_u, origin_v);
-    scan.description["geometry"] = {{"rtk_xml", s.geometry_xml}, {"projection_origin_mm", {origin_u, origin_v}}};
+    scan.description["geometry"] = {{"rtk_xml", s.geometry_xml},
+                                    {"projection_origin_mm", {origin_u, origin_v}},
+                                    {"projection_origin_from", origin_from}};
   } else {
     if (!(s.sid > 0) || !(s.sdd > s.sid))
       bad("without --geometry, give --sid and --sdd (mm, SDD > SID) and optionally --arc, --first-angle, --offset");
     std::vector<double> offset{0.0, 0.0};
     if (!s.offset.empty()) offset = parse_numbers(s.offset, "--offset", 2, 2);
+    // An origin away from the centred one shifts the detector, as RTK's
+    // projection origin does (rtk_geometry_xml.cpp's to_view).
+    offset[0] += origin_u - centred_u;
+    offset[1] += origin_v - centred_v;
     scan.geometry = recon::circular_scan(detector, p.view_count(), s.sid, s.sdd, s.arc_deg * M_PI / 180.0,
                                          s.first_angle_deg * M_PI / 180.0, offset[0], offset[1]);
     if (!theta_deg.empty()) {
@@ -139,6 +205,7 @@ OpenedScan open_scan(const ScanSettings& s) {
     scan.description["geometry"] = {{"sid_mm", s.sid},
                                     {"sdd_mm", s.sdd},
                                     {"detector_offset_mm", offset},
+                                    {"projection_origin_from", origin_from},
                                     {"angles", theta_deg.empty() ? "uniform" : "/exchange/theta"}};
     if (theta_deg.empty()) {
       scan.description["geometry"]["arc_deg"] = s.arc_deg;
@@ -155,6 +222,7 @@ OpenedScan open_scan(const ScanSettings& s) {
                                      {"views", p.view_count()},
                                      {"detector", {detector.columns, detector.rows}},
                                      {"pitch_mm", {detector.pitch_u, detector.pitch_v}},
+                                     {"pitch_from", pitch_from},
                                      {"quantity", intensities ? "intensities" : "line_integrals"}};
   return scan;
 }

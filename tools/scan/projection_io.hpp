@@ -17,6 +17,7 @@
 // match is refused when it is opened, not at the first read.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -142,6 +143,28 @@ std::unique_ptr<ProjectionReader> open_tiff_projections(const std::vector<std::s
                                                         const IntensityOptions& intensity = {});
 // The files `source` resolves to, in the order above.
 std::vector<std::string> resolve_tiff_files(const std::string& source);
+
+// --- ITK images: MetaImage (.mha, .mhd) and NRRD (.nrrd, .nhdr) -----------
+
+// A 3-D stack (columns, rows, views) of any scalar type, raw or compressed
+// (inflated once into a temporary file, since reconstruction reads bands of
+// rows of every view). Integer samples are always intensities. Flat and
+// dark fields are ITK images too (one image or a stack each).
+struct ItkImageScan {
+  std::unique_ptr<ProjectionReader> projections;
+  // The header's spacing (detector pitch) and origin (RTK's projection
+  // origin: the first pixel's position on the detector), where it has them,
+  // and the field each came from.
+  bool has_pitch = false;
+  std::array<double, 2> pitch{1.0, 1.0};
+  std::string pitch_field;
+  bool has_origin = false;
+  std::array<double, 2> origin{0.0, 0.0};
+  std::string origin_field;
+  std::string unit;  // NRRD space units; empty for MetaImage (millimetres by ITK's convention)
+};
+ItkImageScan open_itk_image_projections(const std::string& path, StoredQuantity quantity,
+                                        const IntensityOptions& intensity = {});
 
 // --- HDF5 DXchange --------------------------------------------------------
 
