@@ -175,12 +175,16 @@ const VolumeLayout& Reader::layout() const { return impl_->info.layout; }
 const Metadata& Reader::metadata() const { return impl_->metadata; }
 const IoStats& Reader::io_stats() const {
   impl_->stats.bytes_read = impl_->file.bytes_read - impl_->bytes_baseline;
+  impl_->stats.requests = impl_->file.requests() - impl_->requests_baseline;
+  impl_->stats.bytes_fetched = impl_->file.bytes_fetched() - impl_->fetched_baseline;
   return impl_->stats;
 }
 
 void Reader::reset_io_stats() {
   impl_->stats = IoStats{};
   impl_->bytes_baseline = impl_->file.bytes_read;
+  impl_->requests_baseline = impl_->file.requests();
+  impl_->fetched_baseline = impl_->file.bytes_fetched();
 }
 
 std::uint32_t Reader::voxel_bits(std::uint32_t x, std::uint32_t y, std::uint32_t z, unsigned lod) {

@@ -27,6 +27,8 @@ struct Reader::Impl {
   IoStats stats;
   std::uint64_t grid_lod_voxels = 0;                // ReaderOptions::grid_lod_voxels
   std::uint64_t bytes_baseline = 0;                 // file.bytes_read at the last reset
+  std::uint64_t requests_baseline = 0;              // file.requests() at the last reset
+  std::uint64_t fetched_baseline = 0;               // file.bytes_fetched() at the last reset
   std::unordered_map<std::size_t, Error> failures;  // blocks that failed their checks
   std::optional<detail::GridStructure> grid;        // structures of spec §8A
   // Blocks of the nodes and values streams, sorted by first element.

@@ -123,6 +123,12 @@ struct DamagedRegion {
 
 struct IoStats {
   std::uint64_t bytes_read = 0;      // bytes read from the file, all parts
+  // Round trips to the storage and the bytes they brought: for a local file
+  // the reads and bytes_read; over HTTP(S) the range requests and the whole
+  // pages they fetched (a path starting http:// or https:// opens a remote
+  // file, read by range).
+  std::uint64_t requests = 0;
+  std::uint64_t bytes_fetched = 0;
   std::uint64_t blocks_decoded = 0;  // blocks read, checked and decompressed
   std::uint64_t cache_hits = 0;
 };
