@@ -54,8 +54,8 @@ struct Case {
 
 std::vector<Case> cases() {
   std::vector<Case> list;
-  // About 1.9 detector rows per slice: sixteen slices sit near the strip's
-  // 31 rows, so both the strip and the gather path run.
+  // About 1.9 detector rows per slice: sixteen slices span up to 29 rows,
+  // just within one strip.
   ScanGeometry full = circular_scan({48, 40, 1.6, 1.6}, 60, 300.0, 600.0, 2 * M_PI, 0.3, 2.0, -1.5);
   full.views[3].source_offset_u = 1.0;  // one odd view
   list.push_back({"full scan, offsets", full, VolumeGrid::centred({24, 22, 20}, 1.5), 0});
@@ -64,7 +64,8 @@ std::vector<Case> cases() {
   // Coarse detector rows: every sixteen slices take the strip.
   list.push_back({"coarse rows, thin slabs", circular_scan({48, 24, 1.6, 3.2}, 40, 300.0, 600.0, 2 * M_PI, 0.1),
                   VolumeGrid::centred({20, 20, 37}, 1.0), 5});
-  // Fine detector rows (7.5 per slice): only the gather path.
+  // Fine detector rows (7.5 per slice): the gather path, and the strip where
+  // the rows are clamped at the band's ends.
   list.push_back({"fine rows", circular_scan({96, 160, 0.8, 0.4}, 30, 300.0, 600.0, 2 * M_PI),
                   VolumeGrid::centred({17, 18, 20}, 1.5), 0});
   return list;
