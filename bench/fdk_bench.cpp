@@ -100,10 +100,10 @@ int main(int argc, char** argv) {
   auto run = [&](bool native) {
     FdkOptions chosen = options;
     chosen.native_cpu_backprojection = native;
-    const FdkReport report =
-        reconstruct_fdk(projections, geometry, grid, chosen, [&](std::uint32_t k0, std::uint32_t k1, const float* data) {
-          std::copy(data, data + slice * (k1 - k0), volume.data() + slice * k0);
-        });
+    const FdkReport report = reconstruct_fdk(projections, geometry, grid, chosen,
+                                             [&](std::uint32_t k0, std::uint32_t k1, const float* data) {
+                                               std::copy(data, data + slice * (k1 - k0), volume.data() + slice * k0);
+                                             });
     std::printf(
         "{\"size\": %u, \"views\": %zu, \"detector\": %d, \"phantom\": \"%s\", \"device\": \"%s\", "
         "\"backprojector\": \"%s\", \"slabs\": %zu, \"projecting_s\": %.3f, \"setup_s\": %.3f, \"reading_s\": %.3f, "

@@ -81,7 +81,8 @@ void FdkDevice::configure(std::uint32_t max_slices, int max_band_rows) {
   // Keep buffers that are large enough from an earlier grid of the same shape.
   if (native_) {
     max_slices_ = max_slices;  // the native backprojector holds the slab on the host
-  } else if (max_slices > max_slices_ || !slab_() || slab_.getInfo<CL_MEM_SIZE>() < slice_bytes * padded_slices(max_slices)) {
+  } else if (max_slices > max_slices_ || !slab_() ||
+             slab_.getInfo<CL_MEM_SIZE>() < slice_bytes * padded_slices(max_slices)) {
     slab_ = cl::Buffer(context_, CL_MEM_READ_WRITE, slice_bytes * padded_slices(max_slices));
     max_slices_ = max_slices;
   }
@@ -243,8 +244,8 @@ void FdkDevice::reconstruct_slab_native(std::uint32_t k_begin, std::uint32_t k_e
   run_views(band, [&](cl::Buffer& filtered, int stride_rows, std::size_t first_view, cl::Event*) {
     const std::size_t bytes = static_cast<std::size_t>(kBatch) * stride_rows * stride_cols_ * sizeof(float);
     cl::Event mapped;
-    const auto* data = static_cast<const float*>(
-        queue_.enqueueMapBuffer(filtered, CL_TRUE, CL_MAP_READ, 0, bytes, nullptr, &mapped));
+    const auto* data =
+        static_cast<const float*>(queue_.enqueueMapBuffer(filtered, CL_TRUE, CL_MAP_READ, 0, bytes, nullptr, &mapped));
     transfer_events_.push_back(mapped);
     const auto start = std::chrono::steady_clock::now();
     native_->add_batch(data, stride_cols_, stride_rows, band.first, problem_.backproject_views.data() + first_view);

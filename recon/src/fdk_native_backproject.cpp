@@ -4,7 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
+#include <system_error>
 #include <thread>
 
 // This file is compiled with -ffp-contract=off (recon/CMakeLists.txt): every
@@ -22,12 +22,17 @@ constexpr std::uint32_t kLanes = NativeBackprojector::kLanes;
 constexpr int kStrip = 2 * kLanes;
 constexpr std::uint32_t kTile = 16;
 
-// Runs work(t) for t = 0 .. threads − 1, the last on the calling thread.
+// Runs work(t) for t = 0 .. threads − 1, the last (and any the system
+// would not start a thread for) on the calling thread.
 template <class Work>
 void on_threads(unsigned threads, const Work& work) {
   std::vector<std::thread> pool;
-  for (unsigned t = 0; t + 1 < threads; ++t) pool.emplace_back([&work, t] { work(t); });
-  work(threads - 1);
+  unsigned started = 0;
+  try {
+    for (; started + 1 < threads; ++started) pool.emplace_back([&work, started] { work(started); });
+  } catch (const std::system_error&) {
+  }
+  for (unsigned t = started; t < threads; ++t) work(t);
   for (std::thread& thread : pool) thread.join();
 }
 

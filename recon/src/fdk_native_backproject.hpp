@@ -48,7 +48,7 @@ class NativeBackprojector {
  private:
   unsigned threads_;
   std::uint32_t nx_ = 0, ny_ = 0, k_first_ = 0, slices_ = 0, depth_ = 0;  // depth_: slices in whole lanes
-  std::vector<float> columns_;     // [j][i][k], depth_ per column
+  std::vector<float> columns_;                                            // [j][i][k], depth_ per column
   std::vector<float> transposed_;  // per view [column][row], then a strip's overrun of zeros
 };
 

@@ -77,7 +77,7 @@ struct FdkReport {
   std::uint32_t slab_slices = 0;            // slices of a full slab
   std::uint64_t device_bytes_per_slab = 0;  // device memory one slab used
   bool short_scan = false;
-  std::vector<std::string> devices;   // names of the devices used
+  std::vector<std::string> devices;  // names of the devices used
   // Per device: "opencl" (the kernel) or "native-avx512" (dense slabs
   // backprojected in native code on a CPU device).
   std::vector<std::string> backprojectors;
