@@ -40,6 +40,7 @@ FdkReport FdkReconstructor::Impl::new_report() const {
   report.short_scan = shape.short_scan;
   report.warnings = shape.warnings;
   for (const auto& h : handles) report.devices.push_back(h.info.name);
+  for (const auto& d : devices) report.backprojectors.push_back(d->backprojector());
   return report;
 }
 
@@ -71,6 +72,8 @@ RampWindow parse_ramp_window(const std::string& name) {
     if (name == ramp_window_name(w)) return w;
   throw std::invalid_argument("unknown ramp window '" + name + "'; known: ram-lak, shepp-logan, cosine, hamming, hann");
 }
+
+bool native_backprojection_supported() { return detail::native_backprojection_available(); }
 
 double FdkReport::gups() const {
   return timings.backprojection > 0 ? static_cast<double>(voxel_updates) / timings.backprojection * 1e-9 : 0.0;

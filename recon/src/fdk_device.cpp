@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstring>
 #include <stdexcept>
+#include <thread>
 
 namespace ivol::recon::detail {
 namespace {
@@ -69,6 +70,8 @@ FdkDevice::FdkDevice(const DeviceHandle& handle, const FdkProblem& problem)
                          const_cast<float*>(problem.response.data()));
   twiddles_ = cl::Buffer(context_, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, problem.twiddles.size() * sizeof(float),
                          const_cast<float*>(problem.twiddles.data()));
+  if (!handle.info.is_gpu && problem.native_cpu_backprojection && native_backprojection_available())
+    native_ = std::make_unique<NativeBackprojector>(std::max(1u, std::thread::hardware_concurrency()));
 }
 
 void FdkDevice::configure(std::uint32_t max_slices, int max_band_rows) {
@@ -76,7 +79,10 @@ void FdkDevice::configure(std::uint32_t max_slices, int max_band_rows) {
   const int columns = problem_.geometry->detector.columns;
   const std::size_t slice_bytes = std::size_t{padded_row(grid.size[0])} * grid.size[1] * sizeof(float);
   // Keep buffers that are large enough from an earlier grid of the same shape.
-  if (max_slices > max_slices_ || !slab_() || slab_.getInfo<CL_MEM_SIZE>() < slice_bytes * padded_slices(max_slices)) {
+  if (native_) {
+    max_slices_ = max_slices;  // the native backprojector holds the slab on the host
+  } else if (max_slices > max_slices_ || !slab_() ||
+             slab_.getInfo<CL_MEM_SIZE>() < slice_bytes * padded_slices(max_slices)) {
     slab_ = cl::Buffer(context_, CL_MEM_READ_WRITE, slice_bytes * padded_slices(max_slices));
     max_slices_ = max_slices;
   }
@@ -169,8 +175,10 @@ void FdkDevice::run_views(const RowBand& band, const Backprojector& backproject)
     if (batch_done_[parity]()) batch_done_[parity].wait();
     const int count = static_cast<int>(std::min<std::size_t>(kBatch, views - first));
     filter_batch(parity, first, count, band);
+    batch_done_[parity] = cl::Event();
     backproject(filtered_[parity], band.rows() + kBorder, first, &batch_done_[parity]);
-    backproject_events_.push_back(batch_done_[parity]);
+    // The native backprojector leaves no event: it has finished with the batch.
+    if (batch_done_[parity]()) backproject_events_.push_back(batch_done_[parity]);
     queue_.flush();
   }
 }
@@ -183,6 +191,10 @@ void FdkDevice::finish_timings() {
 }
 
 void FdkDevice::reconstruct_slab(std::uint32_t k_begin, std::uint32_t k_end, std::vector<float>& out) {
+  if (native_) {
+    reconstruct_slab_native(k_begin, k_end, out);
+    return;
+  }
   const VolumeGrid& grid = *problem_.grid;
   const std::uint32_t slices = k_end - k_begin;
   const std::uint32_t row = padded_row(grid.size[0]);
@@ -219,6 +231,33 @@ void FdkDevice::reconstruct_slab(std::uint32_t k_begin, std::uint32_t k_end, std
                                grid.size[0] * sizeof(float), std::size_t{grid.size[0]} * grid.size[1] * sizeof(float),
                                out.data(), nullptr, &read);
   transfer_events_.push_back(read);
+  finish_timings();
+}
+
+void FdkDevice::reconstruct_slab_native(std::uint32_t k_begin, std::uint32_t k_end, std::vector<float>& out) {
+  const VolumeGrid& grid = *problem_.grid;
+  const RowBand band = rows_for_slab(*problem_.geometry, grid, k_begin, k_end);
+  if (band.rows() > max_band_rows_)
+    throw std::logic_error("FDK: slab needs " + std::to_string(band.rows()) + " detector rows, planned for " +
+                           std::to_string(max_band_rows_));
+  native_->start_slab(grid.size[0], grid.size[1], k_begin, k_end - k_begin);
+  run_views(band, [&](cl::Buffer& filtered, int stride_rows, std::size_t first_view, cl::Event*) {
+    const std::size_t bytes = static_cast<std::size_t>(kBatch) * stride_rows * stride_cols_ * sizeof(float);
+    cl::Event mapped;
+    const auto* data =
+        static_cast<const float*>(queue_.enqueueMapBuffer(filtered, CL_TRUE, CL_MAP_READ, 0, bytes, nullptr, &mapped));
+    transfer_events_.push_back(mapped);
+    const auto start = std::chrono::steady_clock::now();
+    native_->add_batch(data, stride_cols_, stride_rows, band.first, problem_.backproject_views.data() + first_view);
+    timings_.backprojection += seconds_since(start);
+    cl::Event unmapped;
+    queue_.enqueueUnmapMemObject(filtered, const_cast<float*>(data), nullptr, &unmapped);
+    transfer_events_.push_back(unmapped);
+  });
+  const auto start = std::chrono::steady_clock::now();
+  native_->finish_slab(out);
+  timings_.transfer += seconds_since(start);
+  queue_.finish();
   finish_timings();
 }
 

@@ -5,9 +5,11 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <vector>
 
+#include "fdk_native_backproject.hpp"
 #include "fdk_plan.hpp"
 #include "opencl_runtime.hpp"
 
@@ -27,6 +29,7 @@ struct FdkProblem {
   std::vector<float> response;
   std::vector<float> twiddles;  // n/2 complex values, interleaved
   bool fft_in_global_memory = false;
+  bool native_cpu_backprojection = true;  // FdkOptions::native_cpu_backprojection
 };
 
 struct DeviceTimings {
@@ -60,6 +63,8 @@ class FdkDevice {
   const DeviceTimings& timings() const { return timings_; }
   const std::string& name() const { return name_; }
   bool fft_in_global() const { return fft_in_global_; }
+  // "native-avx512" when dense slabs are backprojected in native code, else "opencl".
+  const char* backprojector() const { return native_ ? "native-avx512" : "opencl"; }
 
  private:
   // Reads, weights and filters one batch of views into filtered_[parity].
@@ -70,6 +75,10 @@ class FdkDevice {
   // Every batch of views through the filter and `backproject`, two batches
   // in flight so that reading the next overlaps the device's work.
   void run_views(const RowBand& band, const Backprojector& backproject);
+  // reconstruct_slab with the native backprojector: the device filters,
+  // the host backprojects the filtered bands in place (PoCL's buffers are
+  // host memory).
+  void reconstruct_slab_native(std::uint32_t k_begin, std::uint32_t k_end, std::vector<float>& out);
   void finish_timings();
   double event_seconds(const cl::Event& event) const;
   void collect(std::vector<cl::Event>& events, double& into);
@@ -90,7 +99,8 @@ class FdkDevice {
   cl::Buffer fine_tasks_;
   cl::Buffer centre_tasks_;
   cl::Buffer octant_tasks_;
-  cl::Buffer slab_;
+  cl::Buffer slab_;  // the OpenCL kernel's slab; unused with native_
+  std::unique_ptr<NativeBackprojector> native_;
   cl::Buffer filter_views_;
   cl::Buffer backproject_views_;
   cl::Buffer response_;

@@ -32,6 +32,7 @@ FdkProblem make_problem(ProjectionSource& projections, const ScanGeometry& geome
   problem.geometry = &geometry;
   problem.projections = &projections;
   problem.fft_in_global_memory = options.fft_in_global_memory;
+  problem.native_cpu_backprojection = options.native_cpu_backprojection;
   for (std::size_t v = 0; v < geometry.view_count(); ++v)
     problem.filter_views.push_back(detail::filter_view(geometry, shape, v));
   problem.log2n = detail::ramp_log2_length(geometry.detector.columns);

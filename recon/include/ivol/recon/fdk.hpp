@@ -46,6 +46,12 @@ struct FdkOptions {
   // Keep the FFT scratch in global memory even where local memory would do
   // (for testing the path long detectors take on GPUs).
   bool fft_in_global_memory = false;
+  // On a CPU device whose processor has AVX-512, backproject dense slabs in
+  // native code instead of the OpenCL kernel: the same bits, several times
+  // faster than PoCL's vectorisation of the kernel (bench/RESULTS.md,
+  // fdk_bench). false keeps the kernel (to compare the two). Filtering and
+  // the structure path stay on OpenCL.
+  bool native_cpu_backprojection = true;
   // With an exchange, this process is one rank of a distributed
   // reconstruction (slab_exchange.hpp): it reconstructs only the slabs it
   // owns, and only rank 0's sink (or structure) receives the volume. Slabs
@@ -71,7 +77,10 @@ struct FdkReport {
   std::uint32_t slab_slices = 0;            // slices of a full slab
   std::uint64_t device_bytes_per_slab = 0;  // device memory one slab used
   bool short_scan = false;
-  std::vector<std::string> devices;   // names of the devices used
+  std::vector<std::string> devices;  // names of the devices used
+  // Per device: "opencl" (the kernel) or "native-avx512" (dense slabs
+  // backprojected in native code on a CPU device).
+  std::vector<std::string> backprojectors;
   std::vector<std::string> warnings;  // e.g. an arc too short for Parker
   // Voxel updates per second of backprojection (voxels × views / time; a
   // coarse voxel's eight samples count as eight).
@@ -148,5 +157,8 @@ struct DeviceInfo {
   unsigned compute_units = 0;
 };
 std::vector<DeviceInfo> list_devices();
+// True when FdkOptions::native_cpu_backprojection takes effect on CPU
+// devices here: the processor has AVX-512F (checked at run time).
+bool native_backprojection_supported();
 
 }  // namespace ivol::recon

@@ -1,0 +1,223 @@
+#include "fdk_native_backproject.hpp"
+
+#include <immintrin.h>
+
+#include <algorithm>
+#include <cmath>
+#include <system_error>
+#include <thread>
+
+// This file is compiled with -ffp-contract=off (recon/CMakeLists.txt): every
+// fused multiply-add below is written out, where the kernel's compiler fuses.
+
+namespace ivol::recon::detail {
+namespace {
+
+constexpr int kBatch = IVOL_BACKPROJECT_BATCH;
+constexpr int kBorderBefore = IVOL_BAND_BORDER_BEFORE;
+constexpr int kBorderAfter = IVOL_BAND_BORDER_AFTER;
+constexpr std::uint32_t kLanes = NativeBackprojector::kLanes;
+// A strip is two vectors: the rows of sixteen voxels must lie within 31
+// rows so that each voxel's row and the next one are among them.
+constexpr int kStrip = 2 * kLanes;
+constexpr std::uint32_t kTile = 16;
+
+// Runs work(t) for t = 0 .. threads − 1, the last (and any the system
+// would not start a thread for) on the calling thread.
+template <class Work>
+void on_threads(unsigned threads, const Work& work) {
+  std::vector<std::thread> pool;
+  unsigned started = 0;
+  try {
+    for (; started + 1 < threads; ++started) pool.emplace_back([&work, started] { work(started); });
+  } catch (const std::system_error&) {
+  }
+  for (unsigned t = started; t < threads; ++t) work(t);
+  for (std::thread& thread : pool) thread.join();
+}
+
+// What a voxel column (i, j) keeps along k for one view: the kernel's
+// per-view scalars, computed with the kernel's roundings.
+struct ColumnView {
+  float column_frac;
+  float weight;
+  float row_at_zero;
+  float row_step;
+  int column_index;  // band column of the left pixel, border included
+};
+
+__attribute__((target("avx512f,fma"))) ColumnView column_view(const BackprojectView& m, float fi, float fj,
+                                                              float column_limit) {
+  // clang contracts a·b + c·d + e into fma(a, b, c·d) + e.
+  const float w = __builtin_fmaf(m.depth[0], fi, m.depth[1] * fj) + m.depth[3];
+  const float inv_w = 1.0F / w;
+  const float projected = (__builtin_fmaf(m.column[0], fi, m.column[1] * fj) + m.column[3]) * inv_w;
+  const float column = std::fmin(std::fmax(projected, -1.0F), column_limit);
+  const float column_floor = std::floor(column);
+  ColumnView view;
+  view.column_frac = column - column_floor;
+  view.weight = inv_w * inv_w;
+  view.row_at_zero = (__builtin_fmaf(m.row[0], fi, m.row[1] * fj) + m.row[3]) * inv_w;
+  view.row_step = m.row[2] * inv_w;
+  view.column_index = static_cast<int>(column_floor) + kBorderBefore;
+  return view;
+}
+
+struct BatchArgs {
+  const float* transposed;  // per view [column][row]
+  std::size_t plane;        // floats per view
+  int stride_rows;
+  float column_limit;
+  float row_limit;
+  float band_first;
+  const BackprojectView* views;
+};
+
+// Adds one batch to the voxel column whose per-view scalars are `at`:
+// sixteen slices at a time, each view's sixteen rows from one strip.
+__attribute__((target("avx512f,fma"))) inline void backproject_column(const BatchArgs& a, const ColumnView* at,
+                                                                      float* column, std::uint32_t depth,
+                                                                      std::uint32_t k_first) {
+  const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  const __m512i one = _mm512_set1_epi32(1);
+  const __m512 minus_one = _mm512_set1_ps(-1.0F);
+  const __m512 row_limit = _mm512_set1_ps(a.row_limit);
+  const __m512 band_first = _mm512_set1_ps(a.band_first);
+  for (std::uint32_t k = 0; k < depth; k += kLanes) {
+    // Slice indices as floats, exactly (they are far below 2^24).
+    const __m512 fk = _mm512_cvtepi32_ps(_mm512_add_epi32(_mm512_set1_epi32(static_cast<int>(k_first + k)), lane));
+    __m512 sum = _mm512_setzero_ps();
+    for (int v = 0; v < kBatch; ++v) {
+      const ColumnView& c = at[v];
+      __m512 row = _mm512_fmadd_ps(fk, _mm512_set1_ps(c.row_step), _mm512_set1_ps(c.row_at_zero));
+      row = _mm512_min_ps(_mm512_max_ps(_mm512_sub_ps(row, band_first), minus_one), row_limit);
+      const __m512i row_index = _mm512_cvt_roundps_epi32(row, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
+      const __m512 row_frac = _mm512_sub_ps(row, _mm512_cvtepi32_ps(row_index));
+      const __m512 column_frac = _mm512_set1_ps(c.column_frac);
+      // Rows are monotonic along k: the first or the last lane is lowest.
+      const int first = _mm_cvtsi128_si32(_mm512_castsi512_si128(row_index));
+      const int last = _mm_extract_epi32(_mm512_extracti32x4_epi32(row_index, 3), 3);
+      const int lowest = std::min(first, last);
+      const float* left = a.transposed + static_cast<std::size_t>(v) * a.plane +
+                          static_cast<std::size_t>(c.column_index) * a.stride_rows;
+      __m512 top;
+      __m512 bottom;
+      if (std::max(first, last) - lowest < kStrip - 1) {
+        // top(r) = image[r][c] + frac·(image[r][c+1] − image[r][c]) for 32
+        // rows at once; a voxel's "top" is top(r), its "bottom" top(r+1).
+        const float* strip = left + lowest + kBorderBefore;
+        const float* right = strip + a.stride_rows;
+        const __m512 l0 = _mm512_loadu_ps(strip);
+        const __m512 l1 = _mm512_loadu_ps(strip + kLanes);
+        const __m512 s0 = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(_mm512_loadu_ps(right), l0), l0);
+        const __m512 s1 = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(_mm512_loadu_ps(right + kLanes), l1), l1);
+        const __m512i offset = _mm512_sub_epi32(row_index, _mm512_set1_epi32(lowest));
+        top = _mm512_permutex2var_ps(s0, offset, s1);
+        bottom = _mm512_permutex2var_ps(s0, _mm512_add_epi32(offset, one), s1);
+      } else {
+        // Steep rows (fine detector rows): gather the four pixels.
+        const __m512i stride_rows = _mm512_set1_epi32(a.stride_rows);
+        const __m512i offset = _mm512_add_epi32(row_index, _mm512_set1_epi32(kBorderBefore));
+        const __m512i below = _mm512_add_epi32(offset, one);
+        const __m512 tl = _mm512_i32gather_ps(offset, left, 4);
+        const __m512 tr = _mm512_i32gather_ps(_mm512_add_epi32(offset, stride_rows), left, 4);
+        const __m512 bl = _mm512_i32gather_ps(below, left, 4);
+        const __m512 br = _mm512_i32gather_ps(_mm512_add_epi32(below, stride_rows), left, 4);
+        top = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(tr, tl), tl);
+        bottom = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(br, bl), bl);
+      }
+      const __m512 value = _mm512_fmadd_ps(row_frac, _mm512_sub_ps(bottom, top), top);
+      sum = _mm512_fmadd_ps(_mm512_set1_ps(c.weight), value, sum);
+    }
+    _mm512_storeu_ps(column + k, _mm512_add_ps(_mm512_loadu_ps(column + k), sum));
+  }
+}
+
+// Adds one batch to the columns of rows [j_begin, j_end), in tiles of
+// kTile² columns: a tile projects onto a few dozen detector columns per
+// view, so the part of the band it reads stays in L2.
+__attribute__((target("avx512f,fma"))) void backproject_rows(const BatchArgs& a, float* columns, std::uint32_t nx,
+                                                             std::uint32_t depth, std::uint32_t k_first,
+                                                             std::uint32_t j_begin, std::uint32_t j_end) {
+  ColumnView at[kBatch];
+  for (std::uint32_t j0 = j_begin; j0 < j_end; j0 += kTile)
+    for (std::uint32_t i0 = 0; i0 < nx; i0 += kTile)
+      for (std::uint32_t j = j0; j < std::min(j_end, j0 + kTile); ++j)
+        for (std::uint32_t i = i0; i < std::min(nx, i0 + kTile); ++i) {
+          for (int v = 0; v < kBatch; ++v)
+            at[v] = column_view(a.views[v], static_cast<float>(i), static_cast<float>(j), a.column_limit);
+          backproject_column(a, at, columns + (std::size_t{j} * nx + i) * depth, depth, k_first);
+        }
+}
+
+}  // namespace
+
+bool native_backprojection_available() {
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("fma");
+}
+
+NativeBackprojector::NativeBackprojector(unsigned threads) : threads_(std::max(1u, threads)) {}
+
+void NativeBackprojector::start_slab(std::uint32_t nx, std::uint32_t ny, std::uint32_t k_first, std::uint32_t slices) {
+  nx_ = nx;
+  ny_ = ny;
+  k_first_ = k_first;
+  slices_ = slices;
+  depth_ = (slices + kLanes - 1) / kLanes * kLanes;
+  columns_.assign(std::size_t{nx} * ny * depth_, 0.0F);
+}
+
+void NativeBackprojector::add_batch(const float* filtered, int stride_cols, int stride_rows, int band_first_row,
+                                    const BackprojectView* views) {
+  const std::size_t plane = static_cast<std::size_t>(stride_cols) * stride_rows;
+  // A strip read at the last column of the last view may run kStrip floats
+  // past its plane; those lanes are never selected.
+  transposed_.resize(kBatch * plane + kStrip);
+  std::fill(transposed_.end() - kStrip, transposed_.end(), 0.0F);
+  on_threads(threads_, [&](unsigned t) {
+    for (int v = static_cast<int>(t); v < kBatch; v += static_cast<int>(threads_)) {
+      const float* in = filtered + v * plane;
+      float* out = transposed_.data() + v * plane;
+      for (int r0 = 0; r0 < stride_rows; r0 += 16)
+        for (int c = 0; c < stride_cols; ++c)
+          for (int r = r0; r < std::min(r0 + 16, stride_rows); ++r)
+            out[static_cast<std::size_t>(c) * stride_rows + r] = in[static_cast<std::size_t>(r) * stride_cols + c];
+    }
+  });
+  BatchArgs args;
+  args.transposed = transposed_.data();
+  args.plane = plane;
+  args.stride_rows = stride_rows;
+  // As the kernel: clamped into the zero border, one pixel before the band
+  // and up to IVOL_BAND_BORDER_AFTER after it.
+  args.column_limit = static_cast<float>(stride_cols - kBorderBefore - kBorderAfter);
+  args.row_limit = static_cast<float>(stride_rows - kBorderBefore - kBorderAfter);
+  args.band_first = static_cast<float>(band_first_row);
+  args.views = views;
+  on_threads(threads_, [&](unsigned t) {
+    const std::uint32_t j_begin = static_cast<std::uint32_t>(std::uint64_t{ny_} * t / threads_);
+    const std::uint32_t j_end = static_cast<std::uint32_t>(std::uint64_t{ny_} * (t + 1) / threads_);
+    backproject_rows(args, columns_.data(), nx_, depth_, k_first_, j_begin, j_end);
+  });
+}
+
+void NativeBackprojector::finish_slab(std::vector<float>& out) const {
+  out.resize(std::size_t{nx_} * ny_ * slices_);
+  on_threads(threads_, [&](unsigned t) {
+    const std::uint32_t j_begin = static_cast<std::uint32_t>(std::uint64_t{ny_} * t / threads_);
+    const std::uint32_t j_end = static_cast<std::uint32_t>(std::uint64_t{ny_} * (t + 1) / threads_);
+    // Sixteen columns at a time, so that the columns stay in cache while
+    // their slices are written out.
+    for (std::uint32_t j = j_begin; j < j_end; ++j)
+      for (std::uint32_t i0 = 0; i0 < nx_; i0 += kLanes) {
+        const std::uint32_t i_end = std::min(nx_, i0 + kLanes);
+        for (std::uint32_t k = 0; k < slices_; ++k) {
+          float* row = out.data() + (std::size_t{k} * ny_ + j) * nx_;
+          for (std::uint32_t i = i0; i < i_end; ++i) row[i] = columns_[(std::size_t{j} * nx_ + i) * depth_ + k];
+        }
+      }
+  });
+}
+
+}  // namespace ivol::recon::detail
