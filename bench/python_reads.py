@@ -129,8 +129,8 @@ def main():
                            env=dict(os.environ, IVOLREF_PURE_PYTHON=pure), stdout=subprocess.DEVNULL)
             t = time.perf_counter() - t0
             label = "reference reader, " + ("pure-Python checksums" if pure == "1" else "C checksums")
-            same = np.fromfile(out, dtype={"binary16": "<u2", "uint16": "<u2", "float32": "<u4"}[f.encoding]).tobytes() \
-                == f.stored[...].tobytes()
+            width = {"binary16": "<u2", "uint16": "<u2", "float32": "<u4"}[f.encoding]
+            same = np.fromfile(out, dtype=width).tobytes() == f.stored[...].tobytes()
             os.remove(out)
             results[label] = {"whole_s": t, "same_bits": same}
             print(f"whole, {label}: {t:.2f} s ({t / results['whole']['ivol_s']:.0f}x ivol's whole read)"
