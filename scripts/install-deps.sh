@@ -25,6 +25,8 @@ packages=(
   python3-openvdb
   # the Python package (python/): ivol._ivol
   pybind11-dev python3-dev
+  # the reference reader's checksums in C (format-spec/reference-reader; both paths tested)
+  python3-crc32c python3-xxhash
 )
 
 missing=()

@@ -33,9 +33,11 @@ from ._errors import (  # noqa: F401 (the package's exceptions)
     UnsupportedFeatureError,
     UnsupportedVersionError,
 )
+from ._indexing import pieces as _pieces
 from ._indexing import plan as _plan
+from ._writing import write, write_structure  # noqa: F401 (the package's writers)
 
-__all__ = ["open", "verify", "write", "File", "Level", "IvolError", "library_version"]
+__all__ = ["open", "verify", "write", "write_structure", "File", "Level", "IvolError", "library_version"]
 
 _STORED_DTYPES = {"uint16": np.dtype("<u2"), "binary16": np.dtype("<f2"), "float32": np.dtype("<f4")}
 
@@ -66,32 +68,56 @@ class Level:
         return self.shape[0]
 
     def __getitem__(self, key):
-        lo, hi, local, empty_shape = _plan(key, self.shape)
+        return self._get(key, self._file._salvage, None)
+
+    def read_salvaged(self, key=Ellipsis):
+        """(array, damaged) for `key`: blocks that are damaged or missing do
+        not stop the read; their voxels take the value of the nearest
+        coarser level that survived (spec §18; a grid, which has none, reads
+        stored code 0 there), and `damaged` lists those regions as dicts:
+        lo and hi (z, y, x, half-open, in this level's voxels), level (the
+        octree level where the damage was met) and message (which block)."""
+        damaged = []
+        out = self._get(key, True, damaged)
+        unique = {(d["lo"], d["hi"], d["level"], d["message"]): d for d in damaged}
+        return out, list(unique.values())
+
+    def _get(self, key, salvage, damaged):
+        _, _, _, empty_shape = _plan(key, self.shape)
         if empty_shape is not None:
             return np.empty(empty_shape, dtype=self.dtype)
-        z_at = next(i for i, k in enumerate(local) if k is not None)
-        z_key = local[z_at]
-        if isinstance(z_key, slice) and abs(z_key.step) > 1:
-            # Slices of z one by one: a box spanning the skipped ones would
-            # read and decode their blocks too.
-            planes = range(lo[0], hi[0])[z_key]
-            block = np.concatenate([self._read([z, lo[1], lo[2]], [z + 1, hi[1], hi[2]]) for z in planes])
-            local = local[:z_at] + (slice(None),) + local[z_at + 1 :]
-        else:
-            block = self._read(lo, hi)
-        out = block[local]
-        # A view of a larger box would keep the whole box alive.
-        return out.copy() if isinstance(out, np.ndarray) and out.size < block.size else out
+        out_shape, squeeze, boxes = _pieces(key, self.shape)
+        if len(boxes) == 1:
+            lo, hi, _, box_slices = boxes[0]
+            block = self._read(lo, hi, salvage, damaged)
+            out = block[box_slices][squeeze]
+            # A view of a larger box would keep the whole box alive.
+            return out.copy() if isinstance(out, np.ndarray) and out.size < block.size else out
+        # Several boxes (a step along z, or a wide one along y or x): each
+        # reads only the blocks its voxels lie in.
+        out = np.empty(out_shape, dtype=self.dtype)
+        for lo, hi, out_slices, box_slices in boxes:
+            out[out_slices] = self._read(lo, hi, salvage, damaged)[box_slices]
+        return out[squeeze]
 
-    def _read(self, lo, hi):
-        """The box [lo, hi) (z, y, x) of this level, as an array."""
+    def _read(self, lo, hi, salvage, damaged):
+        """The box [lo, hi) (z, y, x) of this level, as an array; with
+        salvage, the regions filled from coarser levels go into `damaged`."""
         # libformat takes boxes as (x, y, z).
         box_lo, box_hi = lo[::-1], hi[::-1]
         reader = self._file._reader()
+        read = reader.read_bits if self._stored else reader.read
+        out = read(box_lo, box_hi, self.lod, salvage)
+        if salvage:
+            out, regions = out
+            if damaged is not None:
+                damaged.extend(
+                    {"lo": r["lo"][::-1], "hi": r["hi"][::-1], "level": r["level"], "message": r["message"]}
+                    for r in regions
+                )
         if self._stored:
-            bits = reader.read_bits(box_lo, box_hi, self.lod)
-            return bits.view(self.dtype).reshape([h - l for l, h in zip(lo, hi)])
-        return reader.read(box_lo, box_hi, self.lod)
+            return out.view(self.dtype).reshape([h - l for l, h in zip(lo, hi)])
+        return out
 
     @property
     def stored(self):
@@ -110,9 +136,10 @@ class Level:
 class File(Level):
     """An open .ivol file; indexing it reads physical values of level 0."""
 
-    def __init__(self, path, cache_bytes=256 << 20):
+    def __init__(self, path, cache_bytes=256 << 20, salvage=False):
         self.path = os.fspath(path)
         self._cache_bytes = cache_bytes
+        self._salvage = bool(salvage)
         self._local = threading.local()
         self._lock = threading.Lock()
         self._readers = []
@@ -126,6 +153,9 @@ class File(Level):
         self.version = info["version"]
         self.file_size = info["file_size"]
         self.metadata = json.loads(info["metadata_json"])
+        # What a salvaging open found when the index could not be used
+        # (None when the file opened as it is).
+        self.salvage = info["salvage"]
         m = self.metadata
         self.voxel_size = tuple(float(v) for v in m["voxel_size"][::-1])
         self.origin = tuple(float(v) for v in m["origin"][::-1])
@@ -136,7 +166,7 @@ class File(Level):
         # libformat's Reader is not thread-safe: one per thread.
         reader = getattr(self._local, "reader", None)
         if reader is None:
-            reader = _ivol.Reader(self.path, self._cache_bytes)
+            reader = _ivol.Reader(self.path, self._cache_bytes, self._salvage)
             self._local.reader = reader
             with self._lock:
                 self._readers.append(reader)
@@ -173,10 +203,10 @@ class File(Level):
     # Pickled by path (dask's process and distributed schedulers send the
     # array-likes to other processes): the copy opens the file anew.
     def __getstate__(self):
-        return {"path": self.path, "cache_bytes": self._cache_bytes}
+        return {"path": self.path, "cache_bytes": self._cache_bytes, "salvage": self._salvage}
 
     def __setstate__(self, state):
-        self.__init__(state["path"], state["cache_bytes"])
+        self.__init__(state["path"], state["cache_bytes"], state.get("salvage", False))
 
     def close(self):
         with self._lock:
@@ -196,9 +226,14 @@ class File(Level):
         )
 
 
-def open(path, cache_bytes=256 << 20):  # noqa: A001 (the package's entry point)
-    """Opens an .ivol file; raises IvolError (by class) for a bad file."""
-    return File(path, cache_bytes)
+def open(path, cache_bytes=256 << 20, salvage=False):  # noqa: A001 (the package's entry point)
+    """Opens an .ivol file; raises IvolError (by class) for a bad file.
+
+    salvage=True opens a cut or damaged format 1.3 file whose footer or index
+    cannot be used by scanning its framed blocks (spec §18); `f.salvage` then
+    says what was found, and reads fill damaged or missing regions from the
+    nearest coarser level (`f.read_salvaged(key)` also lists them)."""
+    return File(path, cache_bytes, salvage)
 
 
 def verify(path):
@@ -248,65 +283,3 @@ def verify(path):
         r["message"] = f"{path}: {e.strerror}"
     r.update(report)
     return r
-
-
-_SAMPLE_NAMES = {
-    np.dtype(np.uint8): "u8",
-    np.dtype(np.uint16): "u16",
-    np.dtype(np.int16): "i16",
-    np.dtype(np.float16): "f16",
-    np.dtype(np.float32): "f32",
-}
-
-
-def write(
-    path,
-    array,
-    voxel_size=(1.0, 1.0, 1.0),
-    origin=(0.0, 0.0, 0.0),
-    unit="mm",
-    encoding=None,
-    quantity=None,
-    value_unit=None,
-    provenance=None,
-    block_bytes=0,
-    byte_planes=True,
-):
-    """Writes a 3-D array (z, y, x) as a lossless octree .ivol file, as
-    `ivol convert` writes the same samples from a raw file: the same file,
-    byte for byte, given the same provenance. voxel_size and origin are in
-    (z, y, x) order. encoding: None (lossless: uint16 for integer arrays,
-    binary16 for float16, float32 for float32), "uint16", "binary16" or
-    "float32". provenance: a dict merged into the default provenance.
-    The file appears at `path` only when complete."""
-    a = np.asarray(array)
-    if a.ndim != 3:
-        raise InvalidArgumentError(f"{path}: a volume needs 3 dimensions (z, y, x), not {a.ndim}", "invalid-argument")
-    name = _SAMPLE_NAMES.get(a.dtype.newbyteorder("="))
-    if name is None:
-        raise InvalidArgumentError(
-            f"{path}: samples of type {a.dtype} cannot be written; use uint8, uint16, int16, float16 or float32 "
-            "(e.g. array.astype(numpy.float32))",
-            "invalid-argument",
-        )
-    a = np.ascontiguousarray(a, dtype=a.dtype.newbyteorder("<"))
-    if 0 in a.shape:
-        raise InvalidArgumentError(f"{path}: the volume is empty {a.shape}", "invalid-argument")
-    vz, vy, vx = (float(v) for v in voxel_size)
-    oz, oy, ox = (float(v) for v in origin)
-    return _ivol.write(
-        os.fspath(path),
-        a,
-        name,
-        (a.shape[2], a.shape[1], a.shape[0]),
-        encoding or "",
-        (vx, vy, vz),
-        (ox, oy, oz),
-        unit,
-        quantity or "",
-        value_unit or "",
-        json.dumps(provenance) if provenance else "",
-        int(block_bytes),
-        bool(byte_planes),
-    )
-

@@ -81,3 +81,58 @@ def plan(key, shape):
             local.append(0)
         axis += 1
     return lo, hi, tuple(local), (tuple(result_shape) if empty else None)
+
+
+
+# Along y and x, selected voxels further apart than this are read as boxes of
+# their own: blocks hold cubes of about 16 voxels a side, so a gap of two
+# blocks saves decoding at least one. Along z a step reads planes one by one.
+SPLIT_GAP = 32
+# Past this many boxes a read costs more in calls than it saves in decoding:
+# y and x are then read as one box around the selection.
+MAX_BOXES = 4096
+
+
+def _selected(k, n):
+    """The indices an axis key selects, in output order, as a range."""
+    if isinstance(k, slice):
+        return range(*k.indices(n))
+    i = operator.index(k) % n
+    return range(i, i + 1)
+
+
+def _runs(indices, split_any_step):
+    """Pieces of one axis' selection: (first output position, count, indices)."""
+    step = abs(indices.step)
+    if len(indices) <= 1 or step == 1 or (not split_any_step and step <= SPLIT_GAP):
+        return [(0, len(indices), indices)]
+    return [(p, 1, indices[p : p + 1]) for p in range(len(indices))]
+
+
+def pieces(key, shape):
+    """The boxes to read for a key that plan() accepted and that selects at
+    least one voxel: (out_shape, squeeze_key, boxes), each box
+    (lo, hi, out_slices, box_slices): read [lo, hi), take box[box_slices]
+    into out[out_slices]. out has the (z, y, x) selection's shape; out[squeeze_key]
+    drops integer axes and adds None axes. Axes in numpy order.
+    """
+    expanded = _expand(key, len(shape))
+    squeeze = tuple(None if k is None else slice(None) if isinstance(k, slice) else 0 for k in expanded)
+    selected = [_selected(k, n) for k, n in zip((k for k in expanded if k is not None), shape)]
+    runs = [_runs(selected[0], True)] + [_runs(s, False) for s in selected[1:]]
+    if len(runs[0]) * len(runs[1]) * len(runs[2]) > MAX_BOXES:
+        runs = [runs[0]] + [[(0, len(s), s)] for s in selected[1:]]
+    boxes = []
+    for rz in runs[0]:
+        for ry in runs[1]:
+            for rx in runs[2]:
+                lo, hi, out_slices, box_slices = [], [], [], []
+                for first, count, idx in (rz, ry, rx):
+                    low = min(idx[0], idx[-1])
+                    lo.append(low)
+                    hi.append(max(idx[0], idx[-1]) + 1)
+                    out_slices.append(slice(first, first + count))
+                    stop = idx[-1] - low + (1 if idx.step > 0 else -1)
+                    box_slices.append(slice(idx[0] - low, stop if stop >= 0 else None, idx.step))
+                boxes.append((lo, hi, tuple(out_slices), tuple(box_slices)))
+    return tuple(len(s) for s in selected), squeeze, boxes

@@ -50,40 +50,85 @@ ivol::Box make_box(const std::array<std::uint32_t, 3>& lo, const std::array<std:
   return box;
 }
 
+// The regions a salvaging read filled from a coarser level, as dicts with
+// lo and hi (x, y, z, in the coordinates of the read's level), the octree
+// level where the damage was met and libformat's message.
+py::list damaged_list(const std::vector<ivol::DamagedRegion>& damaged) {
+  py::list out;
+  for (const ivol::DamagedRegion& d : damaged) {
+    py::dict e;
+    e["lo"] = py::make_tuple(d.region.lo[0], d.region.lo[1], d.region.lo[2]);
+    e["hi"] = py::make_tuple(d.region.hi[0], d.region.hi[1], d.region.hi[2]);
+    e["level"] = d.level;
+    e["message"] = text(d.message);
+    out.append(e);
+  }
+  return out;
+}
+
+py::dict salvage_dict(const ivol::SalvageInfo& s) {
+  py::dict d;
+  d["reason"] = text(s.reason);
+  d["blocks_found"] = s.blocks_found;
+  d["blocks_used"] = s.blocks_used;
+  d["bytes_lost"] = s.bytes_lost;
+  py::list gaps;
+  for (const auto& g : s.gaps) gaps.append(py::make_tuple(g.first, g.second));
+  d["gaps"] = gaps;
+  d["metadata"] = s.metadata;
+  d["finest_complete_level"] = s.finest_complete_lod;
+  d["values_found"] = s.values_found;
+  d["values_total"] = s.values_total;
+  py::list notes;
+  for (const std::string& n : s.notes) notes.append(text(n));
+  d["notes"] = notes;
+  return d;
+}
+
 // One Reader and the lock that keeps io_stats() from racing a read of
 // another thread that was handed this object.
 class PyReader {
  public:
-  PyReader(const std::string& path, std::uint64_t cache_bytes) {
+  PyReader(const std::string& path, std::uint64_t cache_bytes, bool salvage) {
     ivol::ReaderOptions options;
     options.cache_bytes = cache_bytes;
+    options.salvage = salvage;
     py::gil_scoped_release release;
     reader_ = std::make_unique<ivol::Reader>(path, options);
   }
 
   // Physical values of the box [lo, hi) (x, y, z) of level `lod`, as a
-  // float32 array [z][y][x].
-  py::array read(const std::array<std::uint32_t, 3>& lo, const std::array<std::uint32_t, 3>& hi, unsigned lod) {
+  // float32 array [z][y][x]. With `salvage`, damaged or missing blocks take
+  // a coarser level's values and the result is (array, damaged regions).
+  py::object read(const std::array<std::uint32_t, 3>& lo, const std::array<std::uint32_t, 3>& hi, unsigned lod,
+                  bool salvage) {
     std::vector<float> values;
+    std::vector<ivol::DamagedRegion> damaged;
     {
       py::gil_scoped_release release;
       std::lock_guard<std::mutex> lock(mutex_);
-      values = reader_->read_box(make_box(lo, hi), lod);
+      values = reader_->read_box(make_box(lo, hi), lod, salvage ? &damaged : nullptr);
     }
-    return owning_array(std::move(values), shape_of(lo, hi), py::dtype::of<float>());
+    py::array array = owning_array(std::move(values), shape_of(lo, hi), py::dtype::of<float>());
+    if (!salvage) return std::move(array);
+    return py::make_tuple(array, damaged_list(damaged));
   }
 
   // Stored bits of the box, little-endian, encoding_width() bytes a voxel,
   // as a uint8 array the Python half views with the encoding's dtype.
-  py::array read_bits(const std::array<std::uint32_t, 3>& lo, const std::array<std::uint32_t, 3>& hi, unsigned lod) {
+  py::object read_bits(const std::array<std::uint32_t, 3>& lo, const std::array<std::uint32_t, 3>& hi, unsigned lod,
+                       bool salvage) {
     std::vector<std::uint8_t> bits;
+    std::vector<ivol::DamagedRegion> damaged;
     {
       py::gil_scoped_release release;
       std::lock_guard<std::mutex> lock(mutex_);
-      bits = reader_->read_box_bits(make_box(lo, hi), lod);
+      bits = reader_->read_box_bits(make_box(lo, hi), lod, salvage ? &damaged : nullptr);
     }
     const auto n = static_cast<py::ssize_t>(bits.size());
-    return owning_array(std::move(bits), {n}, py::dtype::of<std::uint8_t>());
+    py::array array = owning_array(std::move(bits), {n}, py::dtype::of<std::uint8_t>());
+    if (!salvage) return std::move(array);
+    return py::make_tuple(array, damaged_list(damaged));
   }
 
   py::dict info() const {
@@ -100,6 +145,7 @@ class PyReader {
     d["file_size"] = f.file_size;
     d["block_count"] = f.blocks.size();
     d["metadata_json"] = reader_->metadata().to_json().dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+    d["salvage"] = f.salvage ? py::object(salvage_dict(*f.salvage)) : py::object(py::none());
     return d;
   }
 
@@ -281,6 +327,76 @@ py::dict write_volume(const std::string& path, const py::buffer& array, const st
   return d;
 }
 
+// Writes `values` ([z][y][x] float32) as a structure of `kind_name`
+// generated from a need mask ([k][j][i] cells of `factor` voxels a side,
+// non-zero where full resolution is needed), each structure voxel the mean
+// of the voxels it covers: what `ivol recon --structure` does with a
+// reconstruction (generate_structure, then write_structure), with the mask
+// given instead of found on a preview.
+py::dict write_grid(const std::string& path, const py::array_t<float, py::array::c_style>& values,
+                    const std::string& kind_name, const py::array_t<std::uint8_t, py::array::c_style>& need,
+                    std::uint32_t factor, std::uint32_t nested_cell, std::uint32_t max_interval,
+                    const std::string& encoding_name, const std::array<double, 3>& voxel_size,
+                    const std::array<double, 3>& origin, const std::string& unit, const std::string& quantity,
+                    const std::string& value_unit, const std::string& provenance_json, std::uint32_t block_bytes) {
+  ivol::StructureKind kind{};
+  if (!ivol::parse_structure(kind_name, kind))
+    throw ivol::Error(ivol::ErrorClass::InvalidArgument,
+                      path + ": structure '" + kind_name + "' is not octree, regular, rectilinear or nested");
+  if (values.ndim() != 3 || need.ndim() != 3)
+    throw ivol::Error(ivol::ErrorClass::InvalidArgument, path + ": values and need need 3 dimensions (z, y, x)");
+  ivol::NeedMask mask;
+  mask.factor = factor;
+  for (int a = 0; a < 3; ++a) {
+    mask.dims[a] = static_cast<std::uint32_t>(values.shape(2 - a));
+    mask.cells[a] = (mask.dims[a] + factor - 1) / factor;
+    if (static_cast<std::uint64_t>(need.shape(2 - a)) != mask.cells[a])
+      throw ivol::Error(ivol::ErrorClass::InvalidArgument,
+                        path + ": need has " + std::to_string(need.shape(2 - a)) + " cells along axis " +
+                            std::to_string(2 - a) + "; ceil(" + std::to_string(mask.dims[a]) + " / " +
+                            std::to_string(factor) + ") = " + std::to_string(mask.cells[a]) + " expected");
+  }
+  mask.need.assign(need.data(), need.data() + need.size());
+
+  ivol::StreamingOptions options;
+  const auto parsed = ivol::parse_encoding(encoding_name);
+  if (!parsed || *parsed == ivol::ValueEncoding::UInt16)
+    throw ivol::Error(ivol::ErrorClass::InvalidArgument,
+                      path + ": encoding '" + encoding_name +
+                          "' for a structure: binary16 or float32 (its coarse voxels are means, not integers)");
+  options.build.encoding = *parsed;
+  if (block_bytes) options.write.block_bytes = block_bytes;
+
+  ivol::Metadata metadata;
+  metadata.voxel_size = voxel_size;
+  metadata.origin = origin;
+  metadata.unit = unit;
+  if (!quantity.empty()) metadata.quantity = quantity;
+  if (!value_unit.empty()) metadata.value_unit = value_unit;
+  metadata.provenance = ivol::default_provenance();
+  if (!provenance_json.empty()) metadata.provenance.update(nlohmann::json::parse(provenance_json));
+  metadata.structure["kind"] = kind_name;
+
+  ivol::StreamingResult result;
+  std::uint64_t structure_voxels = 0;
+  {
+    py::gil_scoped_release release;
+    ivol::GenerationOptions generation;
+    generation.nested_cell = nested_cell;
+    generation.rectilinear_max_interval = max_interval;
+    std::unique_ptr<ivol::VoxelStructure> structure = ivol::generate_structure(kind, mask, generation);
+    structure->sample_dense(values.data());
+    structure_voxels = structure->voxel_count();
+    result = ivol::write_structure(*structure, path, metadata, options);
+  }
+  py::dict d;
+  d["file_bytes"] = result.write.file_bytes;
+  d["max_abs_error"] = result.max_abs_error;
+  d["structure_voxels"] = structure_voxels;
+  d["encoding"] = ivol::encoding_name(options.build.encoding);
+  return d;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_ivol, m) {
@@ -300,7 +416,8 @@ PYBIND11_MODULE(_ivol, m) {
   });
 
   py::class_<PyReader>(m, "Reader")
-      .def(py::init<const std::string&, std::uint64_t>(), py::arg("path"), py::arg("cache_bytes"))
+      .def(py::init<const std::string&, std::uint64_t, bool>(), py::arg("path"), py::arg("cache_bytes"),
+           py::arg("salvage"))
       .def("read", &PyReader::read)
       .def("read_bits", &PyReader::read_bits)
       .def("info", &PyReader::info)
@@ -308,5 +425,6 @@ PYBIND11_MODULE(_ivol, m) {
       .def("reset_io_stats", &PyReader::reset_io_stats);
   m.def("check", &check);
   m.def("write", &write_volume);
+  m.def("write_grid", &write_grid);
   m.def("library_version", &ivol::library_version);
 }

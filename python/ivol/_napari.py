@@ -1,0 +1,45 @@
+"""The napari reader contribution (napari.yaml, npe2): an .ivol file opens as
+one multiscale image, its levels of detail the pyramid, with the voxel size
+as scale and the origin as translate, all in (z, y, x).
+
+Imports nothing of napari: napari calls get_reader with a path and the
+reader it returns with the same path (or a list of paths).
+"""
+
+import os
+
+from . import open as _open
+
+
+def get_reader(path):
+    """The reader for `path` when it is one .ivol file, else None (napari then
+    asks other plugins)."""
+    if isinstance(path, (list, tuple)):
+        if len(path) != 1:
+            return None
+        path = path[0]
+    path = os.fspath(path)
+    if not path.endswith(".ivol") or not os.path.isfile(path):
+        return None
+    return read_layers
+
+
+def read_layers(path):
+    """[(pyramid, layer options, "image")] for napari: the pyramid is
+    [f.level(k) for k in range(f.levels)], finest first; level k's voxels are
+    2^k voxels of level 0 wide, which napari derives from the shapes, so one
+    scale (the voxel size) serves every level."""
+    if isinstance(path, (list, tuple)):
+        path = path[0]
+    f = _open(path)
+    pyramid = [f.level(k) for k in range(f.levels)]
+    options = {
+        "name": os.path.splitext(os.path.basename(f.path))[0],
+        "scale": f.voxel_size,
+        "translate": f.origin,
+        "metadata": {"ivol": f.metadata, "unit": f.unit},
+        "multiscale": len(pyramid) > 1,
+    }
+    # A file of one level (a volume of one voxel) is a plain image to napari.
+    data = pyramid if len(pyramid) > 1 else pyramid[0]
+    return [(data, options, "image")]
