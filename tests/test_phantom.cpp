@@ -474,7 +474,7 @@ TEST(PhantomLibrary, EveryPhantomFitsTheFieldOfView) {
 }
 
 TEST(PhantomLibrary, NamesAndRefusals) {
-  EXPECT_EQ(phantom_names().size(), 6u);
+  EXPECT_EQ(phantom_names().size(), 7u);
   try {
     named_phantom("teapot", 10);
     FAIL() << "no exception";
