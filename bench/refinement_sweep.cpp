@@ -8,7 +8,8 @@
 //
 //   refinement_sweep [--size N] [--views V] [--detector D] [--phantom NAME]...
 //
-// Prints one JSON line per setting.
+// Prints one JSON line per setting; with SWEEP_DIAG=1 also the first missed
+// object voxels of each setting (position, dense value, the cell's pooled value).
 #include <chrono>
 #include <cmath>
 #include <cstdio>
