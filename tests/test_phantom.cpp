@@ -342,7 +342,8 @@ TEST(PhantomVoxelize, EqualsDensityAtVoxelCentresAndSlabsAgree) {
           nonzero += expected != 0;
         }
     EXPECT_LE(mismatches, 1) << name;
-    EXPECT_GT(nonzero, 10) << name;
+    // fine-wires' wires are radius / 128 thin: few centres of 2 mm voxels fall in them.
+    EXPECT_GT(nonzero, name == "fine-wires" ? 0 : 10) << name;
     voxelize(p, grid, 9, 16, part.data());
     EXPECT_TRUE(std::equal(part.begin(), part.end(), whole.begin() + 9 * slice)) << name;
   }
@@ -474,7 +475,7 @@ TEST(PhantomLibrary, EveryPhantomFitsTheFieldOfView) {
 }
 
 TEST(PhantomLibrary, NamesAndRefusals) {
-  EXPECT_EQ(phantom_names().size(), 6u);
+  EXPECT_EQ(phantom_names().size(), 7u);
   try {
     named_phantom("teapot", 10);
     FAIL() << "no exception";

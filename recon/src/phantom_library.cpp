@@ -297,14 +297,47 @@ Phantom lattice_part(double R) {
   return p;
 }
 
+Phantom fine_wires(double R, double w) {
+  check_radius(R);
+  if (!(w > 0.0) || !std::isfinite(w) || w > 0.04 * R)
+    throw std::invalid_argument("phantom: the wire width must be positive and at most 4 % of the field's radius");
+  Phantom p;
+  auto& s = p.shapes;
+  const double h = 0.5 * w;  // half a wire's width
+  // A copper grating: 9 wires along x, gaps of one width between them.
+  for (int n = 0; n < 9; ++n)
+    s.push_back(make(ShapeKind::Box, {0.0, -0.3 * R + (n - 4) * 2.0 * w, 0.25 * R}, {0.45 * R, h, h}, kCopper));
+  // A steel grating across it, lower down: 9 wires along y.
+  for (int n = 0; n < 9; ++n)
+    s.push_back(make(ShapeKind::Box, {0.2 * R + (n - 4) * 2.0 * w, 0.0, -0.25 * R}, {h, 0.45 * R, h}, kSteel));
+  // Two aluminium sheets one width thick with a gap of one width between
+  // them, standing across the field.
+  for (double side : {-1.0, 1.0})
+    s.push_back(make(ShapeKind::Box, {-0.35 * R + side * w, 0.1 * R, 0.0}, {h, 0.3 * R, 0.35 * R}, kAluminium));
+  // Lone wires in air, far from everything else: steel along z and along two
+  // diagonals, brass along y, and a plastic one (near the threshold).
+  s.push_back(rod({0.45 * R, 0.35 * R, -0.6 * R}, {0.45 * R, 0.35 * R, 0.6 * R}, h, kSteel));
+  s.push_back(rod({-0.5 * R, -0.5 * R, -0.5 * R}, {0.3 * R, 0.0, 0.55 * R}, h, kSteel));
+  s.push_back(rod({0.6 * R, -0.3 * R, 0.6 * R}, {0.0, -0.6 * R, -0.2 * R}, h, kSteel));
+  s.push_back(make(ShapeKind::Box, {-0.15 * R, 0.0, 0.6 * R}, {h, 0.5 * R, h}, kBrass));
+  s.push_back(make(ShapeKind::Box, {0.0, 0.55 * R, -0.55 * R}, {0.5 * R, h, h}, kPlastic));
+  // Turned so that no wire runs along the voxel grid.
+  place(s, 0, multiply(about_z(11.0), about_x(4.0)), {0.0, 0.0, 0.0});
+  return p;
+}
+
+Phantom fine_wires(double R) { return fine_wires(R, R / 128.0); }
+
 std::vector<std::string> phantom_names() {
-  return {"shepp-logan", "pencil-holder", "connector-board", "computer-board", "thin-pipe", "lattice-part"};
+  return {"shepp-logan", "pencil-holder", "connector-board", "computer-board",
+          "thin-pipe",   "lattice-part",  "fine-wires"};
 }
 
 Phantom named_phantom(const std::string& name, double fov_radius) {
   static const std::pair<const char*, Phantom (*)(double)> kMakers[] = {
       {"shepp-logan", shepp_logan_3d},    {"pencil-holder", pencil_holder}, {"connector-board", connector_board},
-      {"computer-board", computer_board}, {"thin-pipe", thin_pipe},         {"lattice-part", lattice_part}};
+      {"computer-board", computer_board}, {"thin-pipe", thin_pipe},         {"lattice-part", lattice_part},
+      {"fine-wires", fine_wires}};
   for (const auto& [known, maker] : kMakers)
     if (name == known) return maker(fov_radius);
   std::string list;

@@ -5,6 +5,7 @@
 #include <iomanip>
 #include <iostream>
 #include <optional>
+#include <sstream>
 
 #include "commands.hpp"
 #include "fixity.hpp"
@@ -42,9 +43,10 @@ struct ReconSettings {
   std::string keep;
   std::string structure;
   std::string threshold = "otsu";
+  std::string refine = "detection";
   unsigned margin = 2;
   std::uint32_t nested_cell = 16;
-  unsigned preview_factor = 4;
+  unsigned preview_factor = 0;  // 0: the rule's own (2 for detection, 4 for the preview rule and --keep)
   std::uint64_t memory_mib = 1024;
   bool json = false;
   bool force = false;
@@ -90,6 +92,27 @@ void scan_inputs(const ScanSettings& scan, std::vector<std::string>& inputs, std
   for (const std::string& f : scan.flats) add(f, "flat");
   for (const std::string& f : scan.darks) add(f, "dark");
   if (!scan.geometry_xml.empty()) add(scan.geometry_xml, "geometry");
+}
+
+constexpr recon::DetectionRule kDetection{};
+
+std::string share_text(double share) {
+  std::ostringstream text;
+  text << share;
+  return text.str();
+}
+
+// The rule in words, for provenance.
+std::string refinement_rule(bool detection, unsigned factor) {
+  const std::string cell = std::to_string(factor) + "^3";
+  if (!detection)
+    return "a " + cell + " cell is full resolution where the 1/" + std::to_string(factor) +
+           " preview's value at its centre exceeds the threshold, or within the margin (in whole cells) of one "
+           "that does";
+  return "a " + cell + " cell is full resolution where the largest sample of a 1/" +
+         std::to_string(factor > 2 ? factor / 2 : factor) + " reconstruction (one view in " +
+         std::to_string(kDetection.thinning) + ", " + std::to_string(kDetection.thinning) + "x" +
+         std::to_string(kDetection.thinning) + " pixels merged) within the margin of the cell exceeds the threshold";
 }
 
 double seconds_since(std::chrono::steady_clock::time_point start) {
@@ -167,21 +190,28 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
                   std::chrono::steady_clock::time_point start, MpiRun* mpi) {
   StructureKind kind{};
   parse_structure(s.structure, kind);
+  // The refinement rule (docs/refinement.md). detection: each preview cell
+  // the largest sample of a 1/(factor/2) reconstruction within the margin
+  // of it, against a share of Otsu's threshold that covers the preview's
+  // blur; the margin is applied while pooling, so the need mask adds none.
+  // preview (the rule before issue 18): each cell its centre's value on a
+  // 1/factor preview, half of Otsu's threshold, the margin in whole cells.
+  const bool detection = s.refine == "detection";
+  const unsigned factor = s.preview_factor ? s.preview_factor : detection ? kDetection.factor : 4;
   const recon::Preview preview =
-      recon::reconstruct_preview(*scan.projections, scan.geometry, fdk_options, grid, s.preview_factor);
-  // Half of Otsu's threshold on the preview: a preview voxel averages a thin
-  // wall with the air around it, and a wall filling half of it must still be
-  // found (bench/RESULTS.md: 99.7 % of the object kept at full resolution,
-  // against 89 % with Otsu's threshold itself, for the thin pipe).
-  float threshold = 0.5F * preview.otsu_threshold;
+      detection ? recon::reconstruct_detection_preview(*scan.projections, scan.geometry, fdk_options, grid, factor,
+                                                       kDetection.thinning, s.margin)
+                : recon::reconstruct_preview(*scan.projections, scan.geometry, fdk_options, grid, factor);
+  const double otsu_share = detection ? kDetection.otsu_share : 0.5;
+  float threshold = static_cast<float>(otsu_share * preview.otsu_threshold);
   if (s.threshold != "otsu") {
     threshold = static_cast<float>(parse_number(s.threshold, "--threshold"));
   }
+  const unsigned mask_margin = detection ? 0 : s.margin;
   auto generation_start = std::chrono::steady_clock::now();
   const Dims full{grid.size[0], grid.size[1], grid.size[2]};
   const Dims low{preview.grid.size[0], preview.grid.size[1], preview.grid.size[2]};
-  const NeedMask mask =
-      need_mask_from_low_resolution(preview.values.data(), low, s.preview_factor, full, threshold, s.margin);
+  const NeedMask mask = need_mask_from_low_resolution(preview.values.data(), low, factor, full, threshold, mask_margin);
   GenerationOptions generation;
   generation.nested_cell = s.nested_cell;
   std::unique_ptr<VoxelStructure> structure = generate_structure(kind, mask, generation);
@@ -189,10 +219,15 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
 
   metadata.provenance["reconstruction"]["structure"] = {
       {"kind", s.structure},
+      {"refinement", s.refine},
+      {"refinement_rule", refinement_rule(detection, factor)},
       {"threshold", threshold},
-      {"threshold_method", s.threshold == "otsu" ? "half of Otsu's on the preview" : "given"},
+      {"threshold_method", s.threshold != "otsu" ? "given"
+                           : detection           ? share_text(kDetection.otsu_share) + " of Otsu's on the samples"
+                                                 : "half of Otsu's on the preview"},
+      {"otsu_threshold", preview.otsu_threshold},
       {"margin", s.margin},
-      {"preview_factor", s.preview_factor},
+      {"preview_factor", factor},
       {"voxels", structure->voxel_count()}};
   metadata.voxel_size = grid.voxel_size;
   metadata.origin = grid.origin;
@@ -335,8 +370,18 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember({"octree", "nested", "rectilinear", "regular"}));
   paper
       ->add_option("--threshold", s->threshold,
-                   "With --structure: the object's threshold on the preview, a value or otsu (half of Otsu's)")
+                   "With --structure: the object's threshold on the preview, a value or otsu (" +
+                       share_text(kDetection.otsu_share) +
+                       " of Otsu's on the detection samples; half of Otsu's with --refine preview)")
       ->check(checked(check_threshold))
+      ->capture_default_str();
+  paper
+      ->add_option("--refine", s->refine,
+                   "With --structure: which cells get full resolution. detection: a cell whose largest sample of a "
+                   "1/(factor/2) reconstruction within --margin voxels of it exceeds --threshold (keeps walls and "
+                   "wires one voxel thin; docs/refinement.md); preview: a cell whose 1/factor preview value at its "
+                   "centre does, grown by --margin in whole cells (the rule before 2026-12)")
+      ->check(CLI::IsMember({"detection", "preview"}))
       ->capture_default_str();
   paper->add_option("--margin", s->margin, "With --structure: full-resolution voxels kept around the object")
       ->check(whole_number())
@@ -345,9 +390,9 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       ->check(whole_number())
       ->capture_default_str();
   out->add_option("--preview-factor", s->preview_factor,
-                  "Coarsening of the preview that finds the object (a power of two)")
-      ->check(CLI::IsMember({2, 4, 8, 16, 32}))
-      ->capture_default_str();
+                  "Edge in voxels of the cells the preview marks (a power of two; default 2 with --refine "
+                  "detection, 4 with --refine preview and --keep ...otsu)")
+      ->check(CLI::IsMember({2, 4, 8, 16, 32}));
   out->add_option("--memory", s->memory_mib, "About how many MiB the writer may hold")
       ->check(whole_number())
       ->capture_default_str();
@@ -396,13 +441,14 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     import.framed_blocks = s->format_version == "1.3";
     import.slab_budget_bytes = (s->memory_mib << 20) / 4;
     double preview_seconds = 0.0;
+    const unsigned keep_factor = s->preview_factor ? s->preview_factor : 4;
     if (!s->keep.empty()) {
       convert::KeepRule rule = parse_keep(s->keep, "--keep");
       if (rule.otsu) {
         // The paper's way: a quick low-resolution reconstruction finds the
         // object; its Otsu threshold then marks the full-resolution region.
         const recon::Preview preview =
-            recon::reconstruct_preview(*scan.projections, scan.geometry, options, grid, s->preview_factor);
+            recon::reconstruct_preview(*scan.projections, scan.geometry, options, grid, keep_factor);
         rule.otsu = false;
         rule.threshold = preview.otsu_threshold;
         preview_seconds = preview.seconds;
@@ -424,7 +470,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
           {"threshold", import.keep->threshold},
           {"margin", import.keep->margin},
           {"method", s->keep.find("otsu") != std::string::npos
-                         ? "otsu on a 1/" + std::to_string(s->preview_factor) + " preview"
+                         ? "otsu on a 1/" + std::to_string(keep_factor) + " preview"
                          : "given"}};
     }
     m.quantity = "linear_attenuation";

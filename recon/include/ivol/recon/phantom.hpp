@@ -116,9 +116,18 @@ Phantom thin_pipe(double fov_radius);
 // that no face is aligned with the grid.
 Phantom lattice_part(double fov_radius);
 
+// Wires and sheets one `wire_width` thick with gaps of one width: a copper
+// and a steel grating (9 square wires each, gaps of one width), two aluminium
+// sheets with a gap of one width, and lone wires in air (steel along z and
+// two diagonals, brass, one of plastic), all turned off the voxel grid. The
+// one-argument form makes them fov_radius / 128 wide: one voxel at 256³ over
+// the field.
+Phantom fine_wires(double fov_radius, double wire_width);
+Phantom fine_wires(double fov_radius);
+
 // "shepp-logan" (scale = fov_radius, so the outer ellipsoid spans the field),
 // "pencil-holder", "connector-board", "computer-board", "thin-pipe",
-// "lattice-part". Throws std::invalid_argument listing the known names.
+// "lattice-part", "fine-wires". Throws std::invalid_argument listing the known names.
 Phantom named_phantom(const std::string& name, double fov_radius);
 std::vector<std::string> phantom_names();
 

@@ -23,4 +23,30 @@ struct Preview {
 Preview reconstruct_preview(ProjectionSource& projections, const ScanGeometry& geometry, const FdkOptions& options,
                             const VolumeGrid& full, unsigned factor);
 
+// The detection rule's settings (docs/refinement.md; the share and the
+// thinning measured in bench/RESULTS.md, "Refinement rule").
+struct DetectionRule {
+  unsigned factor = 2;      // a cell's edge in voxels (a power of two)
+  unsigned thinning = 2;    // samples from every 2nd view, 2×2 pixels merged
+  unsigned margin = 2;      // voxels around a cell whose samples count for it
+  double otsu_share = 0.3;  // the threshold: this share of the samples' Otsu's threshold
+};
+
+// A preview built to find the object rather than to show it (the refinement
+// rule of docs/refinement.md): the volume is reconstructed at 1/(factor/2)
+// (two samples per cell and axis; at 1/2, one, when factor is 2) from every
+// `thinning`-th view with thinning² pixels merged; each cell of factor³ full
+// voxels then takes the LARGEST sample within `margin_voxels` of it (rounded
+// up to whole samples), not its centre's value nor a mean. A full voxel lies
+// within half a sample spacing of a sample of its cell, so a wall or wire one
+// voxel thin shows in its cell near its own density instead of blurring into
+// air, and the margin catches the dense reconstruction's own blur across a
+// cell's face without adding whole cells. Samples arrive slice by slice and
+// are pooled at once: host memory is the cells pooled along x and y plus one
+// sample in eight. otsu_threshold is Otsu's over that one in eight (not over
+// the maxima, which would bias it). factor: a power of two, at least 2.
+Preview reconstruct_detection_preview(ProjectionSource& projections, const ScanGeometry& geometry,
+                                      const FdkOptions& options, const VolumeGrid& full, unsigned factor,
+                                      unsigned thinning, unsigned margin_voxels);
+
 }  // namespace ivol::recon
