@@ -22,11 +22,13 @@ std::size_t count(const BrickDims& d) { return std::size_t{d[0]} * d[1] * d[2]; 
 std::vector<std::uint16_t> reference_decode(const std::vector<std::uint8_t>& payload, const BrickDims& d) {
   const std::size_t n = count(d);
   std::vector<std::uint8_t> planes(2 * n);
-  const std::size_t got = ZSTD_decompress(planes.data(), planes.size(), payload.data() + 20, payload.size() - 20);
+  const std::size_t got = ZSTD_decompress(planes.data(), planes.size(), payload.data() + 24, payload.size() - 24);
   EXPECT_EQ(got, planes.size());
   const int map = payload[1], shift = payload[2];
   std::int64_t tap[7];
   for (int k = 0; k < 7; ++k) tap[k] = static_cast<std::int16_t>(payload[4 + 2 * k] | payload[5 + 2 * k] << 8);
+  const std::int64_t bias =
+      static_cast<std::int32_t>(payload[18] | payload[19] << 8 | payload[20] << 16 | std::uint32_t{payload[21]} << 24);
   std::vector<std::int64_t> u(n);
   auto at = [&](std::int64_t x, std::int64_t y, std::int64_t z) { return u[(z * d[1] + y) * d[0] + x]; };
   auto clamp = [](std::int64_t p) { return std::min<std::int64_t>(65535, std::max<std::int64_t>(0, p)); };
@@ -39,7 +41,7 @@ std::vector<std::uint16_t> reference_decode(const std::vector<std::uint8_t>& pay
                                  tap[3] * at(x - 1, y - 1, z) + tap[4] * at(x - 1, y, z - 1) +
                                  tap[5] * at(x, y - 1, z - 1) + tap[6] * at(x - 1, y - 1, z - 1);
           const std::int64_t r = shift > 0 ? std::int64_t{1} << (shift - 1) : 0;
-          p = clamp(static_cast<std::int64_t>(std::floor(static_cast<long double>(s + r) / (1LL << shift))));
+          p = clamp(static_cast<std::int64_t>(std::floor(static_cast<long double>(s + r) / (1LL << shift))) + bias);
         } else if (x > 0 && y > 0) {
           p = clamp(at(x - 1, y, z) + at(x, y - 1, z) - at(x - 1, y - 1, z));
         } else if (x > 0 && z > 0) {
@@ -153,7 +155,7 @@ TEST(PredictedCodec, APlaneIsPredictedExactly) {
   const auto payload = ivol::encode_predicted(v.data(), d, ValueEncoding::UInt16);
   EXPECT_LT(payload.size(), 200u);
   std::vector<std::uint8_t> planes(2 * count(d));
-  ASSERT_EQ(ZSTD_decompress(planes.data(), planes.size(), payload.data() + 20, payload.size() - 20), planes.size());
+  ASSERT_EQ(ZSTD_decompress(planes.data(), planes.size(), payload.data() + 24, payload.size() - 24), planes.size());
   // Voxel 0 is predicted as 0: zigzag(1000) = 2000 = 0x07D0; x = 1 from x = 0 (3 -> 6), y = 1 (5 -> 10).
   EXPECT_EQ(planes[0], 0xD0);
   EXPECT_EQ(planes[count(d)], 0x07);
@@ -182,12 +184,12 @@ TEST(PredictedCodec, ArbitraryTapsDecodeAsTheSpecSays) {
   for (int trial = 0; trial < 200; ++trial) {
     std::vector<std::uint8_t> planes(2 * count(d));
     for (auto& b : planes) b = static_cast<std::uint8_t>(rng());
-    std::vector<std::uint8_t> payload(20, 0);
+    std::vector<std::uint8_t> payload(24, 0);
     payload[0] = 1;
     payload[1] = rng() % 2;
     payload[2] = rng() % 16;
     payload[3] = 1;
-    for (int k = 0; k < 14; ++k)
+    for (int k = 0; k < 18; ++k)
       payload[4 + k] = trial % 4 == 0 ? (k % 2 ? 0x7F : 0xFF) : static_cast<std::uint8_t>(rng());
     std::vector<std::uint8_t> frame(ZSTD_compressBound(planes.size()));
     frame.resize(ZSTD_compress(frame.data(), frame.size(), planes.data(), planes.size(), 1));
@@ -213,7 +215,7 @@ TEST(PredictedCodec, HostilePayloadsAreRefused) {
   const auto good = ivol::encode_predicted(v.data(), d, ValueEncoding::UInt16);
   using C = ivol::ErrorClass;
   expect_refused({}, d, C::Malformed, "shorter than the codec header");
-  expect_refused(std::vector<std::uint8_t>(good.begin(), good.begin() + 19), d, C::Malformed, "shorter");
+  expect_refused(std::vector<std::uint8_t>(good.begin(), good.begin() + 23), d, C::Malformed, "shorter");
   auto p = good;
   p[0] = 2;
   expect_refused(p, d, C::UnsupportedFeature, "predictor 2");
@@ -223,13 +225,13 @@ TEST(PredictedCodec, HostilePayloadsAreRefused) {
   expect_refused(p, d, C::Malformed, "shift 16");
   p = good, p[3] = 0;
   expect_refused(p, d, C::UnsupportedFeature, "entropy coder 0");
-  p = good, p[19] = 1;
+  p = good, p[23] = 1;
   expect_refused(p, d, C::Malformed, "reserved");
   p = good, p.push_back(0);
   expect_refused(p, d, C::Malformed, "exactly one complete zstd frame");
   p = std::vector<std::uint8_t>(good.begin(), good.end() - 1);
   expect_refused(p, d, C::Malformed, "zstd frame");
-  p = good, p[20] ^= 0xFF;
+  p = good, p[24] ^= 0xFF;
   expect_refused(p, d, C::Malformed, "not a zstd frame");
   // A frame of the wrong brick: 7 x 8 x 8 values are not 8 x 8 x 8.
   expect_refused(good, BrickDims{7, 8, 8}, C::Malformed, "the brick needs");

@@ -29,8 +29,9 @@ struct Taps {
   unsigned shift = 0;
   // Neighbours (x-1), (y-1), (z-1), (x-1,y-1), (x-1,z-1), (y-1,z-1), (x-1,y-1,z-1).
   std::array<std::int32_t, 7> t{};
+  std::int32_t bias = 0;  // added after the shift: a level that noise-dominated bricks predict best
 };
-constexpr Taps kLorenzo{0, {1, 1, 1, -1, -1, -1, 1}};
+constexpr Taps kLorenzo{0, {1, 1, 1, -1, -1, -1, 1}, 0};
 
 std::uint16_t map_value(std::uint16_t v, std::uint8_t map) {
   if (map == kMapIdentity) return v;
@@ -81,7 +82,7 @@ void walk_brick(const BrickDims& d, const Taps& taps, std::uint16_t* u, F&& at) 
                                  t[2] * std::int64_t{c[-sz]} + t[3] * std::int64_t{c[-1 - sy]} +
                                  t[4] * std::int64_t{c[-1 - sz]} + t[5] * std::int64_t{c[-sy - sz]} +
                                  t[6] * std::int64_t{c[-1 - sy - sz]};
-        at(i, static_cast<std::uint16_t>(clamp_u16((sum + round) >> taps.shift)));
+        at(i, static_cast<std::uint16_t>(clamp_u16(((sum + round) >> taps.shift) + taps.bias)));
       }
     }
 }
@@ -159,6 +160,65 @@ bool fit_least_squares(const BrickDims& d, const std::uint16_t* u, Taps& out) {
   return out.t[0] >= -32768 && out.t[0] <= 32767;
 }
 
+// Least-squares taps with a level (intercept), for bricks where noise
+// dominates: predicting every voxel from its neighbours' sum would add their
+// noise, predicting the level does not. Fitted on values less the brick's
+// first interior voxel (so that the sums keep their precision); the level is
+// computed after the taps are rounded, so their rounding costs nothing.
+bool fit_least_squares_with_level(const BrickDims& d, const std::uint16_t* u, Taps& out) {
+  if (d[0] < 2 || d[1] < 2 || d[2] < 2 || (d[0] - 1) * std::uint64_t{d[1] - 1} * (d[2] - 1) < 64) return false;
+  const std::size_t sy = d[0], sz = std::size_t{d[0]} * d[1];
+  const double ref = u[sz + sy + 1];
+  double sum_n[7] = {}, sum_v = 0, nn[49] = {}, nv[7] = {}, count = 0;
+  auto neighbours = [&](const std::uint16_t* c, double* n) {
+    n[0] = c[-1] - ref, n[1] = c[-sy] - ref, n[2] = c[-sz] - ref, n[3] = c[-1 - sy] - ref;
+    n[4] = c[-1 - sz] - ref, n[5] = c[-sy - sz] - ref, n[6] = c[-1 - sy - sz] - ref;
+  };
+  for (std::uint32_t z = 1; z < d[2]; ++z)
+    for (std::uint32_t y = 1; y < d[1]; ++y) {
+      const std::uint16_t* c = u + z * sz + y * sy + 1;
+      for (std::uint32_t x = 1; x < d[0]; ++x, ++c) {
+        double n[7];
+        neighbours(c, n);
+        const double v = c[0] - ref;
+        count += 1, sum_v += v;
+        for (int r = 0; r < 7; ++r) {
+          sum_n[r] += n[r], nv[r] += n[r] * v;
+          for (int k = r; k < 7; ++k) nn[r * 7 + k] += n[r] * n[k];
+        }
+      }
+    }
+  double cov[49], rhs[7];
+  for (int r = 0; r < 7; ++r) {
+    rhs[r] = nv[r] - sum_n[r] * sum_v / count;
+    for (int k = r; k < 7; ++k) cov[r * 7 + k] = cov[k * 7 + r] = nn[r * 7 + k] - sum_n[r] * sum_n[k] / count;
+  }
+  if (!solve(cov, rhs, 7)) return false;
+  out.shift = kLeastSquaresShift;
+  for (int r = 0; r < 7; ++r) {
+    const double scaled = std::nearbyint(rhs[r] * (1 << kLeastSquaresShift));
+    if (!(std::fabs(scaled) <= 32767)) return false;
+    out.t[r] = static_cast<std::int32_t>(scaled);
+  }
+  // The level: the mean of what the rounded taps leave, over the interior.
+  out.bias = 0;
+  double left = 0;
+  const std::int64_t round = std::int64_t{1} << (kLeastSquaresShift - 1);
+  for (std::uint32_t z = 1; z < d[2]; ++z)
+    for (std::uint32_t y = 1; y < d[1]; ++y) {
+      const std::uint16_t* c = u + z * sz + y * sy + 1;
+      for (std::uint32_t x = 1; x < d[0]; ++x, ++c) {
+        const std::int64_t sum = out.t[0] * std::int64_t{c[-1]} + out.t[1] * std::int64_t{c[-sy]} +
+                                 out.t[2] * std::int64_t{c[-sz]} + out.t[3] * std::int64_t{c[-1 - sy]} +
+                                 out.t[4] * std::int64_t{c[-1 - sz]} + out.t[5] * std::int64_t{c[-sy - sz]} +
+                                 out.t[6] * std::int64_t{c[-1 - sy - sz]};
+        left += static_cast<double>(c[0] - ((sum + round) >> kLeastSquaresShift));
+      }
+    }
+  out.bias = static_cast<std::int32_t>(std::nearbyint(left / count));
+  return true;
+}
+
 // Sum of the residuals' magnitudes: what the candidate taps are judged by.
 std::uint64_t residual_cost(const BrickDims& d, const Taps& taps, const std::uint16_t* u) {
   std::uint64_t cost = 0;
@@ -195,12 +255,16 @@ std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const Br
   std::vector<std::uint16_t> u(n);
   for (std::size_t i = 0; i < n; ++i) u[i] = map_value(values[i], map);
 
+  // Candidates judged by the sum of their residuals' magnitudes.
   Taps taps = kLorenzo;
-  Taps fitted;
-  if (options.taps != PredictedOptions::Taps::Lorenzo && fit_least_squares(dims, u.data(), fitted)) {
-    if (options.taps == PredictedOptions::Taps::LeastSquares ||
-        residual_cost(dims, fitted, u.data()) < residual_cost(dims, kLorenzo, u.data()))
-      taps = fitted;
+  if (options.taps != PredictedOptions::Taps::Lorenzo) {
+    std::uint64_t best =
+        options.taps == PredictedOptions::Taps::Best ? residual_cost(dims, kLorenzo, u.data()) : ~std::uint64_t{0};
+    Taps fitted;
+    if (fit_least_squares(dims, u.data(), fitted))
+      if (const std::uint64_t cost = residual_cost(dims, fitted, u.data()); cost < best) best = cost, taps = fitted;
+    if (fit_least_squares_with_level(dims, u.data(), fitted))
+      if (const std::uint64_t cost = residual_cost(dims, fitted, u.data()); cost < best) best = cost, taps = fitted;
   }
 
   std::vector<std::uint8_t> planes(2 * n);
@@ -220,7 +284,8 @@ std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const Br
     out[4 + 2 * k] = static_cast<std::uint8_t>(tap);
     out[5 + 2 * k] = static_cast<std::uint8_t>(tap >> 8);
   }
-  out[18] = out[19] = 0;  // reserved
+  for (int k = 0; k < 4; ++k) out[18 + k] = static_cast<std::uint8_t>(static_cast<std::uint32_t>(taps.bias) >> (8 * k));
+  out[22] = out[23] = 0;  // reserved
   thread_local std::unique_ptr<ZSTD_CCtx, decltype(&ZSTD_freeCCtx)> context(ZSTD_createCCtx(), ZSTD_freeCCtx);
   if (!context) throw Error(ErrorClass::Io, "zstd: cannot create a compression context");
   ZSTD_CCtx_reset(context.get(), ZSTD_reset_session_and_parameters);
@@ -246,11 +311,13 @@ void decode_predicted(const std::uint8_t* payload, std::size_t size, const Brick
   if (payload[2] > kMaxShift) bad(ErrorClass::Malformed, "shift " + std::to_string(payload[2]) + " exceeds 15");
   if (payload[3] != kEntropyZstdPlanes)
     bad(ErrorClass::UnsupportedFeature, "entropy coder " + std::to_string(payload[3]) + " is not known");
-  if (payload[18] != 0 || payload[19] != 0) bad(ErrorClass::Malformed, "the reserved bytes 18 .. 20 are not 0");
+  if (payload[22] != 0 || payload[23] != 0) bad(ErrorClass::Malformed, "the reserved bytes 22 .. 24 are not 0");
   Taps taps;
   taps.shift = payload[2];
   for (int k = 0; k < 7; ++k)
     taps.t[k] = static_cast<std::int16_t>(static_cast<std::uint16_t>(payload[4 + 2 * k] | payload[5 + 2 * k] << 8));
+  taps.bias = static_cast<std::int32_t>(std::uint32_t{payload[18]} | std::uint32_t{payload[19]} << 8 |
+                                        std::uint32_t{payload[20]} << 16 | std::uint32_t{payload[21]} << 24);
 
   const std::uint8_t* frame = payload + kPredictedHeaderSize;
   const std::size_t frame_size = size - kPredictedHeaderSize;

@@ -2,8 +2,9 @@
 // values block that is a brick of 16-bit values. A causal 3-D predictor on
 // the u16 bit patterns (so -0 and NaN payloads come back exactly), zigzag
 // residuals, and zstd over the residuals' two byte planes. Each brick carries
-// its own integer predictor taps: least squares fitted to the brick, or the
-// Lorenzo predictor when the fit does not predict better.
+// its own integer predictor taps and level: least squares fitted to the brick
+// (with or without a level), or the Lorenzo predictor, whichever leaves the
+// smallest residuals.
 #pragma once
 
 #include <array>
@@ -21,11 +22,13 @@ using BrickDims = std::array<std::uint32_t, 3>;
 struct PredictedOptions {
   int zstd_level = 3;
   // Which taps the encoder may store (the decoder reads any).
+  // Best: the smallest residuals of Lorenzo and both fits; LeastSquares: of
+  // the fits only.
   enum class Taps { Best, Lorenzo, LeastSquares } taps = Taps::Best;
 };
 
 // Size of the codec header in front of the zstd frame (spec §7.2).
-constexpr std::size_t kPredictedHeaderSize = 20;
+constexpr std::size_t kPredictedHeaderSize = 24;
 
 // Encodes `values` (dims[0] * dims[1] * dims[2] of them, at least one) as a
 // codec 3 payload. `encoding` picks the value map (binary16 values are
