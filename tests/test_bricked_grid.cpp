@@ -41,6 +41,22 @@ std::vector<std::uint16_t> make_volume(const Dims& d, ValueEncoding e, unsigned 
   return v;
 }
 
+namespace detail_free {
+// Value index of a voxel, from spec §8A.4's formula (independent of libformat's).
+struct BrickOrder {
+  BrickOrder(const Dims& d, unsigned b) : d(d), b(b) {}
+  std::uint64_t value_index(std::uint64_t x, std::uint64_t y, std::uint64_t z) const {
+    const std::uint64_t B = 1u << b, i = x >> b, j = y >> b, k = z >> b;
+    const std::uint64_t ex = std::min<std::uint64_t>(B, d[0] - i * B), ey = std::min<std::uint64_t>(B, d[1] - j * B),
+                        ez = std::min<std::uint64_t>(B, d[2] - k * B);
+    const std::uint64_t first = k * B * d[1] * d[0] + j * B * d[0] * ez + i * B * ey * ez;
+    return first + ((z % B) * ey + (y % B)) * ex + (x % B);
+  }
+  Dims d;
+  unsigned b;
+};
+}  // namespace detail_free
+
 std::string write(const std::string& name, const Dims& d, const std::vector<std::uint16_t>& v, ValueEncoding e,
                   unsigned log2, bool predicted = true) {
   const std::string path = ivol::test::temp_path(name);
@@ -148,6 +164,43 @@ TEST(BrickedGrid, PredictionMakesSmoothVolumesSmallerThanBytePlanes) {
     Reader r(planes_path);  // codec 2 bricks read back too
     EXPECT_EQ(bits_of(r, full_box(d)), v);
   }
+}
+
+// A file cut after half its bricks (its metadata comes last, so it is lost
+// too): the bricks before the cut are read exactly, the others are listed
+// as damaged and read as the stored code 0 (spec §18 for grids).
+TEST(BrickedGrid, ACutFileKeepsItsCompleteBricks) {
+  const Dims d{20, 12, 16};
+  const auto v = make_volume(d, ValueEncoding::UInt16, 12, 0.0005f);
+  const std::string path = write("bricked_cut_source.ivol", d, v, ValueEncoding::UInt16, 3);
+  const Reader whole(path);
+  const BlockInfo& middle = whole.info().blocks[whole.info().blocks.size() / 2];
+  auto bytes = test::read_bytes(path);
+  bytes.resize(middle.file_offset + 10);
+  const std::string cut = test::temp_path("bricked_cut.ivol");
+  test::write_bytes(cut, bytes);
+  ReaderOptions options;
+  options.salvage = true;
+  Reader r(cut, options);
+  ASSERT_TRUE(r.info().salvage);
+  std::vector<DamagedRegion> damaged;
+  const auto got = r.read_box_bits(full_box(d), 0, &damaged);
+  EXPECT_FALSE(damaged.empty());
+  const detail_free::BrickOrder order(d, 3);
+  std::size_t kept = 0;
+  for (std::uint32_t z = 0; z < d[2]; ++z)
+    for (std::uint32_t y = 0; y < d[1]; ++y)
+      for (std::uint32_t x = 0; x < d[0]; ++x) {
+        const std::size_t i = (std::size_t{z} * d[1] + y) * d[0] + x;
+        const std::uint16_t stored = static_cast<std::uint16_t>(got[2 * i] | got[2 * i + 1] << 8);
+        if (order.value_index(x, y, z) < middle.first_element) {
+          ASSERT_EQ(stored, v[i]) << x << "," << y << "," << z;
+          ++kept;
+        } else {
+          ASSERT_EQ(stored, 0) << x << "," << y << "," << z;
+        }
+      }
+  EXPECT_GT(kept, 0u);
 }
 
 TEST(BrickedGrid, WriterRefusesWhatTheFormatCannotHold) {

@@ -75,6 +75,8 @@ class BrickGrid {
 // for other blocks, or for a block that does not start at a brick (salvage).
 inline std::optional<Dims> brick_of_block(const VolumeLayout& v, std::uint8_t stream, std::uint64_t first) {
   if (v.kind != StructureKind::Bricked || stream != 3) return std::nullopt;
+  // More than 2^56 voxels is refused elsewhere (spec §8A); here it must not overflow.
+  if (std::uint64_t{v.dims[0]} * v.dims[1] > (std::uint64_t{1} << 56) / v.dims[2]) return std::nullopt;
   const BrickGrid grid(v.dims, v.cell_log2);
   std::array<std::uint32_t, 3> brick{};
   if (!grid.brick_at(first, brick)) return std::nullopt;

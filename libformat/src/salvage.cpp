@@ -8,6 +8,7 @@
 #include <map>
 
 #include "block_reader.hpp"
+#include "brick_grid.hpp"
 #include "file_index.hpp"
 #include "framing.hpp"
 #include "ivol/crc32c.hpp"
@@ -186,7 +187,10 @@ class Salvager {
     const VolumeLayout& v = result_.info.layout;
     std::string why;
     const std::uint64_t width = stream_width(b.stream, v.encoding);
-    if (b.flags != 0 || b.codec > 2 || b.element_count == 0)
+    // Codec 3 only on a bricked grid's values, one brick per block (spec §7, §8A.4).
+    const bool brick_codec =
+        b.codec == 3 && brick_of_block(v, b.stream, b.first_element) && v.encoding != ValueEncoding::Float32;
+    if (b.flags != 0 || (b.codec > 2 && !brick_codec) || b.element_count == 0)
       why = "flags, codec or element_count out of range";
     else if (b.element_count * width > layout::kMaxBlockDecodedBytes)
       why = "decoded size over 64 MiB";
