@@ -31,9 +31,11 @@ mkdir -p "$work"
 views=$((size * 3 / 2))
 echo "# bench/run_bricked.sh --size $size ($(date -u +%FT%TZ), $(nproc) cores, $(uname -m))"
 if [ ! -f "$work/r.raw" ]; then
-  "$ivol" -q phantom pencil-holder --views "$views" --detector "$views" -o "$work/p.h5" -f
-  "$ivol" -q recon "$work/p.h5" --size "$size" --voxel $(/usr/bin/python3 -c "print(200.0 / $size)") \
-    --encoding float32 -o "$work/r.ivol"
+  pitch=$(/usr/bin/python3 -c "print(round(460.0 / $views, 4))")   # the field of 100 mm radius, magnified 2x, 3 % spare
+  "$ivol" -q phantom pencil-holder --views "$views" --detector "$views" --pitch "$pitch" -o "$work/p.h5" -f
+  "$ivol" -q recon "$work/p.h5" --geometry "$work/p.xml" --pitch "$pitch" --detector "$views,$views" \
+    --views "$views" --size "$size" --voxel $(/usr/bin/python3 -c "print(200.0 / $size)") \
+    --encoding float32 -o "$work/r.ivol" -f
   "$ivol" -q convert "$work/r.ivol" "$work/r.raw" --out-type f32
 fi
 /usr/bin/python3 - "$work" "$size" <<'PY'

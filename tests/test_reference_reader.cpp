@@ -120,13 +120,15 @@ TEST(ReferenceReader, AgreesWithLibformatOnEveryStructureKind) {
 // reader decodes them from the spec's formulas, libformat from its own code.
 TEST(ReferenceReader, AgreesWithLibformatOnBrickedGrids) {
   std::mt19937 rng(22);
-  std::normal_distribution<float> noise(0.0f, 0.0005f);
+  std::normal_distribution<float> noise(0.0f, 0.00002f);
   const Dims shapes[] = {{19, 13, 9}, {8, 8, 8}, {1, 17, 5}};
+  int predicted_files = 0;
   for (const Dims& d : shapes)
     for (ValueEncoding e : {ValueEncoding::Binary16, ValueEncoding::UInt16}) {
       std::vector<std::uint16_t> v(voxel_count(d));
       for (std::size_t i = 0; i < v.size(); ++i) {
-        const float m = 0.01f + 0.0007f * static_cast<float>(i % 23) + noise(rng);
+        const std::size_t x = i % d[0], y = i / d[0] % d[1], z = i / d[0] / d[1];
+        const float m = 0.01f + 0.0007f * static_cast<float>(x + 2 * y + 3 * z) + noise(rng);
         v[i] = e == ValueEncoding::UInt16 ? static_cast<std::uint16_t>(m * 500000.0f) : float_to_binary16(m);
       }
       if (e == ValueEncoding::Binary16) v[3] = 0x8000, v[5] = 0x7E13, v[v.size() - 1] = 0xFC00;
@@ -140,9 +142,10 @@ TEST(ReferenceReader, AgreesWithLibformatOnBrickedGrids) {
       writer.finish(Metadata{});
       bool predicted = false;
       for (const BlockInfo& b : Reader(path).info().blocks) predicted = predicted || b.codec == 3;
-      EXPECT_TRUE(predicted);
+      predicted_files += predicted;
       expect_readers_agree(path);
     }
+  EXPECT_GE(predicted_files, 4);  // tiny bricks may be smaller under codec 2 or stored
 }
 
 TEST(ReferenceReader, RefusesWhatLibformatRefuses) {
