@@ -42,9 +42,9 @@ fi
 import sys, numpy as np
 w, n = sys.argv[1], int(sys.argv[2])
 f = np.fromfile(w + "/r.raw", dtype="<f4")
-f.astype("<f2").tofile(w + "/v.f16")
+f.astype("<f2").tofile(w + "/v-f16.raw")
 lo, hi = float(f.min()), float(f.max())
-np.round((f - lo) / (hi - lo) * 65535).astype("<u2").tofile(w + "/v.u16")
+np.round((f - lo) / (hi - lo) * 65535).astype("<u2").tofile(w + "/v-u16.raw")
 PY
 dims=$size,$size,$size
 printf "| values | form | bytes | vs octree | write s |\n|---|---|---:|---:|---:|\n"
@@ -52,7 +52,7 @@ for kind in f16 u16; do
   declare -A bytes=()
   for structure in octree bricked; do
     t0=$(date +%s.%N)
-    "$ivol" -q convert "$work/v.$kind" "$work/v-$kind-$structure.ivol" --dims "$dims" --type "$kind" \
+    "$ivol" -q convert "$work/v-$kind.raw" "$work/v-$kind-$structure.ivol" --dims "$dims" --type "$kind" \
       --structure "$structure" -f
     t1=$(date +%s.%N)
     bytes[$structure]=$(stat -c %s "$work/v-$kind-$structure.ivol")
@@ -63,7 +63,7 @@ for kind in f16 u16; do
   /usr/bin/python3 - "$work" "$size" "$kind" "${bytes[octree]}" <<'PY'
 import sys, time, h5py, numpy as np
 w, n, kind, octree = sys.argv[1], int(sys.argv[2]), sys.argv[3], int(sys.argv[4])
-v = np.fromfile("%s/v.%s" % (w, kind), dtype="<f2" if kind == "f16" else "<u2").reshape(n, n, n)
+v = np.fromfile("%s/v-%s.raw" % (w, kind), dtype="<f2" if kind == "f16" else "<u2").reshape(n, n, n)
 path = "%s/v-%s.h5" % (w, kind)
 t = time.time()
 with h5py.File(path, "w") as f:
@@ -75,9 +75,9 @@ print("| %s | HDF5 64^3 shuffle + deflate 9 | %d | %+.1f %% | %.2f |" % (kind, b
 PY
   for level in 3 19; do
     t0=$(date +%s.%N)
-    zstd -q -f -"$level" -T2 "$work/v.$kind" -o "$work/v.$kind.zst"
+    zstd -q -f -"$level" -T2 "$work/v-$kind.raw" -o "$work/v-$kind.raw.zst"
     t1=$(date +%s.%N)
-    b=$(stat -c %s "$work/v.$kind.zst")
+    b=$(stat -c %s "$work/v-$kind.raw.zst")
     printf "| %s | zstd -%s -T2 (whole file) | %d | %s | %.2f |\n" "$kind" "$level" "$b" \
       "$(/usr/bin/python3 -c "print('%+.1f %%' % (100.0 * $b / ${bytes[octree]} - 100))")" "$(echo "$t1 - $t0" | bc)"
   done
