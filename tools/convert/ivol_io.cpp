@@ -235,7 +235,9 @@ void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, cons
 namespace {
 
 // StructureChoice::Auto's rule, and whether a bricked grid can hold the file.
-bool choose_bricked(const ImportOptions& options, ValueEncoding encoding, ImportReport& report) {
+// `layer_bytes`: what import_bricked holds for one layer of bricks.
+bool choose_bricked(const ImportOptions& options, ValueEncoding encoding, std::uint64_t layer_bytes,
+                    ImportReport& report) {
   std::string against;
   if (options.keep) against = "a keep rule coarsens regions, which only an octree holds";
   if (encoding == ValueEncoding::Float32) against = "float32 values (codec 3 predicts 16-bit values)";
@@ -250,6 +252,10 @@ bool choose_bricked(const ImportOptions& options, ValueEncoding encoding, Import
     report.structure_reason = "asked for (--structure octree)";
     return false;
   }
+  if (against.empty() && layer_bytes > memory_budget(options.memory_bytes))
+    against = "a layer of bricks (" + mib_text(layer_bytes) +
+              ") exceeds the memory budget (--memory), a slab of the "
+              "octree writer does not";
   if (!against.empty()) {
     report.structure_reason = against;
     return false;
@@ -337,7 +343,19 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
   ImportReport report;
   const StreamingOptions streaming = import_streaming_options(shape, options, report);
   const BuildOptions& build = streaming.build;
-  if (choose_bricked(options, build.encoding, report)) {
+  // Samples, float32 (binary16 from another type), the 16-bit values and the
+  // encoded layer, for a layer of bricks (import_bricked); 128-bit so that no
+  // declared size overflows before it is compared.
+  const bool codes = build.encoding == ValueEncoding::UInt16;
+  const bool raw_binary16 = shape.type == SampleType::Float16 && !codes;
+  __extension__ const unsigned __int128 layer_voxels =
+      static_cast<unsigned __int128>(std::min<std::uint32_t>(shape.dims[2], 1u << options.brick_log2)) * shape.dims[0] *
+      shape.dims[1];
+  __extension__ const unsigned __int128 layer_bytes =
+      layer_voxels * (sample_size(shape.type) + (codes || raw_binary16 ? 0 : 4) + 2 + 2);
+  const std::uint64_t layer =
+      layer_bytes > ~std::uint64_t{0} ? ~std::uint64_t{0} : static_cast<std::uint64_t>(layer_bytes);
+  if (choose_bricked(options, build.encoding, layer, report)) {
     report.structure = "bricked";
     import_bricked(source, path, options, streaming, report);
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -348,7 +366,6 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
   const std::uint32_t slab = writer.slab_slices();
   report.slab_slices = slab;
   const unsigned margin = options.keep ? options.keep->margin : 0;
-  const bool codes = build.encoding == ValueEncoding::UInt16;
 
   // One slab and the `margin` slices on either side, which the keep mask's
   // growth needs. The writer takes slabs of at least 8 slices whatever
