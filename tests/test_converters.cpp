@@ -219,3 +219,42 @@ TEST(IvolImport, KeepRuleParsing) {
 }
 
 }  // namespace
+
+namespace {
+
+using namespace ivol;
+using namespace ivol::convert;
+
+// StructureChoice::Auto (issue 22): lossless every-voxel uint16 becomes a
+// bricked grid, read back bit for bit; where a layer of bricks (32 slices)
+// would exceed the memory budget and the octree writer's slabs (8 slices)
+// do not, the octree is chosen and the reason given.
+TEST(Converters, AutoStructureChoosesBrickedGridsWithinTheMemoryBudget) {
+  DenseVolume v = make_dense({64, 64, 64}, SampleType::UInt16);
+  for (std::size_t i = 0; i < v.data.size() / 2; ++i) {
+    const auto value = static_cast<std::uint16_t>(1000 + (i % 64) * 3 + (i / 64 % 64) * 5 + (i / 4096) * 7);
+    std::memcpy(v.data.data() + 2 * i, &value, 2);
+  }
+  ImportOptions options;
+  const std::string path = test::temp_path("auto.ivol");
+  ImportReport report = import_to_ivol(v, path, options);
+  EXPECT_EQ(report.structure, "bricked");
+  EXPECT_NE(report.structure_reason.find("lossless every-voxel 16-bit"), std::string::npos);
+  {
+    Reader reader(path);
+    EXPECT_EQ(reader.layout().kind, StructureKind::Bricked);
+    EXPECT_EQ(reader.read_box_bits(full_box({64, 64, 64})), v.data);
+    EXPECT_EQ(reader.metadata().structure.value("kind", ""), "bricked");
+  }
+  options.slab_budget_bytes = 8 * 64 * 64 * 4;  // octree slabs of 8 slices
+  options.memory_bytes = 500 * 1024;            // a layer of 32 slices needs 768 KiB
+  const std::string small = test::temp_path("auto_small.ivol");
+  report = import_to_ivol(v, small, options);
+  EXPECT_EQ(report.structure, "octree");
+  EXPECT_NE(report.structure_reason.find("exceeds the memory budget"), std::string::npos) << report.structure_reason;
+  Reader reader(small);
+  EXPECT_EQ(reader.layout().kind, StructureKind::Octree);
+  EXPECT_EQ(reader.read_box_bits(full_box({64, 64, 64})), v.data);
+}
+
+}  // namespace

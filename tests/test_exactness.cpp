@@ -69,21 +69,28 @@ TEST(Exactness, F16ImportKeepsNegativeZeroAndNanPayloads) {
   const std::vector<std::uint16_t> special{0x8000, 0x0000, 0x7D01, 0xFE05, 0x7E00, 0x7FFF, 0x7C00, 0xFC00, 0x0001};
   for (std::size_t n = 0; n < special.size(); ++n) bits[30 + n] = special[n];
   const DenseVolume source = volume_of(dims, SampleType::Float16, bits);
-  const std::string path = test::temp_path("f16-bits.ivol");
-  const ImportReport report = import_to_ivol(source, path, ImportOptions{});
-  EXPECT_TRUE(report.lossless);
-  EXPECT_TRUE(report.encoding_loss.exact());
+  // Both structures: the bricked grid (the default for f16 since codec 3)
+  // and the octree.
+  for (const StructureChoice structure : {StructureChoice::Auto, StructureChoice::Octree}) {
+    const std::string path = test::temp_path("f16-bits.ivol");
+    ImportOptions options;
+    options.structure = structure;
+    const ImportReport report = import_to_ivol(source, path, options);
+    EXPECT_EQ(report.structure, structure == StructureChoice::Auto ? "bricked" : "octree");
+    EXPECT_TRUE(report.lossless);
+    EXPECT_TRUE(report.encoding_loss.exact());
 
-  Reader reader(path);
-  const std::vector<std::uint8_t> stored = reader.read_box_bits(full_box(dims));
-  ASSERT_EQ(stored.size(), source.data.size());
-  for (std::size_t i = 0; i < bits.size(); ++i)
-    ASSERT_EQ(stored[2 * i] | (stored[2 * i + 1] << 8), bits[i]) << "stored bits of voxel " << i;
-  const DenseVolume back = export_from_ivol(reader, Box{}, 0, SampleType::Float16);
-  EXPECT_EQ(back.data, source.data);
-  EXPECT_TRUE(std::signbit(reader.read_box(full_box(dims))[0])) << "Reader::read_box keeps -0";
-  EXPECT_EQ(natural_sample_type(reader), SampleType::Float16);
-  EXPECT_EQ(natural_float_type(reader), SampleType::Float16);
+    Reader reader(path);
+    const std::vector<std::uint8_t> stored = reader.read_box_bits(full_box(dims));
+    ASSERT_EQ(stored.size(), source.data.size());
+    for (std::size_t i = 0; i < bits.size(); ++i)
+      ASSERT_EQ(stored[2 * i] | (stored[2 * i + 1] << 8), bits[i]) << "stored bits of voxel " << i;
+    const DenseVolume back = export_from_ivol(reader, Box{}, 0, SampleType::Float16);
+    EXPECT_EQ(back.data, source.data);
+    EXPECT_TRUE(std::signbit(reader.read_box(full_box(dims))[0])) << "Reader::read_box keeps -0";
+    EXPECT_EQ(natural_sample_type(reader), SampleType::Float16);
+    EXPECT_EQ(natural_float_type(reader), SampleType::Float16);
+  }
 }
 
 // With a keep rule, a node without kept voxels becomes one leaf: its value

@@ -344,7 +344,11 @@ def known_stream(stream, kind):
         return kind == KIND_NESTED
     return stream in KNOWN_STREAMS
 KIND_OCTREE, KIND_REGULAR, KIND_RECTILINEAR, KIND_NESTED = 1, 2, 3, 4   # §6.1, §8, §8A
-KIND_NAMES = {1: "octree", 2: "regular grid", 3: "rectilinear grid", 4: "nested grid"}
+KIND_BRICKED = 5                                                       # §8A.4 (1.3)
+KIND_NAMES = {1: "octree", 2: "regular grid", 3: "rectilinear grid", 4: "nested grid",
+              5: "bricked regular grid"}
+MAX_BRICK_LOG2 = 8                                                     # §6.1 byte 11
+PREDICTED_HEADER = 24                                                  # §7.2
 MAX_BLOCK_DECODED = 64 * 1024 * 1024                                   # §7
 MAX_METADATA = 16 * 1024 * 1024                                        # §11
 
@@ -384,8 +388,8 @@ def read_index(header, footer, idx):
         fail("malformed", "index: fixed_size %d, expected 48..4096" % fixed_size)
     if structure_kind not in KIND_NAMES:
         fail("unsupported-feature", "index: structure_kind %d, this reader knows 1 "
-             "(octree), 2 (regular grid), 3 (rectilinear grid), 4 (nested grid)"
-             % structure_kind)
+             "(octree), 2 (regular grid), 3 (rectilinear grid), 4 (nested grid), "
+             "5 (bricked regular grid)" % structure_kind)
     if value_encoding not in ENCODINGS:
         fail("unsupported-feature", "index: value_encoding %d, this reader knows 1, 2, 3"
              % value_encoding)
@@ -395,6 +399,13 @@ def read_index(header, footer, idx):
         if not 1 <= cell_log2 <= 31:
             fail("malformed", "index: cell_log2 (index offset 11) is %d, expected 1..31 "
                  "for structure_kind 4 (nested grid)" % cell_log2)
+    elif structure_kind == KIND_BRICKED:   # §6.1 byte 11: b, log2 of the brick edge
+        if not 1 <= cell_log2 <= MAX_BRICK_LOG2:
+            fail("malformed", "index: brick log2 (index offset 11) is %d, expected 1..%d "
+                 "for structure_kind 5 (bricked regular grid)" % (cell_log2, MAX_BRICK_LOG2))
+        if not header.framed:   # §8A.4
+            fail("malformed", "index: structure_kind 5 (bricked regular grid) needs framed "
+                 "blocks (required feature bit 0)")
     elif cell_log2 != 0:
         fail("malformed", "index: reserved byte at index offset 11 is %d, expected 0 "
              "for structure_kind %d" % (cell_log2, structure_kind))
@@ -468,8 +479,8 @@ def read_index(header, footer, idx):
         ix.total_inner = None
         ix.first_inner = ix.first_value = ix.level_values = None
         ix.total_values = None          # kinds 3 and 4: known once stream 4/5 is read
-        if structure_kind == KIND_REGULAR:
-            ix.total_values = size_x * size_y * size_z          # §8A.1
+        if structure_kind in (KIND_REGULAR, KIND_BRICKED):
+            ix.total_values = size_x * size_y * size_z          # §8A.1, §8A.4
         if structure_kind == KIND_NESTED:
             C = 1 << cell_log2                                  # §8A.3
             ix.cells = tuple(-(-n // C) for n in ix.size)       # n_a = ceil(size_a / C)
@@ -508,6 +519,10 @@ def read_index(header, footer, idx):
                  % (ix.where(e), e.flags, e.stream))
         check_stream_kind(ix, e)
         check_block_level(ix, e)
+        if e.codec == 3 and not (e.stream == STREAM_VALUES and structure_kind == KIND_BRICKED
+                                 and value_encoding in (1, 2)):   # §7 codec 3
+            fail("malformed", "block table: %s: codec 3 is valid only on values blocks of "
+                 "a bricked regular grid of 16-bit values" % ix.where(e))
         entries.append(e)
     if expected_offset != footer.index_offset:
         fail("malformed", "block table: the last block ends at %d, expected index_offset %d"
@@ -543,7 +558,49 @@ def read_index(header, footer, idx):
                  % (ix.border_elements, limit))
     if structure_kind == KIND_NESTED:
         check_stream_coverage(ix, STREAM_CELLS, ix.cell_count)
+    if structure_kind == KIND_BRICKED:
+        check_bricks(ix, [e for e in entries if e.stream == STREAM_VALUES])
     return ix
+
+
+def brick_layout(size, b):
+    """§8A.4: bricks per axis, and per brick (i, j, k) its extent and the value
+    index of its first voxel, as functions."""
+    B = 1 << b
+    sx, sy, sz = size
+    n = tuple(-(-s // B) for s in size)
+
+    def extent(i, j, k):
+        return (min(B, sx - i * B), min(B, sy - j * B), min(B, sz - k * B))
+
+    def first(i, j, k):
+        ex, ey, ez = extent(i, j, k)
+        return k * B * sy * sx + j * B * sx * ez + i * B * ey * ez
+    return n, extent, first
+
+
+def check_bricks(ix, values):
+    """§6.4, §8A.4: every values block holds exactly one brick.  The number of
+    bricks is compared with the number of blocks before any brick is listed,
+    so a claimed size costs nothing."""
+    (nx, ny, nz), extent, first = brick_layout(ix.size, ix.cell_log2)
+    if nx * ny * nz != len(values):
+        fail("malformed", "block table: %d values blocks, the bricked grid has %d bricks "
+             "(one brick per block)" % (len(values), nx * ny * nz))
+    ordered = sorted(values, key=lambda e: e.first_element)
+    ix.brick_of = {}
+    q = 0
+    for k in range(nz):
+        for j in range(ny):
+            for i in range(nx):
+                e = ordered[q]
+                q += 1
+                ext = extent(i, j, k)
+                if e.first_element != first(i, j, k) or e.element_count != ext[0] * ext[1] * ext[2]:
+                    fail("malformed", "block table: %s: brick (%d, %d, %d) is elements %d..%d"
+                         % (ix.where(e), i, j, k, first(i, j, k),
+                            first(i, j, k) + ext[0] * ext[1] * ext[2]))
+                ix.brick_of[e.first_element] = ext
 
 
 def check_stream_kind(ix, e):
@@ -659,8 +716,10 @@ def zstd_compress_bound(n):
 def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
     """§7: read one block, check its CRC, decode it.  Returns the decoded bytes."""
     where = ix.where(e)
-    if e.codec in (1, 2):   # §7: bounded before the stored bytes are read
+    if e.codec in (1, 2, 3):   # §7: bounded before the stored bytes are read
         bound = zstd_compress_bound(e.element_count * stream_width(ix, e.stream))
+        if e.codec == 3:       # §7.2: the codec header and a frame of 2n bytes
+            bound = PREDICTED_HEADER + zstd_compress_bound(2 * e.element_count)
         if ix.header.framed:   # §7.1: plus the block header
             bound += BLOCK_HEADER_SIZE
         if e.stored_size > bound:
@@ -679,9 +738,9 @@ def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
 def decode_payload(ix, e, stored, limit=MAX_BLOCK_DECODED):
     """§7: decode a block's payload (its stored bytes without a block header)."""
     where = ix.where(e)
-    if e.codec not in (0, 1, 2):   # checked when the block is read (SPEC-NOTES 8)
-        fail("unsupported-feature", "%s: codec %d, this reader knows 0 (stored), 1 (zstd) "
-             "and 2 (zstd over byte planes)" % (where, e.codec))
+    if e.codec not in (0, 1, 2, 3):   # checked when the block is read (SPEC-NOTES 8)
+        fail("unsupported-feature", "%s: codec %d, this reader knows 0 (stored), 1 (zstd), "
+             "2 (zstd over byte planes) and 3 (predicted 16-bit)" % (where, e.codec))
     width = stream_width(ix, e.stream)
     size = e.element_count * width
     if size > MAX_BLOCK_DECODED:
@@ -693,10 +752,72 @@ def decode_payload(ix, e, stored, limit=MAX_BLOCK_DECODED):
             fail("malformed", "%s: stored block (codec 0) has a payload of %d bytes, "
                  "expected element_count x width = %d" % (where, len(stored), size))
         return stored
+    if e.codec == 3:
+        ext = getattr(ix, "brick_of", {}).get(e.first_element)
+        if ext is None or e.stream != STREAM_VALUES or width != 2:
+            fail("malformed", "%s: codec 3 outside a brick of 16-bit values" % where)
+        return decode_predicted(stored, ext, where)
     content = decode_zstd_frame(stored, size, where)
     if e.codec == 1:
         return content
     return unshuffle_byte_planes(content, e.element_count, width)
+
+
+def decode_predicted(payload, ext, where):
+    """§7.2 codec 3: the codec header, the residuals' frame, then every voxel in
+    raster order from its prediction.  Returns the values as little-endian u16."""
+    ex, ey, ez = ext
+    n = ex * ey * ez
+    if len(payload) < PREDICTED_HEADER:
+        fail("malformed", "%s: codec 3 payload of %d bytes, shorter than its 24-byte header"
+             % (where, len(payload)))
+    predictor, value_map, s, entropy = payload[0], payload[1], payload[2], payload[3]
+    if predictor != 1:
+        fail("unsupported-feature", "%s: codec 3 predictor %d, this reader knows 1" % (where, predictor))
+    if value_map not in (0, 1):
+        fail("malformed", "%s: codec 3 value_map %d, expected 0 or 1" % (where, value_map))
+    if s > 15:
+        fail("malformed", "%s: codec 3 shift %d, expected 0..15" % (where, s))
+    if entropy != 1:
+        fail("unsupported-feature", "%s: codec 3 entropy coder %d, this reader knows 1" % (where, entropy))
+    t = struct.unpack_from("<7h", payload, 4)
+    (level,) = struct.unpack_from("<i", payload, 18)
+    if payload[22] or payload[23]:
+        fail("malformed", "%s: codec 3 reserved bytes 22..24 are not 0" % where)
+    content = decode_zstd_frame(bytes(payload[PREDICTED_HEADER:]), 2 * n, where)
+    planes = np.frombuffer(content, np.uint8).astype(np.int64)
+    zz = planes[:n] + 256 * planes[n:]
+    diff = np.where(zz % 2 == 0, zz // 2, -(zz + 1) // 2).tolist()
+    r = (1 << (s - 1)) if s > 0 else 0
+    sy, sz = ex, ex * ey          # index steps along y and z
+    u = [0] * n
+
+    def clamp(p):
+        return 0 if p < 0 else 65535 if p > 65535 else p
+    i = 0
+    for z in range(ez):
+        for y in range(ey):
+            for x in range(ex):
+                if x and y and z:
+                    S = (t[0] * u[i - 1] + t[1] * u[i - sy] + t[2] * u[i - sz]
+                         + t[3] * u[i - 1 - sy] + t[4] * u[i - 1 - sz] + t[5] * u[i - sy - sz]
+                         + t[6] * u[i - 1 - sy - sz])
+                    p = clamp(((S + r) >> s) + level)      # >> is floor division by 2^s
+                else:
+                    back = [step for c, step in ((x, 1), (y, sy), (z, sz)) if c]
+                    if not back:
+                        p = 0
+                    elif len(back) == 1:
+                        p = u[i - back[0]]
+                    else:
+                        a, b = back
+                        p = clamp(u[i - a] + u[i - b] - u[i - a - b])
+                u[i] = (p + diff[i]) % 65536
+                i += 1
+    v = np.array(u, np.uint32)
+    if value_map == 1:   # the inverse of the binary16 order map
+        v = np.where(v & 0x8000, v ^ 0x8000, v ^ 0xFFFF)
+    return v.astype("<u2").tobytes()
 
 
 def unshuffle_byte_planes(content, n, w):
@@ -1254,7 +1375,7 @@ def read_grid_streams(r, ix, check_ignorable):
             np.frombuffer(data, target.dtype)
     g = Grid()
     g.values = arrays[STREAM_VALUES]
-    if kind == KIND_REGULAR:
+    if kind in (KIND_REGULAR, KIND_BRICKED):
         g.total_values = ix.total_values
     elif kind == KIND_RECTILINEAR:
         g.borders = check_borders(ix, arrays[STREAM_BORDERS])
@@ -1362,6 +1483,16 @@ def grid_dense(ix, g):
     kind = ix.structure_kind
     if kind == KIND_REGULAR:                      # §8A.1: (z·size_y + y)·size_x + x
         return g.values.reshape(sz, sy, sx)
+    if kind == KIND_BRICKED:                      # §8A.4: brick by brick
+        b = ix.cell_log2
+        B, m = 1 << b, (1 << b) - 1
+        z = np.arange(sz, dtype=np.int64)[:, None, None]
+        y = np.arange(sy, dtype=np.int64)[None, :, None]
+        x = np.arange(sx, dtype=np.int64)[None, None, :]
+        i, j, k = x >> b, y >> b, z >> b
+        ex, ey, ez = np.minimum(B, sx - i * B), np.minimum(B, sy - j * B), np.minimum(B, sz - k * B)
+        first = k * B * sy * sx + j * B * sx * ez + i * B * ey * ez
+        return g.values[first + ((z & m) * ey + (y & m)) * ex + (x & m)]
     if kind == KIND_RECTILINEAR:                  # §8A.2: (k·n_y + j)·n_x + i
         nx, ny, nz = g.intervals
         cell = [np.repeat(np.arange(len(b) - 1), np.diff(b)) for b in g.borders]
@@ -1636,6 +1767,9 @@ def salvage_header(data):
     if kind not in KIND_NAMES or encoding not in ENCODINGS:
         fail("unsupported-feature", "salvage: structure_kind %d / value_encoding %d"
              % (kind, encoding))
+    if kind == KIND_BRICKED:   # not built in this reader (the library salvages them)
+        fail("unsupported-feature", "salvage: this reader does not salvage structure_kind 5 "
+             "(bricked regular grid)")
     if min(sx, sy, sz) < 1 or depth != (max(sx, sy, sz) - 1).bit_length():
         fail("malformed", "salvage: the volume descriptor's sizes or depth are wrong")
     ix.structure_kind, ix.value_encoding, ix.depth = kind, encoding, depth

@@ -59,10 +59,109 @@ NPBITS = {BINARY16: np.uint16, UINT16: np.uint16, FLOAT32: np.uint32}
 STREAM_META, STREAM_NODES, STREAM_VALUES = 1, 2, 3
 STREAM_BORDERS, STREAM_CELLS = 4, 5                     # since 1.1 (§6.4, §8A)
 KIND_OCTREE, KIND_REGULAR, KIND_RECTILINEAR, KIND_NESTED = 1, 2, 3, 4
+KIND_BRICKED = 5                                        # since 1.3 (§8A.4)
 KIND_NAME = {KIND_OCTREE: "octree", KIND_REGULAR: "regular",           # as metadata structure.kind
-             KIND_RECTILINEAR: "rectilinear", KIND_NESTED: "nested"}
+             KIND_RECTILINEAR: "rectilinear", KIND_NESTED: "nested", KIND_BRICKED: "bricked"}
 CODEC_STORED, CODEC_ZSTD = 0, 1
 CODEC_PLANES = 2                 # zstd over byte planes, since 1.2 (§7)
+CODEC_PREDICTED = 3              # predicted 16-bit, since 1.3 (§7.2)
+LORENZO = (1, 1, 1, -1, -1, -1, 1)
+
+
+# ------------------------------------------------------- codec 3 (§7.2)
+
+def b16_order(v):
+    """§7.2 value map 1: binary16 bit patterns in numeric order."""
+    return v ^ 0xFFFF if v & 0x8000 else v | 0x8000
+
+
+def b16_order_inverse(u):
+    return u ^ 0x8000 if u & 0x8000 else u ^ 0xFFFF
+
+
+def predict(U, ext, x, y, z, shift, taps, level):
+    """§7.2 step 2: the prediction of voxel (x, y, z) of a brick from the
+    mapped values U (a dict or list indexed in raster order) before it."""
+    ex, ey, _ = ext
+
+    def at(a, b, c):
+        return U[(c * ey + b) * ex + a]
+
+    def clamp(p):
+        return max(0, min(65535, p))
+    if x > 0 and y > 0 and z > 0:
+        n = (at(x - 1, y, z), at(x, y - 1, z), at(x, y, z - 1), at(x - 1, y - 1, z),
+             at(x - 1, y, z - 1), at(x, y - 1, z - 1), at(x - 1, y - 1, z - 1))
+        S = sum(t * v for t, v in zip(taps, n))
+        r = 1 << (shift - 1) if shift else 0
+        return clamp((S + r) // (1 << shift) + level)
+    axes = [a for a, c in enumerate((x, y, z)) if c > 0]
+    if not axes:
+        return 0
+    if len(axes) == 1:
+        c = [x, y, z]
+        c[axes[0]] -= 1
+        return at(*c)
+    c1, c2, c12 = [x, y, z], [x, y, z], [x, y, z]
+    c1[axes[0]] -= 1
+    c2[axes[1]] -= 1
+    c12[axes[0]] -= 1
+    c12[axes[1]] -= 1
+    return clamp(at(*c1) + at(*c2) - at(*c12))
+
+
+def predicted_payload(vals, ext, value_map=1, shift=0, taps=LORENZO, level=0, predictor=1,
+                      entropy=1, reserved=b"\0\0", zcheck=False):
+    """§7.2: the codec header and the zstd frame of the zigzag residuals' byte planes."""
+    ex, ey, ez = ext
+    n = ex * ey * ez
+    U = [b16_order(v) if value_map == 1 else v for v in vals]
+    low, high = bytearray(n), bytearray(n)
+    i = 0
+    for z in range(ez):
+        for y in range(ey):
+            for x in range(ex):
+                d = (U[i] - predict(U, ext, x, y, z, shift, taps, level)) % 65536
+                if d >= 32768:
+                    d -= 65536
+                zz = 2 * d if d >= 0 else -2 * d - 1
+                low[i], high[i] = zz & 0xFF, zz >> 8
+                i += 1
+    head = struct.pack("<BBBB7hi", predictor, value_map, shift, entropy, *taps, level) + reserved
+    return head + zframe(bytes(low) + bytes(high), zcheck)
+
+
+def predicted_decode(st, ext):
+    """§7.2, for the self-test: the values of a codec 3 payload."""
+    ex, ey, ez = ext
+    n = ex * ey * ez
+    if len(st) < 24:
+        _fail("malformed", "codec3.short")
+    predictor, value_map, shift, entropy = st[0], st[1], st[2], st[3]
+    if predictor != 1:
+        _fail("unsupported-feature", "codec3.predictor")
+    if value_map not in (0, 1):
+        _fail("malformed", "codec3.map")
+    if shift > 15:
+        _fail("malformed", "codec3.shift")
+    if entropy != 1:
+        _fail("unsupported-feature", "codec3.entropy")
+    if st[22:24] != b"\0\0":
+        _fail("malformed", "codec3.reserved")
+    taps = struct.unpack_from("<7h", st, 4)
+    (level,) = struct.unpack_from("<i", st, 18)
+    planes = zstd_content(st[24:], 2 * n)
+    U = [0] * n
+    i = 0
+    for z in range(ez):
+        for y in range(ey):
+            for x in range(ex):
+                zz = planes[i] | planes[n + i] << 8
+                d = zz // 2 if zz % 2 == 0 else -(zz + 1) // 2
+                U[i] = (predict(U, ext, x, y, z, shift, taps, level) + d) % 65536
+                i += 1
+    vals = [b16_order_inverse(u) if value_map == 1 else u for u in U]
+    return struct.pack("<%dH" % n, *vals)
 
 
 # ---------------------------------------------------------------- CRC-32C (§2.1)
@@ -602,6 +701,46 @@ def write_nested(src, enc, cell_log2, expo):
     return Grid(KIND_NESTED, enc, (X, Y, Z), vals, cells=cells, cell_log2=cell_log2)
 
 
+def bricked_order(size, b):
+    """§8A.4: (first value, extent, origin) of every brick, in raster order of
+    the bricks; the first values counted brick after brick."""
+    X, Y, Z = size
+    B = 1 << b
+    out, first = [], 0
+    for oz in range(0, Z, B):
+        for oy in range(0, Y, B):
+            for ox in range(0, X, B):
+                ext = (min(B, X - ox), min(B, Y - oy), min(B, Z - oz))
+                out.append((first, ext, (ox, oy, oz)))
+                first += ext[0] * ext[1] * ext[2]
+    return out
+
+
+def write_bricked(src, enc, b):
+    """§8A.4: the voxels brick by brick, raster order inside each brick."""
+    Z, Y, X = src.shape
+    vals = []
+    for _, (ex, ey, ez), (ox, oy, oz) in bricked_order((X, Y, Z), b):
+        vals += [int(v) for v in src[oz:oz + ez, oy:oy + ey, ox:ox + ex].reshape(-1)]
+    return Grid(KIND_BRICKED, enc, (X, Y, Z), vals, cell_log2=b)
+
+
+def bricked_blocks(g, codec=CODEC_PREDICTED, **pred):
+    """One values block per brick; codec 3 blocks with the predictor settings
+    `pred` (or a function of the brick number giving them)."""
+    blocks = []
+    for q, (first, ext, _) in enumerate(bricked_order(g.size, g.cell_log2)):
+        n = ext[0] * ext[1] * ext[2]
+        vals = g.values[first:first + n]
+        c = codec(q) if callable(codec) else codec
+        blk = Blk(STREAM_VALUES, 0, first, n, pack_values(g.enc, vals), codec=c)
+        if c == CODEC_PREDICTED:
+            kw = pred["per_brick"](q) if "per_brick" in pred else pred
+            blk.stored = predicted_payload(vals, ext, **kw)
+        blocks.append(blk)
+    return blocks
+
+
 def pack_u32(v):
     return struct.pack("<%dI" % len(v), *v)
 
@@ -899,6 +1038,18 @@ def decode_block(data, e, width):
     need = e["count"] * width
     if e["codec"] == CODEC_STORED:
         return st
+    if e["codec"] == CODEC_PREDICTED:
+        if e.get("brick") is None or width != 2:
+            _fail("malformed", "codec3.where")
+        return predicted_decode(st, e["brick"])
+    out = zstd_content(st, need)
+    if e["codec"] == CODEC_PLANES:
+        return from_byte_planes(out, width)
+    return out
+
+
+def zstd_content(st, need):
+    """§7 codec 1: exactly one zstd frame of `need` content bytes."""
     try:
         p = zstandard.get_frame_parameters(st)
     except zstandard.ZstdError:
@@ -916,8 +1067,6 @@ def decode_block(data, e, width):
         _fail("malformed", "zstd.data", str(ex))
     if not dobj.eof or dobj.unused_data or len(out) != need:
         _fail("malformed", "zstd.extra")
-    if e["codec"] == CODEC_PLANES:
-        return from_byte_planes(out, width)
     return out
 
 
@@ -980,13 +1129,18 @@ def read_ivol(data, verify=True):
     if not 48 <= fs <= 4096 or fs > isz:
         _fail("malformed", "fixed_size")
     sk, ve, D, ires = idx[8], idx[9], idx[10], idx[11]
-    if sk not in (1, 2, 3, 4):
+    if sk not in (1, 2, 3, 4, 5):
         _fail("unsupported-feature", "structure_kind", str(sk))
     if ve not in (1, 2, 3):
         _fail("unsupported-feature", "value_encoding", str(ve))
     if sk == 4:
         if not 1 <= ires <= 31:
             _fail("malformed", "cell_log2", str(ires))
+    elif sk == 5:
+        if not 1 <= ires <= 8:
+            _fail("malformed", "brick_log2", str(ires))
+        if not framed:
+            _fail("malformed", "bricked.unframed")
     elif ires != 0:
         _fail("malformed", "index.reserved")
     X, Y, Z = u32(idx, 12), u32(idx, 16), u32(idx, 20)
@@ -1044,8 +1198,12 @@ def read_ivol(data, verify=True):
         if stream in (1, 2, 3) or (stream == 4 and sk == 3) or (stream == 5 and sk == 4):
             if flags != 0:
                 _fail("malformed", "block.flags", "block %d" % b)
-            if codec not in (0, 1, 2):
+            if codec not in (0, 1, 2, 3):
                 _fail("unsupported-feature", "codec", "block %d codec %d" % (b, codec))
+            if codec == 3 and not (stream == 3 and sk == 5 and ve in (1, 2)):
+                _fail("malformed", "codec3.where", "block %d" % b)
+            if codec == 3 and ss > 24 + zstd_bound(2 * cnt) + (32 if framed else 0):
+                _fail("malformed", "block.stored_bound", "block %d" % b)
             if cnt * width[stream] > MIB64:
                 _fail("malformed", "block.too_large", "block %d" % b)
             if codec == 0 and ss != cnt * width[stream] + (32 if framed else 0):
@@ -1202,8 +1360,17 @@ def _read_grid(data, entries, meta_entry, sk, ve, D, cell_log2, size):
     if sk == 3 and sum(e["count"] for e in entries if e["stream"] == 4) > X + Y + Z + 3:
         _fail("malformed", "borders.count")
     n_values_cov = _tile(entries, 3)
-    if sk == 2 and n_values_cov != X * Y * Z:
+    if sk in (2, 5) and n_values_cov != X * Y * Z:
         _fail("malformed", "stream.coverage", "stream 3")
+    if sk == 5:   # §8A.4: one brick per values block, bricks in raster order
+        bricks = bricked_order(size, cell_log2)
+        vblocks = sorted((e for e in entries if e["stream"] == 3), key=lambda e: e["first"])
+        if len(vblocks) != len(bricks):
+            _fail("malformed", "bricked.blocks", "%d blocks, %d bricks" % (len(vblocks), len(bricks)))
+        for e, (first, ext, _) in zip(vblocks, bricks):
+            if e["first"] != first or e["count"] != ext[0] * ext[1] * ext[2]:
+                _fail("malformed", "bricked.block", "block %d" % e["n"])
+            e["brick"] = ext
     if sk == 3:
         _tile(entries, 4)
     if sk == 4:
@@ -1225,6 +1392,13 @@ def _read_grid(data, entries, meta_entry, sk, ve, D, cell_log2, size):
     boxes = []
     if sk == 2:
         total = X * Y * Z
+    elif sk == 5:
+        total = X * Y * Z
+        for _, (ex, ey, ez), (ox, oy, oz) in bricked_order(size, cell_log2):
+            for z in range(oz, oz + ez):
+                for y in range(oy, oy + ey):
+                    for x in range(ox, ox + ex):
+                        boxes.append((x, x + 1, y, y + 1, z, z + 1))
     elif sk == 3:
         b = gather(4, 4, "I")
         pos = [0]
@@ -2003,16 +2177,25 @@ def gen():
     inv("block_stored_size_plus_1", pen(vblk, "stored_size", "<I", len(bblocks[vblk].stored_bytes()) + 1),
         "malformed", "block.placement",
         "A block's stored_size one too large: the next block does not start where it ends.")
-    for unknown in (3, 255):
+    for unknown in (4, 255):
         bl = level_blocks(bt, CODEC_ZSTD)
         bl.append(meta_block(DEFAULT_META))
         bl[vblk].codec = unknown
         bl[vblk].stored = bl[vblk].data
         d, _ = assemble(bt, bl)
         inv("codec_%d" % unknown, d, "unsupported-feature", "codec",
-            "A values block with codec %d (unknown: 1.2 defines 0, 1 and 2); its stored bytes are the "
-            "raw values, CRC correct.%s" % (unknown, " (Was codec_2 in the 1.0 and 1.1 vectors; 1.2 made "
-                                           "codec 2 zstd over byte planes.)" if unknown == 3 else ""))
+            "A values block with codec %d (unknown: 1.3 defines 0 to 3); its stored bytes are the "
+            "raw values, CRC correct.%s" % (unknown, " (Was codec_3 up to 1.2, codec_2 in the 1.0 and 1.1 "
+                                           "vectors: 1.2 made codec 2 zstd over byte planes, 1.3 codec 3 "
+                                           "predicted 16-bit.)" if unknown == 4 else ""))
+    bl = level_blocks(bt, CODEC_ZSTD)
+    bl.append(meta_block(DEFAULT_META))
+    bl[vblk].codec = CODEC_PREDICTED
+    bl[vblk].stored = bl[vblk].data
+    d, _ = assemble(bt, bl)
+    inv("octree_with_codec3", d, "malformed", "codec3.where",
+        "An octree values block with codec 3 (predicted 16-bit), which 1.3 allows only on the bricks of "
+        "a bricked grid (§7); its stored bytes are the raw values, CRC correct.")
     bl = level_blocks(bt, CODEC_ZSTD)
     bl.append(meta_block(DEFAULT_META))
     zb = Blk(STREAM_VALUES, 2, bt.first_value[2], 0, b"", codec=CODEC_ZSTD)
@@ -2353,6 +2536,7 @@ def gen():
     gen_codec2_valid(BASE)
     gen_codec2_invalid(bt, vblk, nblk1)
     gen_framed()
+    gen_bricked()
     return SAMPLE
 
 
@@ -2525,6 +2709,173 @@ def gen_framed():
     add_invalid("framed_descriptor_reserved", reseal(patch(base, 70, "<B", 1), index=False), "malformed",
                 "framed.reserved", "Reserved header byte 70 (of 68..76, kept for the brick layout) is 1; "
                 "header CRC recomputed.")
+
+
+def gen_bricked():
+    """§8A.4, §7.2 (1.3 draft): bricked regular grids with codec 3 under every
+    predictor setting the header allows, then files that break one rule each."""
+    framed = dict(framed=True, minor=3)
+    rng = np.random.default_rng(2201)
+
+    def bricked_file(src, enc, b, codec=CODEC_PREDICTED, mutate=None, **pred):
+        g = write_bricked(src, enc, b)
+        blocks = bricked_blocks(g, codec, **pred)
+        if mutate:
+            mutate(blocks)
+        blocks.insert(0, meta_block(DEFAULT_META))
+        kw = dict(framed)
+        kw.update(structure_kind=KIND_BRICKED, ireserved=b)
+        data, _ = assemble(g, blocks, **kw)
+        return data
+
+    def valid(name, src, enc, b, desc, lods=True, **kw):
+        add_valid(name, bricked_file(src, enc, b, **kw), src, enc, desc, lods=lods, kind=KIND_BRICKED,
+                  extra={"brick_log2": b})
+
+    smooth = lambda X, Y, Z, lo, step: (lo + step * (np.arange(X)[None, None, :] + 2 * np.arange(Y)[None, :, None]
+                                                     + 3 * np.arange(Z)[:, None, None]))
+    # ---- valid
+    src = (smooth(5, 4, 3, 1000, 7) + rng.integers(0, 3, (3, 4, 5))).astype(np.uint16)
+    valid("bricked_5x4x3_uint16_lorenzo", src, UINT16, 1,
+          "Bricked regular grid (structure_kind 5, §8A.4) 5x4x3 uint16, bricks of 2 (byte 11 = 1), so "
+          "edge bricks of 1 voxel along x and z; codec 3 (§7.2) with the Lorenzo taps, identity map.",
+          value_map=0)
+    vals = np.round(rng.normal(0.5, 0.3, 9 * 7 * 6), 3)
+    src = arr_f16(vals, (6, 7, 9))
+    flat = src.reshape(-1)
+    flat[[0, 5, 17, 40, 77, 111, 200, 301]] = [0x8000, 0x7E01, 0xFE77, 0x7C00, 0xFC00, 0x0001, 0x8001, 0x8000]
+    valid("bricked_9x7x6_binary16_specials", src, BINARY16, 2,
+          "Bricked grid 9x7x6 binary16, bricks of 4, codec 3 with the binary16 order map (value_map 1): "
+          "-0, NaNs with payloads, infinities and subnormals come back bit for bit.")
+    src = (smooth(8, 8, 8, 20000, 11) + rng.integers(0, 40, (8, 8, 8))).astype(np.uint16)
+    valid("bricked_8x8x8_uint16_fitted_taps", src, UINT16, 3,
+          "Bricked grid 8x8x8 uint16, one brick: taps in units of 2^-12 (shift 12) summing to 4096, "
+          "rounding by adding 2^11 before the floor division.",
+          value_map=0, shift=12, taps=(2900, 1800, 1500, -1300, -1100, -900, 1196))
+    src = (rng.integers(3000, 3100, (6, 6, 6))).astype(np.uint16)
+    valid("bricked_6x6x6_uint16_level", src, UINT16, 2,
+          "Bricked grid 6x6x6 uint16 of noise around a level: taps 0.25 each on x, y, z (shift 4) and a "
+          "level L = 1541 added after the shift.",
+          value_map=0, shift=4, taps=(4, 4, 4, 0, 0, 0, 0), level=1541)
+    src = rng.integers(0, 65536, (4, 5, 6)).astype(np.uint16)
+    valid("bricked_6x5x4_uint16_extreme_taps", src, UINT16, 2,
+          "Bricked grid 6x5x4 uint16 of random bits, taps +-32767 and -32768 with shift 0 and a level of "
+          "-2^31: predictions far outside 0..65535 are clamped before the residual is added.",
+          value_map=0, shift=0, taps=(32767, -32768, 32767, -32768, 32767, -32768, 32767), level=-2 ** 31)
+    src = (smooth(7, 6, 5, 40000, -13) + rng.integers(0, 9, (5, 6, 7))).astype(np.uint16)
+    valid("bricked_7x6x5_uint16_negative_floor", src, UINT16, 2,
+          "Bricked grid 7x6x5 uint16, taps summing to a negative S in places, shift 15: the division by "
+          "2^15 floors toward minus infinity.",
+          value_map=0, shift=15, taps=(-20000, 30000, 20000, 1000, -3000, 2000, 2768), level=-7)
+    vals = np.round(rng.normal(1.0, 0.4, 10 * 5 * 4), 2)
+    src = arr_f16(vals, (4, 5, 10))
+    valid("bricked_10x5x4_binary16_mixed_codecs", src, BINARY16, 1,
+          "Bricked grid 10x5x4 binary16, bricks of 2: the values blocks cycle through codecs 3, 0, 1, 2 "
+          "(every codec is valid on a brick).",
+          codec=lambda q: (CODEC_PREDICTED, CODEC_STORED, CODEC_ZSTD, CODEC_PLANES)[q % 4])
+    src = arr_f16(np.round(rng.normal(-0.2, 0.3, 5 * 5 * 5), 3), (5, 5, 5))
+    valid("bricked_5x5x5_binary16_identity_map", src, BINARY16, 2,
+          "Bricked grid 5x5x5 binary16 around zero with value_map 0: the raw bit patterns are predicted "
+          "(worse across zero, still exact).", value_map=0)
+    src = np.array([[[0x8000]]], np.uint16)
+    valid("bricked_1x1x1_binary16", src, BINARY16, 1,
+          "Bricked grid of one voxel (-0), brick of 2: the brick's extent is 1x1x1, its one voxel "
+          "predicted as 0.", lods=False)
+    src = (smooth(17, 1, 1, 500, 3)).astype(np.uint16)
+    valid("bricked_17x1x1_uint16_line", src, UINT16, 2,
+          "Bricked grid 17x1x1 uint16, bricks of 4 (the last of 1 voxel): one-axis prediction only.",
+          value_map=0)
+    src = (smooth(5, 3, 2, 100, 1)).astype(np.uint16)
+    valid("bricked_5x3x2_uint16_brick_larger_than_volume", src, UINT16, 4,
+          "Bricked grid 5x3x2 uint16, bricks of 16 (byte 11 = 4): one brick smaller than B on every axis.",
+          value_map=0)
+    per = lambda q: dict(value_map=q % 2, shift=q % 16, taps=tuple(int(t) for t in rng.integers(-999, 999, 7)),
+                         level=int(rng.integers(-5000, 5000)), zcheck=q % 2 == 0)
+    src = rng.integers(0, 65536, (6, 6, 6)).astype(np.uint16)
+    valid("bricked_6x6x6_uint16_taps_per_brick", src, UINT16, 1,
+          "Bricked grid 6x6x6 uint16 of random bits, 27 bricks of 2, each with its own value map, shift, "
+          "taps and level; every other residual frame carries a content checksum.", per_brick=per)
+
+    # ---- invalid: one rule broken each
+    src = (smooth(6, 5, 4, 1000, 5) + rng.integers(0, 5, (4, 5, 6))).astype(np.uint16)
+    good = dict(value_map=0)
+
+    def first_brick(field_bytes):
+        def mutate(blocks):
+            b = blocks[0]
+            b.stored = field_bytes(b.stored)
+        return mutate
+
+    def with_byte(off, value):
+        return first_brick(lambda st: st[:off] + bytes([value]) + st[off + 1:])
+
+    def inv(name, expect, tag, desc, **kw):
+        args = dict(good)
+        args.update(kw)
+        add_invalid(name, bricked_file(src, UINT16, 2, **args), expect, tag, desc)
+
+    inv("bricked_codec3_predictor_2", "unsupported-feature", "codec3.predictor",
+        "A codec 3 block whose predictor (payload byte 0) is 2, not defined (§7.2).", mutate=with_byte(0, 2))
+    inv("bricked_codec3_entropy_0", "unsupported-feature", "codec3.entropy",
+        "A codec 3 block whose entropy coder (payload byte 3) is 0.", mutate=with_byte(3, 0))
+    inv("bricked_codec3_value_map_2", "malformed", "codec3.map",
+        "A codec 3 block whose value_map (payload byte 1) is 2.", mutate=with_byte(1, 2))
+    inv("bricked_codec3_shift_16", "malformed", "codec3.shift",
+        "A codec 3 block whose shift (payload byte 2) is 16.", mutate=with_byte(2, 16))
+    inv("bricked_codec3_reserved", "malformed", "codec3.reserved",
+        "A codec 3 block whose reserved payload byte 23 is 1.", mutate=with_byte(23, 1))
+    inv("bricked_codec3_short", "malformed", None,
+        "A codec 3 block of 20 bytes, shorter than its 24-byte codec header.",
+        mutate=first_brick(lambda st: st[:20]))
+    inv("bricked_codec3_trailing_byte", "malformed", "zstd.extra",
+        "A codec 3 block with one byte after its zstd frame.", mutate=first_brick(lambda st: st + b"\0"))
+    first_ext = bricked_order((6, 5, 4), 2)[0][1]
+    n0 = first_ext[0] * first_ext[1] * first_ext[2]
+    inv("bricked_codec3_content_size", "malformed", "zstd.content_size",
+        "A codec 3 block whose residual frame holds 2n - 2 bytes instead of 2n.",
+        mutate=first_brick(lambda st: st[:24] + zframe(bytes(2 * n0 - 2), False)))
+
+    def merge_first_two(blocks):
+        a, b = blocks[0], blocks[1]
+        merged = Blk(STREAM_VALUES, 0, a.first, a.count + b.count, a.data + b.data, codec=CODEC_ZSTD)
+        blocks[0:2] = [merged]
+    inv("bricked_two_bricks_in_a_block", "malformed", None,
+        "A bricked grid whose first values block holds the first two bricks (zstd): one brick per "
+        "block (§6.4, §8A.4).", codec=CODEC_ZSTD, mutate=merge_first_two)
+
+    def split_first(blocks):
+        a = blocks[0]
+        h = a.count // 2
+        blocks[0:1] = [Blk(STREAM_VALUES, 0, a.first, h, a.data[:2 * h], codec=CODEC_ZSTD),
+                       Blk(STREAM_VALUES, 0, a.first + h, a.count - h, a.data[2 * h:], codec=CODEC_ZSTD)]
+    inv("bricked_brick_split_in_two", "malformed", None,
+        "A bricked grid whose first brick is split over two values blocks (the coverage holds).",
+        codec=CODEC_ZSTD, mutate=split_first)
+    g = write_bricked(src, UINT16, 2)
+    blocks = [meta_block(DEFAULT_META)] + bricked_blocks(g, value_map=0)
+    for b_log2, name, desc in ((0, "bricked_brick_log2_0", "byte 11 (brick log2) is 0, outside 1 .. 8"),
+                               (9, "bricked_brick_log2_9", "byte 11 (brick log2) is 9, outside 1 .. 8")):
+        data, _ = assemble(g, blocks, structure_kind=KIND_BRICKED, ireserved=b_log2, **framed)
+        add_invalid(name, data, "malformed", "brick_log2", "A bricked grid whose " + desc + " (§6.1).")
+    data, _ = assemble(g, blocks, structure_kind=KIND_BRICKED, ireserved=2, minor=3)
+    add_invalid("bricked_unframed", data, "malformed", "bricked.unframed",
+                "A bricked grid without framed blocks (required feature bit 0 clear): §8A.4 requires them.")
+    reg = write_regular(src, UINT16)
+    rblocks = grid_blocks(reg, CODEC_ZSTD)
+    rblocks[0].stored = predicted_payload([int(v) for v in src.reshape(-1)], (6, 5, 4), value_map=0)
+    rblocks[0].codec = CODEC_PREDICTED
+    data, _ = assemble(reg, [meta_block(DEFAULT_META)] + rblocks, structure_kind=KIND_REGULAR, **framed)
+    add_invalid("regular_with_codec3", data, "malformed", "codec3.where",
+                "A regular grid (structure_kind 2) whose one values block has codec 3, valid only in a "
+                "bricked grid (§7).")
+    f32src = arr_f32(rng.normal(0, 1, 4 * 4 * 4), (4, 4, 4))
+    g32 = write_bricked(f32src, FLOAT32, 2)
+    b32 = bricked_blocks(g32, CODEC_ZSTD)
+    b32[0].codec = CODEC_PREDICTED
+    b32[0].stored = zframe(bytes(8))
+    data, _ = assemble(g32, [meta_block(DEFAULT_META)] + b32, structure_kind=KIND_BRICKED, ireserved=2, **framed)
+    add_invalid("bricked_float32_codec3", data, "malformed", "codec3.where",
+                "A bricked grid of float32 values whose brick has codec 3, which holds 16-bit values only.")
 
 
 def gen_grids_valid():
@@ -2922,8 +3273,9 @@ def gen_grids_invalid(octree_base, octree_blocks, octree_tree):
         "values stream does not cover its 2^93 elements -> malformed.")
 
     # structure kinds (§6.1)
-    inv("structure_kind_5", pg(rb, rblay, 8, "<B", 5), "unsupported-feature", "structure_kind",
-        "%s with structure_kind = 5 (not defined in 1.1 or 1.2)." % gdesc["RB"])
+    inv("structure_kind_6", pg(rb, rblay, 8, "<B", 6), "unsupported-feature", "structure_kind",
+        "%s with structure_kind = 6 (not defined in 1.3; was structure_kind_5 up to 1.2, before the "
+        "bricked grid)." % gdesc["RB"])
     return rb
 
 

@@ -9,6 +9,8 @@
 #include "framing.hpp"
 #include "ivol/crc32c.hpp"
 #include "ivol/error.hpp"
+#include "ivol/predicted_codec.hpp"
+#include "layout.hpp"
 
 namespace ivol::detail {
 namespace {
@@ -50,7 +52,8 @@ std::uint32_t crc32c_of_range(RandomAccessFile& file, std::uint64_t offset, std:
 }
 
 std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const BlockInfo& block, std::size_t index,
-                                                std::size_t width, bool known, bool framed) {
+                                                std::size_t width, bool known, bool framed,
+                                                const std::optional<Dims>& brick) {
   const std::string part = block_part(file, block, index);
   // A block of a stream this reader does not know (ignorable, or the index
   // would have been refused) has no size limit but the file's (spec §6.4):
@@ -60,8 +63,8 @@ std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const Bl
     check_block_crc(file, block, index);
     if (framed) {  // spec §7.1, from the header and a streamed payload CRC
       if (block.stored_size <= 32)
-        throw Error(ErrorClass::Malformed, part + "stored_size " + std::to_string(block.stored_size) +
-                                               " leaves no room for a payload");
+        throw Error(ErrorClass::Malformed,
+                    part + "stored_size " + std::to_string(block.stored_size) + " leaves no room for a payload");
       const std::vector<std::uint8_t> header = file.read(block.file_offset, 32);
       check_block_header(header.data(), block.stored_size, block, part,
                          crc32c_of_range(file, block.file_offset + 32, block.stored_size - 32));
@@ -78,6 +81,20 @@ std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const Bl
   }
   const std::size_t decoded_size = std::size_t{block.element_count} * width;
   if (block.codec == 0) return stored;
+  if (block.codec == 3) {  // spec §7.2: a brick of 16-bit values
+    if (!brick || width != 2 || std::uint64_t{(*brick)[0]} * (*brick)[1] * (*brick)[2] != block.element_count)
+      throw Error(ErrorClass::Malformed,
+                  part + "codec 3 is only for a values block holding one brick of 16-bit values");
+    std::vector<std::uint8_t> decoded(decoded_size);
+    std::vector<std::uint16_t> values(block.element_count);
+    try {
+      decode_predicted(stored.data(), stored.size(), *brick, values.data());
+    } catch (const Error& e) {
+      throw Error(e.error_class(), part + e.what());
+    }
+    for (std::size_t i = 0; i < values.size(); ++i) layout::store<std::uint16_t>(decoded.data() + 2 * i, values[i]);
+    return decoded;
+  }
   if (block.codec != 1 && block.codec != 2)
     throw Error(ErrorClass::UnsupportedFeature, part + "codec " + std::to_string(block.codec) + " is not known");
 

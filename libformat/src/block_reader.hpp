@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <list>
 #include <memory>
+#include <optional>
 #include <unordered_map>
 #include <vector>
 
@@ -18,8 +19,11 @@ namespace ivol::detail {
 // A block of a stream unknown to the file's kind is only checked against its
 // CRC (`known` false). `framed`: format 1.3, the stored bytes begin with a
 // block header, checked against `block` and not part of what is returned.
+// `brick`: the brick of a bricked grid's values block (brick_grid.hpp), which
+// codec 3 needs; a block of codec 3 without one is malformed.
 std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const BlockInfo& block, std::size_t index,
-                                                std::size_t width, bool known, bool framed);
+                                                std::size_t width, bool known, bool framed,
+                                                const std::optional<Dims>& brick = std::nullopt);
 // Checks block `index`'s CRC a chunk at a time (Error(Checksum) if it fails),
 // holding 1 MiB whatever its stored size.
 void check_block_crc(RandomAccessFile& file, const BlockInfo& block, std::size_t index);

@@ -34,7 +34,8 @@ CheckReport check_file(const std::string& path) {
       }
       const auto decoded =
           detail::read_and_decode_block(*file, block, b, detail::stream_width(block.stream, info.layout.encoding),
-                                        detail::is_known_stream(block.stream, info.layout.kind), info.framed());
+                                        detail::is_known_stream(block.stream, info.layout.kind), info.framed(),
+                                        detail::brick_of_block(info.layout, block.stream, block.first_element));
       if (block.stream == 1) metadata_text.assign(decoded.begin(), decoded.end());
     } catch (const Error& e) {
       ++report.blocks_damaged;

@@ -7,9 +7,11 @@
 #include <cstring>
 
 #include "block_reader.hpp"
+#include "brick_grid.hpp"
 #include "framing.hpp"
 #include "ivol/crc32c.hpp"
 #include "ivol/error.hpp"
+#include "ivol/predicted_codec.hpp"
 #include "layout.hpp"
 
 namespace ivol {
@@ -46,6 +48,8 @@ const char* kind_name(StructureKind kind) {
       return "rectilinear grid";
     case StructureKind::Nested:
       return "nested grid";
+    case StructureKind::Bricked:
+      return "bricked regular grid";
   }
   return "?";
 }
@@ -176,10 +180,10 @@ class StructureReader {
     const auto fixed = file_.read(info_.index_offset, fixed_size);
     const unsigned char* p = fixed.data();
     const std::uint8_t structure = p[layout::kIndexStructureKind];
-    if (structure < 1 || structure > 4)
+    if (structure < 1 || structure > 5)
       fail(ErrorClass::UnsupportedFeature, "index",
            "structure_kind " + std::to_string(structure) +
-               " is not known (1 = octree, 2 = regular, 3 = rectilinear, 4 = nested)");
+               " is not known (1 = octree, 2 = regular, 3 = rectilinear, 4 = nested, 5 = bricked)");
     const std::uint8_t encoding = p[layout::kIndexValueEncoding];
     if (!is_known_encoding(encoding))
       fail(ErrorClass::UnsupportedFeature, "index", "value_encoding " + std::to_string(encoding) + " is not known");
@@ -190,7 +194,13 @@ class StructureReader {
     v.cell_log2 = p[layout::kIndexCellLog2];
     if (v.kind == StructureKind::Nested && (v.cell_log2 < 1 || v.cell_log2 > 31))
       fail(ErrorClass::Malformed, "index", "cell_log2 " + std::to_string(v.cell_log2) + " is outside 1 .. 31");
-    if (v.kind != StructureKind::Nested && v.cell_log2 != 0)
+    if (v.kind == StructureKind::Bricked && !info_.framed())
+      fail(ErrorClass::Malformed, "index", "a bricked regular grid (structure_kind 5) needs framed blocks (format 1.3)");
+    if (v.kind == StructureKind::Bricked && (v.cell_log2 < 1 || v.cell_log2 > layout::kMaxBrickLog2))
+      fail(ErrorClass::Malformed, "index",
+           "brick_log2 (byte 11) " + std::to_string(v.cell_log2) + " is outside 1 .. " +
+               std::to_string(layout::kMaxBrickLog2));
+    if (v.kind != StructureKind::Nested && v.kind != StructureKind::Bricked && v.cell_log2 != 0)
       fail(ErrorClass::Malformed, "index", "reserved byte 11 is not zero");
     for (int a = 0; a < 3; ++a) {
       v.dims[a] = load<std::uint32_t>(p + layout::kIndexSizeX + 4 * a);
@@ -298,7 +308,11 @@ class StructureReader {
         continue;  // an ignorable block of a stream we do not know: skipped
       }
       if (blk.flags != 0) bad(ErrorClass::Malformed, "blocks of known streams must have flags 0");
-      if (blk.codec > 2) bad(ErrorClass::UnsupportedFeature, "codec " + std::to_string(blk.codec) + " is not known");
+      if (blk.codec > 3) bad(ErrorClass::UnsupportedFeature, "codec " + std::to_string(blk.codec) + " is not known");
+      // Codec 3 predicts within a brick of 16-bit values (spec §7.2).
+      if (blk.codec == 3 &&
+          (blk.stream != 3 || v.kind != StructureKind::Bricked || v.encoding == ValueEncoding::Float32))
+        bad(ErrorClass::Malformed, "codec 3 is only for values blocks of a bricked grid of 16-bit values");
       const std::uint64_t width = stream_width(blk.stream, v.encoding);
       const std::uint64_t decoded = blk.element_count * width;
       if (decoded > layout::kMaxBlockDecodedBytes)
@@ -311,11 +325,16 @@ class StructureReader {
       // No zstd frame of `decoded` bytes is longer than ZSTD_compressBound
       // (plus the block header in a framed file): a larger stored_size is
       // refused before the block is read (spec §7).
-      if (blk.codec != 0 && blk.stored_size > ZSTD_compressBound(decoded) + frame)
+      if (blk.codec == 3 && blk.stored_size > predicted_payload_bound(blk.element_count) + frame)
+        bad(ErrorClass::Malformed, "stored_size " + std::to_string(blk.stored_size) + " exceeds " +
+                                       std::to_string(predicted_payload_bound(blk.element_count) + frame) +
+                                       ", the largest codec 3 payload of " + std::to_string(blk.element_count) +
+                                       " values" + (frame ? " and the block header" : ""));
+      if ((blk.codec == 1 || blk.codec == 2) && blk.stored_size > ZSTD_compressBound(decoded) + frame)
         bad(ErrorClass::Malformed, "stored_size " + std::to_string(blk.stored_size) + " exceeds " +
                                        std::to_string(ZSTD_compressBound(decoded) + frame) +
-                                       ", the largest zstd frame of its " + std::to_string(decoded) +
-                                       " decoded bytes" + (frame ? " and the block header" : ""));
+                                       ", the largest zstd frame of its " + std::to_string(decoded) + " decoded bytes" +
+                                       (frame ? " and the block header" : ""));
       if (blk.level > v.depth) bad(ErrorClass::Malformed, "level " + std::to_string(blk.level) + " is deeper than D");
       std::uint64_t lo = 0;
       std::uint64_t hi = 0;
@@ -330,6 +349,7 @@ class StructureReader {
         if (decoded > layout::kMaxMetadataBytes) bad(ErrorClass::Malformed, "metadata exceeds 16 MiB");
         continue;
       }
+      if (v.kind == StructureKind::Bricked && blk.stream == 3) check_one_brick(blk, part);
       if (!octree) continue;  // ranges are checked by coverage below
       if (blk.stream == 2) {
         lo = v.first_inner(blk.level);
@@ -356,7 +376,8 @@ class StructureReader {
         check_coverage(2, v.total_inner());
         check_coverage(3, v.total_values());
         break;
-      case StructureKind::Regular: {
+      case StructureKind::Regular:
+      case StructureKind::Bricked: {
         // Sizes up to 2^31 per axis: bound the product as it grows (spec §8A).
         constexpr std::uint64_t kMaxValues = std::uint64_t{1} << 56;
         std::uint64_t total = 1;
@@ -386,6 +407,28 @@ class StructureReader {
         break;
       }
     }
+  }
+
+  // Spec §8A.4: a values block of a bricked grid holds exactly one brick.
+  void check_one_brick(const BlockInfo& blk, const std::string& part) {
+    const VolumeLayout& v = info_.layout;
+    std::uint64_t total = 1;  // more than 2^56 voxels is refused with the coverage below
+    for (int a = 0; a < 3; ++a) {
+      if (total > (std::uint64_t{1} << 56) / v.dims[a]) return;
+      total *= v.dims[a];
+    }
+    const BrickGrid grid(v.dims, v.cell_log2);
+    std::array<std::uint32_t, 3> brick{};
+    if (!grid.brick_at(blk.first_element, brick))
+      fail(ErrorClass::Malformed, part,
+           "first_element " + std::to_string(blk.first_element) + " is not the first value of a brick");
+    const Dims e = grid.extent(brick[0], brick[1], brick[2]);
+    const std::uint64_t voxels = std::uint64_t{e[0]} * e[1] * e[2];
+    if (blk.element_count != voxels)
+      fail(ErrorClass::Malformed, part,
+           "element_count " + std::to_string(blk.element_count) + " is not the " + std::to_string(voxels) +
+               " values of brick (" + std::to_string(brick[0]) + ", " + std::to_string(brick[1]) + ", " +
+               std::to_string(brick[2]) + ")");
   }
 
   // Blocks of a stream, in order of first_element, cover 0 .. total exactly

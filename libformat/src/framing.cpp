@@ -15,7 +15,8 @@ std::array<unsigned char, 32> volume_descriptor(const VolumeLayout& v) {
   d[layout::kIndexStructureKind - 8] = static_cast<std::uint8_t>(v.kind);
   d[layout::kIndexValueEncoding - 8] = static_cast<std::uint8_t>(v.encoding);
   d[layout::kIndexDepth - 8] = static_cast<std::uint8_t>(v.depth);
-  d[layout::kIndexCellLog2 - 8] = v.kind == StructureKind::Nested ? v.cell_log2 : 0;
+  d[layout::kIndexCellLog2 - 8] =
+      v.kind == StructureKind::Nested || v.kind == StructureKind::Bricked ? v.cell_log2 : 0;
   for (int a = 0; a < 3; ++a) layout::store<std::uint32_t>(&d[layout::kIndexSizeX - 8 + 4 * a], v.dims[a]);
   layout::store<double>(&d[layout::kIndexScale - 8], v.value_scale);
   layout::store<double>(&d[layout::kIndexOffset - 8], v.value_offset);

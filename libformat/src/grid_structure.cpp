@@ -14,6 +14,7 @@ GridStructure::GridStructure(const VolumeLayout& layout, std::vector<std::uint32
   std::uint64_t total = 0;
   switch (layout.kind) {
     case StructureKind::Regular:
+    case StructureKind::Bricked:
       total = voxel_count(d);
       break;
     case StructureKind::Rectilinear: {

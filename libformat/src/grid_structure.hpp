@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "brick_grid.hpp"
 #include "ivol/geometry.hpp"
 
 namespace ivol::detail {
@@ -54,6 +55,14 @@ void GridStructure::for_each_cell(const Box& box, F&& visit) const {
           for (std::uint32_t x = box.lo[0]; x < box.hi[0]; ++x)
             visit(Box{{x, y, z}, {x + 1, y + 1, z + 1}}, (std::uint64_t{z} * d[1] + y) * d[0] + x);
       return;
+    case StructureKind::Bricked: {
+      const BrickGrid bricks(d, layout_.cell_log2);
+      for (std::uint32_t z = box.lo[2]; z < box.hi[2]; ++z)
+        for (std::uint32_t y = box.lo[1]; y < box.hi[1]; ++y)
+          for (std::uint32_t x = box.lo[0]; x < box.hi[0]; ++x)
+            visit(Box{{x, y, z}, {x + 1, y + 1, z + 1}}, bricks.value_index(x, y, z));
+      return;
+    }
     case StructureKind::Rectilinear: {
       std::uint32_t lo[3], hi[3];
       for (int a = 0; a < 3; ++a) lo[a] = interval_of(a, box.lo[a]), hi[a] = interval_of(a, box.hi[a] - 1);

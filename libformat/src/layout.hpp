@@ -90,6 +90,9 @@ constexpr std::size_t kEntryLevel = 31;
 constexpr std::uint8_t kStructureOctree = 1;
 constexpr std::uint8_t kFlagIgnorable = 0x01;
 constexpr unsigned kMaxDepth = 31;
+// Bricked grid (spec §8A.4): bricks up to 256^3, so that a brick of float32
+// values (64 MiB) still fits in one block.
+constexpr unsigned kMaxBrickLog2 = 8;
 constexpr std::uint64_t kMaxBlockDecodedBytes = 64ull << 20;
 constexpr std::uint64_t kMaxMetadataBytes = 16ull << 20;
 constexpr std::uint64_t kOffsetMask = (1ull << 56) - 1;

@@ -6,6 +6,7 @@
 #include <optional>
 
 #include "ivol/error.hpp"
+#include "brick_grid.hpp"
 #include "layout.hpp"
 #include "reader_impl.hpp"
 #include "tree_walk.hpp"
@@ -334,7 +335,8 @@ std::vector<std::uint8_t> Reader::read_block(std::size_t block_index) {
   const BlockInfo& b = impl_->info.blocks[block_index];
   return detail::read_and_decode_block(
       impl_->file, b, block_index, detail::stream_width(b.stream, impl_->info.layout.encoding),
-      detail::is_known_stream(b.stream, impl_->info.layout.kind), impl_->info.framed());
+      detail::is_known_stream(b.stream, impl_->info.layout.kind), impl_->info.framed(),
+      detail::brick_of_block(impl_->info.layout, b.stream, b.first_element));
 }
 
 }  // namespace ivol

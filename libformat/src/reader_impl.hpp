@@ -115,8 +115,9 @@ struct Reader::Impl {
     const BlockInfo& b = info.blocks[index];
     detail::BlockData data;
     try {
-      data = std::make_shared<const std::vector<std::uint8_t>>(detail::read_and_decode_block(
-          file, b, index, detail::stream_width(b.stream, info.layout.encoding), true, info.framed()));
+      data = std::make_shared<const std::vector<std::uint8_t>>(
+          detail::read_and_decode_block(file, b, index, detail::stream_width(b.stream, info.layout.encoding), true,
+                                        info.framed(), detail::brick_of_block(info.layout, b.stream, b.first_element)));
     } catch (const Error& e) {
       failures.emplace(index, e);
       throw;

@@ -8,6 +8,7 @@
 #include <map>
 
 #include "block_reader.hpp"
+#include "brick_grid.hpp"
 #include "file_index.hpp"
 #include "framing.hpp"
 #include "ivol/crc32c.hpp"
@@ -84,7 +85,7 @@ class Salvager {
     VolumeLayout& v = info.layout;
     const std::uint8_t kind = d[layout::kIndexStructureKind];
     const std::uint8_t encoding = d[layout::kIndexValueEncoding];
-    if (kind < 1 || kind > 4) fail(ErrorClass::UnsupportedFeature, "structure_kind " + std::to_string(kind));
+    if (kind < 1 || kind > 5) fail(ErrorClass::UnsupportedFeature, "structure_kind " + std::to_string(kind));
     if (!is_known_encoding(encoding))
       fail(ErrorClass::UnsupportedFeature, "value_encoding " + std::to_string(encoding));
     v.kind = static_cast<StructureKind>(kind);
@@ -97,7 +98,9 @@ class Salvager {
     }
     if (v.depth > layout::kMaxDepth || v.depth != depth_for(v.dims))
       fail(ErrorClass::Malformed, "the volume descriptor's depth does not fit its size");
-    if (v.kind == StructureKind::Nested ? (v.cell_log2 < 1 || v.cell_log2 > 31) : v.cell_log2 != 0)
+    if (v.kind == StructureKind::Nested    ? (v.cell_log2 < 1 || v.cell_log2 > 31)
+        : v.kind == StructureKind::Bricked ? (v.cell_log2 < 1 || v.cell_log2 > layout::kMaxBrickLog2)
+                                           : v.cell_log2 != 0)
       fail(ErrorClass::Malformed, "the volume descriptor's cell_log2 is out of range");
     v.value_scale = layout::load<double>(d + layout::kIndexScale);
     v.value_offset = layout::load<double>(d + layout::kIndexOffset);
@@ -184,7 +187,10 @@ class Salvager {
     const VolumeLayout& v = result_.info.layout;
     std::string why;
     const std::uint64_t width = stream_width(b.stream, v.encoding);
-    if (b.flags != 0 || b.codec > 2 || b.element_count == 0)
+    // Codec 3 only on a bricked grid's values, one brick per block (spec §7, §8A.4).
+    const bool brick_codec =
+        b.codec == 3 && brick_of_block(v, b.stream, b.first_element) && v.encoding != ValueEncoding::Float32;
+    if (b.flags != 0 || (b.codec > 2 && !brick_codec) || b.element_count == 0)
       why = "flags, codec or element_count out of range";
     else if (b.element_count * width > layout::kMaxBlockDecodedBytes)
       why = "decoded size over 64 MiB";
@@ -326,7 +332,7 @@ class Salvager {
       }
     }
     std::uint64_t total = ~std::uint64_t{0};  // unknown until the borders or cells are read
-    if (v.kind == StructureKind::Regular) {
+    if (v.kind == StructureKind::Regular || v.kind == StructureKind::Bricked) {
       const unsigned __int128 voxels = static_cast<unsigned __int128>(v.dims[0]) * v.dims[1] * v.dims[2];
       if (voxels <= (std::uint64_t{1} << 56)) total = static_cast<std::uint64_t>(voxels);
     }
@@ -338,7 +344,7 @@ class Salvager {
       used_.push_back(b);
       salvage_->values_found += b.element_count;
     }
-    if (v.kind == StructureKind::Regular) {
+    if (v.kind == StructureKind::Regular || v.kind == StructureKind::Bricked) {
       salvage_->values_total = total;
       if (salvage_->values_found == total) salvage_->finest_complete_lod = 0;
     }

@@ -17,6 +17,8 @@ const char* structure_name(StructureKind kind) {
       return "nested";
     case StructureKind::Octree:
       return "octree";
+    case StructureKind::Bricked:
+      return "bricked";
   }
   return "unknown";
 }

@@ -329,8 +329,11 @@ std::unique_ptr<VoxelStructure> generate_structure(StructureKind kind, const Nee
     }
     case StructureKind::Octree:
       return std::make_unique<OctreeStructure>(mask, threads);
+    case StructureKind::Bricked:  // the same cells as the regular grid, stored otherwise (BrickedGridWriter)
+      break;
   }
-  throw Error(ErrorClass::InvalidArgument, "unknown structure kind");
+  throw Error(ErrorClass::InvalidArgument,
+              std::string(structure_name(kind)) + ": no structure of this kind is generated");
 }
 
 }  // namespace ivol

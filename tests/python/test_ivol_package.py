@@ -181,7 +181,7 @@ class ValidVectors(unittest.TestCase):
                         self.assertTrue(same_bits(level[...], want))
 
     def test_structure_kinds_covered(self):
-        self.assertEqual({v["structure"] for v in VALID}, {"octree", "regular", "rectilinear", "nested"})
+        self.assertEqual({v["structure"] for v in VALID}, {"octree", "regular", "rectilinear", "nested", "bricked"})
         self.assertEqual({v["value_encoding"] for v in VALID}, {"uint16", "binary16", "float32"})
 
 

@@ -27,6 +27,7 @@ struct ConvertSettings {
   std::uint32_t block_bytes = 0;
   std::string codec = "zstd-planes";
   std::string format_version = "1.3";
+  std::string structure = "auto";
   std::uint64_t memory_mib = 0;
   std::string out_type;
   unsigned level = 0;
@@ -119,6 +120,11 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
                    "for 1.0/1.1 readers)")
       ->check(CLI::IsMember({"1.3", "1.2"}))
       ->capture_default_str();
+  into->add_option("--structure", s->structure,
+                   "auto: a bricked regular grid (bricks predicted in 3-D, codec 3) for lossless every-voxel 16-bit "
+                   "values, else an octree; octree or bricked to choose")
+      ->check(CLI::IsMember({"auto", "octree", "bricked"}))
+      ->capture_default_str();
   into->add_option("--memory", s->memory_mib, "About how many MiB the conversion may hold (default 2048)")
       ->check(whole_number());
   into->add_option("--quantity", s->quantity, "What the values are, e.g. linear_attenuation");
@@ -170,6 +176,9 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       options.block_bytes = s->block_bytes;
       options.byte_planes = s->codec == "zstd-planes";
       options.framed_blocks = s->format_version == "1.3";
+      options.structure = s->structure == "octree"    ? convert::StructureChoice::Octree
+                          : s->structure == "bricked" ? convert::StructureChoice::Bricked
+                                                      : convert::StructureChoice::Auto;
       // A slab's samples are held about four times over (as read, as float,
       // the keep mask, the subtrees being built): give a quarter to the slab.
       options.slab_budget_bytes = foreign.memory_bytes / 4;
@@ -219,9 +228,9 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
           std::cerr << "ivol convert: lossy: " << steps << "; largest error " << r.max_abs_error << "\n";
         }
         say << s->input << " (" << format_name(from) << " " << describe(shape) << ", " << human_bytes(bytes) << ") -> "
-            << s->output << " (ivol " << encoding_name(r.encoding) << ", " << human_bytes(r.file_bytes) << ", "
-            << static_cast<double>(bytes) / r.file_bytes << "x smaller" << (r.lossless && !rounded ? ", lossless" : "")
-            << ") in " << seconds << " s\n";
+            << s->output << " (ivol " << r.structure << " " << encoding_name(r.encoding) << ", "
+            << human_bytes(r.file_bytes) << ", " << static_cast<double>(bytes) / r.file_bytes << "x smaller"
+            << (r.lossless && !rounded ? ", lossless" : "") << ") in " << seconds << " s\n";
       }
       print_geometry(shape, *s, to, say, global.quiet);
       return kExitOk;

@@ -36,7 +36,14 @@ Runner add_info_command(CLI::App& app, const GlobalOptions& /*global*/) {
     const auto& dims = d["dimensions"];
     std::cout << d["file"].get<std::string>() << "\n"
               << "  format         .ivol " << d["format_version"].get<std::string>() << ", "
-              << d["structure"].get<std::string>() << " (depth " << d["depth"] << ")\n"
+              << d["structure"].get<std::string>()
+              << (d["brick"].get<std::uint64_t>()
+                      ? ", bricks of " + std::to_string(d["brick"].get<std::uint64_t>()) + "^3"
+                      : std::string())
+              << " (depth " << d["depth"] << ")\n"
+              << (d["structure_reason"].get<std::string>().empty()
+                      ? std::string()
+                      : "  chosen because " + d["structure_reason"].get<std::string>() + "\n")
               << "  dimensions     " << dims[0] << " x " << dims[1] << " x " << dims[2] << " voxels of "
               << d["voxel_size"][0] << " x " << d["voxel_size"][1] << " x " << d["voxel_size"][2] << " "
               << d["unit"].get<std::string>() << "\n"

@@ -61,6 +61,10 @@ nlohmann::json describe_file(Reader& reader) {
       {"format_version", std::to_string(info.version_major) + "." + std::to_string(info.version_minor)},
       {"structure", structure_name(v.kind)},
       {"nested_cell", v.kind == StructureKind::Nested ? (std::uint64_t{1} << v.cell_log2) : 0},
+      {"brick", v.kind == StructureKind::Bricked ? (std::uint64_t{1} << v.cell_log2) : 0},
+      {"structure_reason", reader.metadata().structure.is_object()
+                               ? reader.metadata().structure.value("chosen_because", std::string())
+                               : std::string()},
       {"dimensions", {v.dims[0], v.dims[1], v.dims[2]}},
       {"depth", v.depth},
       {"value_encoding", encoding_name(v.encoding)},

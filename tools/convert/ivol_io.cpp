@@ -6,6 +6,7 @@
 #include <filesystem>
 
 #include "ivol/binary16.hpp"
+#include "ivol/bricked_writer.hpp"
 #include "ivol/build.hpp"
 #include "ivol/error.hpp"
 #include "ivol/keep_mask.hpp"
@@ -214,6 +215,7 @@ void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, cons
   // The outcome of the build is known only at the end; finish() writes the
   // metadata after the blocks, so say it here from what the slabs reported.
   metadata.structure["kind"] = "octree";
+  if (!report.structure_reason.empty()) metadata.structure["chosen_because"] = report.structure_reason;
   metadata.structure["source_encoding"] = sample_type_name(shape.type);
   if (options.keep) {
     metadata.structure["keep"] = {
@@ -230,18 +232,140 @@ void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, cons
   report.file_bytes = result.write.file_bytes;
 }
 
+namespace {
+
+// StructureChoice::Auto's rule, and whether a bricked grid can hold the file.
+// `layer_bytes`: what import_bricked holds for one layer of bricks.
+bool choose_bricked(const ImportOptions& options, ValueEncoding encoding, std::uint64_t layer_bytes,
+                    ImportReport& report) {
+  std::string against;
+  if (options.keep) against = "a keep rule coarsens regions, which only an octree holds";
+  if (encoding == ValueEncoding::Float32) against = "float32 values (codec 3 predicts 16-bit values)";
+  if (!options.byte_planes) against = "--codec zstd (codec 1 only, for format 1.0/1.1 readers)";
+  if (!options.framed_blocks) against = "format 1.2 (a bricked grid needs format 1.3)";
+  if (options.structure == StructureChoice::Bricked) {
+    if (!against.empty()) throw Error(ErrorClass::InvalidArgument, "--structure bricked: " + against);
+    report.structure_reason = "asked for (--structure bricked)";
+    return true;
+  }
+  if (options.structure == StructureChoice::Octree) {
+    report.structure_reason = "asked for (--structure octree)";
+    return false;
+  }
+  if (against.empty() && layer_bytes > memory_budget(options.memory_bytes))
+    against = "a layer of bricks (" + mib_text(layer_bytes) +
+              ") exceeds the memory budget (--memory), a slab of the "
+              "octree writer does not";
+  if (!against.empty()) {
+    report.structure_reason = against;
+    return false;
+  }
+  report.structure_reason =
+      "lossless every-voxel 16-bit values: bricks predicted in 3-D (codec 3) are smaller than an octree of one-voxel "
+      "leaves (--structure octree overrides)";
+  return true;
+}
+
+// The bricked regular grid, a layer of bricks at a time.
+void import_bricked(SlabReader& source, const std::string& path, const ImportOptions& options,
+                    const StreamingOptions& streaming, ImportReport& report) {
+  const DenseVolume& shape = source.shape();
+  const BuildOptions& build = streaming.build;
+  BrickedOptions bricked;
+  bricked.brick_log2 = options.brick_log2;
+  bricked.encoding = build.encoding;
+  bricked.value_scale = build.value_scale;
+  bricked.value_offset = build.value_offset;
+  BrickedGridWriter writer(path, shape.dims, bricked);
+  const bool codes = build.encoding == ValueEncoding::UInt16;
+  const std::uint32_t layer = std::min<std::uint32_t>(shape.dims[2], 1u << options.brick_log2);
+  const std::string what = path + ": a layer of " + std::to_string(layer) + " slices of " +
+                           std::to_string(shape.dims[0]) + "x" + std::to_string(shape.dims[1]) + " " +
+                           sample_type_name(shape.type);
+  const std::uint64_t voxels = checked_mul(layer, slice_voxels(shape.dims, what), what);
+  // Samples, float32 (binary16 from another type), the stored values, and the encoded layer.
+  const bool raw_binary16 = shape.type == SampleType::Float16 && !codes;
+  const std::uint64_t per_voxel = sample_size(shape.type) + (codes || raw_binary16 ? 0 : 4) + 2 + 2;
+  require_within_budget(checked_mul(voxels, per_voxel, what), memory_budget(options.memory_bytes), what);
+  std::vector<std::uint8_t> samples;
+  checked_resize(samples, voxels * sample_size(shape.type), what + " (samples)");
+  std::vector<float> values;
+  checked_resize(values, codes || raw_binary16 ? 0 : voxels, what + " (as float32)");
+  std::vector<std::uint16_t> stored;
+  checked_resize(stored, voxels, what + " (as 16-bit values)");
+  ProgressTicker ticker(options.progress, shape.dims[2]);
+  while (writer.next_layer_count() > 0) {
+    const std::uint32_t z0 = writer.next_layer_first(), n = writer.next_layer_count();
+    const std::uint64_t count = std::uint64_t{n} * shape.dims[0] * shape.dims[1];
+    source.read(z0, n, samples.data());
+    if (codes) {
+      to_codes(shape.type, samples.data(), count, build.value_offset, stored.data());
+    } else if (raw_binary16) {  // every bit as it is: -0 and NaN payloads included
+      std::memcpy(stored.data(), samples.data(), count * 2);
+    } else {
+      to_float(shape, samples.data(), count, values.data());
+      tally_encoding(build.encoding, values.data(), count, report.encoding_loss);
+      for (std::uint64_t i = 0; i < count; ++i) stored[i] = float_to_binary16_keep_nan(values[i]);
+    }
+    writer.add_layer(stored.data());
+    ticker.update(z0 + n);
+  }
+  if (!options.allow_lossy)
+    refuse_loss(report.encoding_loss, shape.voxel_count(),
+                (options.what.empty() ? path : options.what) + ": " + sample_type_name(shape.type) + " samples as " +
+                    encoding_name(build.encoding),
+                encoding_name(build.encoding),
+                "--encoding " + std::string(encoding_name(lossless_encoding(shape.type))));
+  Metadata metadata = options.metadata;
+  if (options.complete_metadata) options.complete_metadata(metadata);
+  if (shape.has_geometry) {
+    metadata.voxel_size = shape.voxel_size;
+    metadata.origin = shape.origin;
+    metadata.unit = shape.unit;
+  }
+  report.lossless = report.encoding_loss.exact();
+  report.max_abs_error = report.encoding_loss.max_error;
+  metadata.structure["kind"] = "bricked";
+  metadata.structure["brick"] = 1u << options.brick_log2;
+  metadata.structure["chosen_because"] = report.structure_reason;
+  metadata.structure["source_encoding"] = sample_type_name(shape.type);
+  metadata.structure["lossless"] = report.lossless;
+  metadata.structure["max_abs_error"] = report.max_abs_error;
+  report.file_bytes = writer.finish(metadata).file_bytes;
+  report.kept_voxels = shape.voxel_count();
+}
+
+}  // namespace
+
 ImportReport import_to_ivol(SlabReader& source, const std::string& path, const ImportOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   const DenseVolume& shape = source.shape();
   ImportReport report;
   const StreamingOptions streaming = import_streaming_options(shape, options, report);
   const BuildOptions& build = streaming.build;
+  // Samples, float32 (binary16 from another type), the 16-bit values and the
+  // encoded layer, for a layer of bricks (import_bricked); 128-bit so that no
+  // declared size overflows before it is compared.
+  const bool codes = build.encoding == ValueEncoding::UInt16;
+  const bool raw_binary16 = shape.type == SampleType::Float16 && !codes;
+  __extension__ const unsigned __int128 layer_voxels =
+      static_cast<unsigned __int128>(std::min<std::uint32_t>(shape.dims[2], 1u << options.brick_log2)) * shape.dims[0] *
+      shape.dims[1];
+  __extension__ const unsigned __int128 layer_bytes =
+      layer_voxels * (sample_size(shape.type) + (codes || raw_binary16 ? 0 : 4) + 2 + 2);
+  const std::uint64_t layer =
+      layer_bytes > ~std::uint64_t{0} ? ~std::uint64_t{0} : static_cast<std::uint64_t>(layer_bytes);
+  if (choose_bricked(options, build.encoding, layer, report)) {
+    report.structure = "bricked";
+    import_bricked(source, path, options, streaming, report);
+    report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return report;
+  }
 
   StreamingOctreeWriter writer(path, shape.dims, streaming);
   const std::uint32_t slab = writer.slab_slices();
   report.slab_slices = slab;
   const unsigned margin = options.keep ? options.keep->margin : 0;
-  const bool codes = build.encoding == ValueEncoding::UInt16;
 
   // One slab and the `margin` slices on either side, which the keep mask's
   // growth needs. The writer takes slabs of at least 8 slices whatever

@@ -32,7 +32,16 @@ KeepRule parse_keep_rule(const std::string& text);
 // Called with the slices done and the slices in all, a few times a second at most.
 using Progress = std::function<void(std::uint64_t done, std::uint64_t total)>;
 
+// How the file holds the voxels. Auto: a bricked regular grid (spec §8A.4,
+// codec 3) for lossless every-voxel 16-bit files, where it is smaller (an
+// octree of one-voxel leaves also stores averages and node words, and its
+// blocks cannot be predicted in 3-D: bench/RESULTS.md); an octree otherwise
+// (a keep rule's coarse leaves, float32, or format 1.2).
+enum class StructureChoice { Auto, Octree, Bricked };
+
 struct ImportOptions {
+  StructureChoice structure = StructureChoice::Auto;
+  unsigned brick_log2 = 5;                // bricked grid: bricks of 2^b voxels per side
   std::optional<ValueEncoding> encoding;  // default: lossless for the sample type
   std::optional<KeepRule> keep;           // default: lossless (equal leaves merge)
   std::uint32_t block_bytes = 0;          // 0: the library's default
@@ -55,6 +64,8 @@ struct ImportOptions {
 };
 
 struct ImportReport {
+  std::string structure = "octree";  // "octree" or "bricked"
+  std::string structure_reason;      // why (the choice of StructureChoice::Auto, or the flag)
   ValueEncoding encoding = ValueEncoding::Binary16;
   double value_scale = 1.0;
   double value_offset = 0.0;

@@ -15,7 +15,8 @@ using Dims = std::array<std::uint32_t, 3>;  // voxels along x, y, z
 enum class Axis { X = 0, Y = 1, Z = 2 };
 
 // The structures a file can hold (spec §6.1: structure_kind), with their codes.
-enum class StructureKind : std::uint8_t { Octree = 1, Regular = 2, Rectilinear = 3, Nested = 4 };
+// Bricked: a regular grid stored brick by brick (spec §8A.4, format 1.3).
+enum class StructureKind : std::uint8_t { Octree = 1, Regular = 2, Rectilinear = 3, Nested = 4, Bricked = 5 };
 
 // A half-open box of voxels [lo, hi) in the coordinates of one level of detail.
 struct Box {
@@ -40,7 +41,7 @@ Box slice_box(const Dims& dims, Axis axis, std::uint32_t index);
 // table say (§6.1, §6.2), with the derived ranges.
 struct VolumeLayout {
   StructureKind kind = StructureKind::Octree;
-  std::uint8_t cell_log2 = 0;  // nested grid: log2 of the cell edge (spec §8A.3)
+  std::uint8_t cell_log2 = 0;  // nested grid: log2 of the cell edge (spec §8A.3); bricked: of the brick edge (§8A.4)
   Dims dims{1, 1, 1};
   unsigned depth = 0;
   ValueEncoding encoding = ValueEncoding::Binary16;

@@ -1,0 +1,111 @@
+// Codec 3 (predicted 16-bit, spec §7.2) against codec 2 (zstd over byte
+// planes) on the bricks of a real volume (issue 22), one core:
+//
+//   codec_bench VOLUME.f32 N [BRICK_LOG2]
+//
+// VOLUME.f32: N^3 float32, x fastest (peers_bench caches its reconstructions
+// as such under WORK/cache). Each brick is encoded as binary16 and as uint16
+// (the volume's range scaled to 0 .. 65535), with codec 3 and with codec 2 at
+// zstd level 3; prints bytes, encode and decode MB/s of 16-bit values, and
+// the taps each brick chose.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "ivol/binary16.hpp"
+#include "ivol/predicted_codec.hpp"
+#include "ivol/writer.hpp"
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+struct Brick {
+  ivol::BrickDims dims;
+  std::vector<std::uint16_t> values;
+};
+
+std::vector<Brick> cut(const std::vector<std::uint16_t>& v, std::uint32_t n, unsigned log2) {
+  const std::uint32_t b = 1u << log2;
+  std::vector<Brick> out;
+  for (std::uint32_t z0 = 0; z0 < n; z0 += b)
+    for (std::uint32_t y0 = 0; y0 < n; y0 += b)
+      for (std::uint32_t x0 = 0; x0 < n; x0 += b) {
+        Brick brick;
+        brick.dims = {std::min(b, n - x0), std::min(b, n - y0), std::min(b, n - z0)};
+        for (std::uint32_t z = z0; z < z0 + brick.dims[2]; ++z)
+          for (std::uint32_t y = y0; y < y0 + brick.dims[1]; ++y)
+            for (std::uint32_t x = x0; x < x0 + brick.dims[0]; ++x)
+              brick.values.push_back(v[(std::size_t{z} * n + y) * n + x]);
+        out.push_back(std::move(brick));
+      }
+  return out;
+}
+
+void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint32_t n, unsigned log2,
+         ivol::ValueEncoding encoding) {
+  const std::vector<Brick> bricks = cut(volume, n, log2);
+  const double mb = 2.0 * volume.size() / 1e6;
+  std::uint64_t predicted_bytes = 0, planes_bytes = 0, best_bytes = 0;
+  std::vector<std::vector<std::uint8_t>> payloads(bricks.size());
+  auto t = Clock::now();
+  for (std::size_t b = 0; b < bricks.size(); ++b) {
+    payloads[b] = ivol::encode_predicted(bricks[b].values.data(), bricks[b].dims, encoding);
+    predicted_bytes += payloads[b].size();
+  }
+  const double encode3 = since(t);
+  t = Clock::now();
+  std::vector<std::uint16_t> out;
+  for (std::size_t b = 0; b < bricks.size(); ++b) {
+    out.resize(bricks[b].values.size());
+    ivol::decode_predicted(payloads[b].data(), payloads[b].size(), bricks[b].dims, out.data());
+    if (out != bricks[b].values) std::fprintf(stderr, "codec_bench: brick %zu does not round-trip\n", b);
+  }
+  const double decode3 = since(t);
+  ivol::WriteOptions w;
+  t = Clock::now();
+  for (std::size_t b = 0; b < bricks.size(); ++b) {
+    const auto block = ivol::encode_block(ivol::Stream::Values, 0, 0, static_cast<std::uint32_t>(out.size()), 2,
+                                          bricks[b].values.data(), w);
+    planes_bytes += block.bytes.size();
+    best_bytes += std::min(block.bytes.size(), payloads[b].size());
+  }
+  const double encode2 = since(t);
+  std::printf(
+      "%-9s %u^3 bricks of %u^3: codec 3 %llu bytes (%.1f %% of codec 2), encode %.0f MB/s, decode %.0f MB/s; "
+      "codec 2 %llu bytes, encode %.0f MB/s; smaller of the two per brick %llu bytes (%.1f %%)\n",
+      label, n, 1u << log2, static_cast<unsigned long long>(predicted_bytes), 100.0 * predicted_bytes / planes_bytes,
+      mb / encode3, mb / decode3, static_cast<unsigned long long>(planes_bytes), mb / encode2,
+      static_cast<unsigned long long>(best_bytes), 100.0 * best_bytes / planes_bytes);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 3) {
+    std::fprintf(stderr, "usage: codec_bench VOLUME.f32 N [BRICK_LOG2]\n");
+    return 2;
+  }
+  const std::uint32_t n = static_cast<std::uint32_t>(std::stoul(argv[2]));
+  const unsigned log2 = argc > 3 ? static_cast<unsigned>(std::stoul(argv[3])) : 5;
+  std::vector<float> f(std::size_t{n} * n * n);
+  std::ifstream in(argv[1], std::ios::binary);
+  if (!in.read(reinterpret_cast<char*>(f.data()), static_cast<std::streamsize>(f.size() * 4))) {
+    std::fprintf(stderr, "codec_bench: cannot read %zu float32 from %s\n", f.size(), argv[1]);
+    return 2;
+  }
+  std::vector<std::uint16_t> half(f.size()), codes(f.size());
+  const auto [lo, hi] = std::minmax_element(f.begin(), f.end());
+  for (std::size_t i = 0; i < f.size(); ++i) {
+    half[i] = ivol::float_to_binary16(f[i]);
+    codes[i] = static_cast<std::uint16_t>(std::lround((f[i] - *lo) / (*hi - *lo) * 65535.0));
+  }
+  run("binary16", half, n, log2, ivol::ValueEncoding::Binary16);
+  run("uint16", codes, n, log2, ivol::ValueEncoding::UInt16);
+  return 0;
+}

@@ -1,0 +1,55 @@
+// Writing a bricked regular grid (spec §8A.4, structure_kind 5, format 1.3):
+// every voxel kept, in bricks of 2^b voxels per side, one brick per values
+// block, each brick of 16-bit values predicted (codec 3). What a lossless
+// every-voxel volume becomes: an octree of one-voxel leaves stores averages
+// and node words besides the same values, and its Morton-order blocks cannot
+// be predicted in 3-D.
+//
+// The volume arrives as layers of 2^b slices (z increasing); memory holds one
+// layer of 16-bit values and its encoded bricks.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "ivol/geometry.hpp"
+#include "ivol/metadata.hpp"
+#include "ivol/writer.hpp"
+
+namespace ivol {
+
+struct BrickedOptions {
+  unsigned brick_log2 = 5;                         // 32^3 bricks: 64 KiB of 16-bit values each (bench/RESULTS.md)
+  ValueEncoding encoding = ValueEncoding::UInt16;  // binary16 or uint16
+  double value_scale = 1.0;
+  double value_offset = 0.0;
+  int zstd_level = 3;
+  bool predicted = true;  // false: zstd over byte planes (codec 2), for comparison
+  unsigned threads = 0;   // 0: all hardware threads
+};
+
+class BrickedGridWriter {
+ public:
+  // Throws Error(InvalidArgument) for brick_log2 outside 1 .. 8 or float32.
+  BrickedGridWriter(const std::string& path, const Dims& dims, const BrickedOptions& options);
+  ~BrickedGridWriter();  // an unfinished writer leaves nothing behind
+  BrickedGridWriter(const BrickedGridWriter&) = delete;
+  BrickedGridWriter& operator=(const BrickedGridWriter&) = delete;
+
+  // Slices z0 .. z0 + count of the next layer (the last may be thinner); 0
+  // when all are added.
+  std::uint32_t next_layer_first() const;
+  std::uint32_t next_layer_count() const;
+  // Adds the next layer: next_layer_count() slices of size_y x size_x stored
+  // 16-bit values (the encoding's bits), [z][y][x].
+  void add_layer(const std::uint16_t* values);
+  // After the last layer: writes the metadata, the index and the footer.
+  WriteStats finish(const Metadata& metadata);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace ivol

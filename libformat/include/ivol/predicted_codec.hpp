@@ -1,0 +1,50 @@
+// Codec 3, "predicted 16-bit" (spec §7.2, format 1.3): the payload of a
+// values block that is a brick of 16-bit values. A causal 3-D predictor on
+// the u16 bit patterns (so -0 and NaN payloads come back exactly), zigzag
+// residuals, and zstd over the residuals' two byte planes. Each brick carries
+// its own integer predictor taps and level: least squares fitted to the brick
+// (with or without a level), or the Lorenzo predictor, whichever leaves the
+// smallest residuals.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "ivol/encoding.hpp"
+
+namespace ivol {
+
+// The brick's voxels along x, y, z; the values lie in raster order (x fastest).
+using BrickDims = std::array<std::uint32_t, 3>;
+
+struct PredictedOptions {
+  int zstd_level = 3;
+  // Which taps the encoder may store (the decoder reads any).
+  // Best: the smallest residuals of Lorenzo and both fits; LeastSquares: of
+  // the fits only.
+  enum class Taps { Best, Lorenzo, LeastSquares } taps = Taps::Best;
+};
+
+// Size of the codec header in front of the zstd frame (spec §7.2).
+constexpr std::size_t kPredictedHeaderSize = 24;
+
+// Encodes `values` (dims[0] * dims[1] * dims[2] of them, at least one) as a
+// codec 3 payload. `encoding` picks the value map (binary16 values are
+// predicted in their numeric order, uint16 as they are); any bits round-trip.
+std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const BrickDims& dims, ValueEncoding encoding,
+                                           const PredictedOptions& options = {});
+
+// Decodes a codec 3 payload of a brick of `dims` into `out` (room for all of
+// its values). Throws Error(Malformed) for a payload that breaks spec §7.2
+// and Error(UnsupportedFeature) for a predictor or entropy coder it does not
+// know; the message says what is wrong (the caller names the file and block).
+// Allocates nothing beyond the brick's own decoded size.
+void decode_predicted(const std::uint8_t* payload, std::size_t size, const BrickDims& dims, std::uint16_t* out);
+
+// The largest payload encode_predicted can produce for `voxels` values: the
+// codec header and the largest zstd frame of 2 * voxels bytes (spec §7).
+std::uint64_t predicted_payload_bound(std::uint64_t voxels);
+
+}  // namespace ivol

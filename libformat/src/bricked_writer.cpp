@@ -1,0 +1,168 @@
+#include "ivol/bricked_writer.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <mutex>
+#include <thread>
+
+#include "brick_grid.hpp"
+#include "ivol/crc32c.hpp"
+#include "ivol/error.hpp"
+#include "ivol/predicted_codec.hpp"
+#include "layout.hpp"
+
+namespace ivol {
+
+struct BrickedGridWriter::Impl {
+  Impl(const std::string& path, const Dims& dims, const BrickedOptions& o)
+      : options(o),
+        grid(dims, o.brick_log2),
+        file(path, layout_of(dims, o), true),
+        start(std::chrono::steady_clock::now()) {}
+
+  static VolumeLayout layout_of(const Dims& dims, const BrickedOptions& o) {
+    if (o.brick_log2 < 1 || o.brick_log2 > layout::kMaxBrickLog2)
+      throw Error(ErrorClass::InvalidArgument, "bricked grid: brick_log2 " + std::to_string(o.brick_log2) +
+                                                   " is outside 1 .. " + std::to_string(layout::kMaxBrickLog2));
+    if (o.encoding == ValueEncoding::Float32)
+      throw Error(ErrorClass::InvalidArgument, "bricked grid: the writer takes 16-bit values (binary16 or uint16)");
+    VolumeLayout v;
+    v.kind = StructureKind::Bricked;
+    v.cell_log2 = static_cast<std::uint8_t>(o.brick_log2);
+    v.dims = dims;
+    v.depth = depth_for(dims);
+    v.encoding = o.encoding;
+    v.value_scale = o.value_scale;
+    v.value_offset = o.value_offset;
+    v.inner_count.assign(v.depth + 1, 0);
+    return v;
+  }
+
+  // One brick, cut from the layer and encoded: codec 3, or stored when
+  // prediction does not make it smaller (random bits).
+  EncodedBlock encode(const std::uint16_t* layer, std::uint32_t i, std::uint32_t j, std::uint32_t k) const {
+    const Dims& d = dims();
+    const Dims e = grid.extent(i, j, k);
+    const std::uint64_t edge = grid.edge();
+    std::vector<std::uint16_t> brick(std::size_t{e[0]} * e[1] * e[2]);
+    std::size_t n = 0;
+    for (std::uint32_t z = 0; z < e[2]; ++z)
+      for (std::uint32_t y = 0; y < e[1]; ++y) {
+        const std::uint16_t* row = layer + (std::uint64_t{z} * d[1] + j * edge + y) * d[0] + i * edge;
+        std::copy(row, row + e[0], brick.data() + n);
+        n += e[0];
+      }
+    const std::uint64_t first = grid.first_value(i, j, k);
+    if (!options.predicted) {
+      WriteOptions w;
+      w.zstd_level = options.zstd_level;
+      return encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), w);
+    }
+    EncodedBlock block;
+    block.stream = Stream::Values;
+    block.first_element = first;
+    block.element_count = static_cast<std::uint32_t>(n);
+    PredictedOptions p;
+    p.zstd_level = options.zstd_level;
+    block.bytes = encode_predicted(brick.data(), e, options.encoding, p);
+    block.codec = Codec::Predicted;
+    // Where noise dominates, no predictor beats the values' own byte planes:
+    // the smaller of codec 3 and codec 2 is kept (and stored below either).
+    WriteOptions w;
+    w.zstd_level = options.zstd_level;
+    EncodedBlock planes = encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), w);
+    if (planes.bytes.size() < block.bytes.size()) return planes;
+    if (block.bytes.size() >= 2 * n) {
+      block.codec = Codec::Stored;
+      block.bytes.resize(2 * n);
+      for (std::size_t v = 0; v < n; ++v) layout::store<std::uint16_t>(block.bytes.data() + 2 * v, brick[v]);
+    }
+    block.crc = crc32c(block.bytes.data(), block.bytes.size());
+    return block;
+  }
+
+  const Dims& dims() const { return dims_; }
+
+  BrickedOptions options;
+  detail::BrickGrid grid;
+  Dims dims_{};
+  FileWriter file;
+  std::uint32_t next_layer = 0;  // brick layer index along z
+  std::uint64_t decoded_bytes = 0;
+  std::chrono::steady_clock::time_point start;
+};
+
+BrickedGridWriter::BrickedGridWriter(const std::string& path, const Dims& dims, const BrickedOptions& options)
+    : impl_(std::make_unique<Impl>(path, dims, options)) {
+  impl_->dims_ = dims;
+}
+
+BrickedGridWriter::~BrickedGridWriter() = default;
+
+std::uint32_t BrickedGridWriter::next_layer_first() const {
+  return static_cast<std::uint32_t>(std::uint64_t{impl_->next_layer} * impl_->grid.edge());
+}
+
+std::uint32_t BrickedGridWriter::next_layer_count() const {
+  if (impl_->next_layer >= impl_->grid.bricks()[2]) return 0;
+  return impl_->grid.extent(0, 0, impl_->next_layer)[2];
+}
+
+void BrickedGridWriter::add_layer(const std::uint16_t* values) {
+  Impl& m = *impl_;
+  if (next_layer_count() == 0) throw Error(ErrorClass::InvalidArgument, "bricked grid: a layer after the last");
+  const std::uint32_t k = m.next_layer;
+  const std::uint32_t nx = m.grid.bricks()[0], ny = m.grid.bricks()[1];
+  const std::size_t count = std::size_t{nx} * ny;
+  std::vector<EncodedBlock> blocks(count);
+  std::atomic<std::size_t> next{0};
+  auto work = [&] {
+    for (std::size_t b; (b = next++) < count;) blocks[b] = m.encode(values, b % nx, b / nx, k);
+  };
+  const unsigned hardware = std::max(1u, std::thread::hardware_concurrency());
+  const unsigned threads =
+      static_cast<unsigned>(std::min<std::size_t>(m.options.threads ? m.options.threads : hardware, count));
+  std::vector<std::thread> pool;
+  std::exception_ptr failure;
+  std::mutex failure_lock;
+  for (unsigned t = 1; t < threads; ++t)
+    pool.emplace_back([&] {
+      try {
+        work();
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(failure_lock);
+        failure = std::current_exception();
+        next = count;
+      }
+    });
+  try {
+    work();
+  } catch (...) {
+    next = count;
+    for (auto& t : pool) t.join();
+    throw;
+  }
+  for (auto& t : pool) t.join();
+  if (failure) std::rethrow_exception(failure);
+  for (const EncodedBlock& b : blocks) {
+    m.file.append(b);
+    m.decoded_bytes += 2ull * b.element_count;
+  }
+  ++m.next_layer;
+}
+
+WriteStats BrickedGridWriter::finish(const Metadata& metadata) {
+  Impl& m = *impl_;
+  if (next_layer_count() != 0)
+    throw Error(ErrorClass::InvalidArgument, "bricked grid: finish() before the last layer was added");
+  m.file.finish(metadata, std::vector<std::uint64_t>(depth_for(m.dims_) + 1, 0));
+  WriteStats stats;
+  stats.file_bytes = m.file.bytes_written();
+  stats.decoded_bytes = m.decoded_bytes;
+  stats.block_count = m.file.block_count();
+  stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - m.start).count();
+  return stats;
+}
+
+}  // namespace ivol

@@ -1,0 +1,17 @@
+# `convert --structure bricked` where a bricked grid (format 1.3, codec 3 on
+# 16-bit values, every voxel) cannot hold the file: refused with exit 2 and
+# the reason, nothing written.
+/usr/bin/python3 - "$work" <<'PY'
+import sys, numpy as np
+(np.arange(8 * 8 * 8, dtype=np.uint16) * 7).tofile(sys.argv[1] + "/u16.raw")
+PY
+bad bricked-with-keep 2 "--structure bricked: a keep rule coarsens regions, which only an octree holds" \
+    -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --keep threshold=10,margin=1
+bad bricked-float32 2 "--structure bricked: float32 values (codec 3 predicts 16-bit values)" \
+    -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --encoding float32
+bad bricked-format-1.2 2 "--structure bricked: format 1.2 (a bricked grid needs format 1.3)" \
+    -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --format-version 1.2
+bad bricked-codec-zstd 2 "--structure bricked: --codec zstd (codec 1 only, for format 1.0/1.1 readers)" \
+    -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --codec zstd
+bad structure-unknown      1 "--structure" \
+    -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure kdtree
