@@ -14,7 +14,7 @@ converters=$(ls "$root"/tools/{convert,scan,hdf5_child}/*.cpp)
 clang++ $flags -DIVOL_VERSION_STRING='"fuzz"' -I"$root/libformat/include" -I"$root/libformat/src" \
   -I"$root/tools/convert" -I"$root/tools/scan" -I"$root/tools/hdf5_child" -I"$root/recon/include" "$root"/libformat/src/*.cpp $converters \
   "$root"/recon/src/{geometry,projections,rtk_geometry_xml}.cpp \
-  "$root/tests/fuzz/fuzz_converters.cpp" -lzstd -lz -ltiff -lopenvdb -ltbb -lImath-3_1 -lpugixml $hdf5_flags \
+  "$root/tests/fuzz/fuzz_converters.cpp" -lzstd -lz -lcurl -ltiff -lopenvdb -ltbb -lImath-3_1 -lpugixml $hdf5_flags \
   -o "$out/fuzz_converters"
 # Seeds: a tiny file of each format, prefixed with the byte that selects it.
 seed() { { printf "\\x$(printf %02x "$1")"; cat "$2"; } > "$out/corpus-converters/$(basename "$2").$1"; }
