@@ -9,7 +9,7 @@ out=${IVOL_FUZZ_DIR:-$root/build-fuzz}
 mkdir -p "$out/corpus"
 flags="-std=c++17 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined -ffp-contract=off"
 clang++ $flags -DIVOL_VERSION_STRING='"fuzz"' -I"$root/libformat/include" -I"$root/libformat/src" \
-  "$root"/libformat/src/*.cpp "$root/tests/fuzz/fuzz_check_file.cpp" -lzstd -o "$out/fuzz_check_file"
+  "$root"/libformat/src/*.cpp "$root/tests/fuzz/fuzz_check_file.cpp" "$root/tests/fuzz/ivol_mutator.cpp" -lzstd -o "$out/fuzz_check_file"
 cp -n "$root"/format-spec/vectors/valid/*.ivol "$root"/format-spec/vectors/invalid/*.ivol \
   "$root"/tests/fuzz/regressions/ivol/*.ivol "$out/corpus/" 2>/dev/null || true
 # A reader must stay within these whatever the file (spec §13, Resources):
