@@ -10,10 +10,12 @@
 #include <openvdb/openvdb.h>
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <string>
 
@@ -217,6 +219,51 @@ TEST(HostileConverters, SliceLargerThanTheMemoryBudgetIsRefused) {
   const ImportReport report = import_to_ivol(*source, out, options);
   EXPECT_TRUE(report.lossless);
   EXPECT_EQ(Reader(out).voxel_value(4095, 4095, 0), 0.0f);
+}
+
+// A page larger than the budget is read a band of rows at a time (a
+// 16384^2 deflate bomb under --memory 256 into raw): by scanline from
+// strips (one strip of the whole page here, so that a band is part of a
+// strip) and by tile, each band equal to numpy's samples of those rows.
+TEST(HostileConverters, TiffPagesReadByBandsOfRowsEqualNumpysSamples) {
+  const std::string dir = temp_path("bands");
+  std::filesystem::create_directories(dir);
+  const auto made = run_command(
+      std::string(IVOL_PYTHON) + " -c \"import numpy as np, tifffile; d = '" + dir +
+      "'; v = (np.arange(3 * 700 * 1000, dtype=np.uint64) * 2654435761 % 65521).astype(np.uint16).reshape(3, 700, "
+      "1000); v.tofile(d + '/v.raw'); tifffile.imwrite(d + '/strip.tif', v, compression='zlib', rowsperstrip=700, "
+      "photometric='minisblack'); tifffile.imwrite(d + '/tiled.tif', v, compression='zlib', tile=(48, 64), "
+      "photometric='minisblack')\"");
+  ASSERT_EQ(made.exit_code, 0) << made.output;
+  std::ifstream in(dir + "/v.raw", std::ios::binary);
+  const std::vector<char> expected((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_EQ(expected.size(), 3u * 700 * 1000 * 2);
+  for (const char* name : {"strip.tif", "tiled.tif"}) {
+    const auto reader = open_tiff_slabs(dir + "/" + name, {}, std::uint64_t{4} << 20);
+    ASSERT_TRUE(reader->reads_rows());
+    ASSERT_EQ(reader->shape().dims, (Dims{1000, 700, 3}));
+    // Bands of 37 rows (not a multiple of a tile's 48), pages in order, and
+    // one band read again after a later one (libtiff decodes back from the
+    // strip's start).
+    std::vector<char> band(37 * 1000 * 2);
+    for (std::uint32_t z = 0; z < 3; ++z)
+      for (std::uint32_t y = 0; y < 700; y += 37) {
+        const std::uint32_t n = std::min(37u, 700 - y);
+        reader->read_rows(z, y, n, band.data());
+        const std::size_t at = (std::size_t{z} * 700 + y) * 2000;
+        ASSERT_TRUE(std::equal(band.begin(), band.begin() + n * 2000, expected.begin() + at))
+            << name << " page " << z << " rows " << y << " .. " << y + n;
+      }
+    reader->read_rows(1, 100, 5, band.data());
+    EXPECT_TRUE(std::equal(band.begin(), band.begin() + 5 * 2000, expected.begin() + (700 + 100) * 2000)) << name;
+    // A tile of 48x64 u16 is 6 KiB: a budget below it is a limit, named.
+    if (std::string(name) == "tiled.tif") {
+      const auto tight = open_tiff_slabs(dir + "/" + name, {}, 4096);
+      std::string message;
+      EXPECT_EQ(error_class_of([&] { tight->read_rows(0, 0, 1, band.data()); }, &message), ErrorClass::LimitExceeded);
+      EXPECT_NE(message.find("a tile of 64x48"), std::string::npos) << message;
+    }
+  }
 }
 
 // One 2 GiB gzip chunk (9 MB of file) holding a 4x4x4 dataset: libhdf5

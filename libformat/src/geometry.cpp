@@ -3,11 +3,13 @@
 #include <algorithm>
 #include <sstream>
 
+#include "ivol/error.hpp"
+
 namespace ivol {
 
 std::uint64_t Box::voxel_count() const {
   if (empty()) return 0;
-  return std::uint64_t{hi[0] - lo[0]} * (hi[1] - lo[1]) * (hi[2] - lo[2]);
+  return ivol::voxel_count(Dims{hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
 }
 
 bool Box::empty() const { return hi[0] <= lo[0] || hi[1] <= lo[1] || hi[2] <= lo[2]; }
@@ -25,7 +27,18 @@ unsigned depth_for(const Dims& dims) {
   return depth;
 }
 
-std::uint64_t voxel_count(const Dims& dims) { return std::uint64_t{dims[0]} * dims[1] * dims[2]; }
+std::uint64_t voxel_count(const Dims& dims) {
+  const std::uint64_t slice = std::uint64_t{dims[0]} * dims[1];  // at most 2^64 - 2^33 + 1
+  std::uint64_t voxels = 0;
+  if (__builtin_mul_overflow(slice, std::uint64_t{dims[2]}, &voxels))
+    throw Error(ErrorClass::LimitExceeded, std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
+                                               std::to_string(dims[2]) + " voxels: more than 2^64 - 1");
+  return voxels;
+}
+
+double voxel_count_approx(const Dims& dims) {
+  return static_cast<double>(dims[0]) * static_cast<double>(dims[1]) * static_cast<double>(dims[2]);
+}
 
 Dims lod_dims(const Dims& dims, unsigned lod) {
   Dims out{};

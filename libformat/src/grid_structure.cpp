@@ -15,6 +15,11 @@ GridStructure::GridStructure(const VolumeLayout& layout, std::vector<std::uint32
   switch (layout.kind) {
     case StructureKind::Regular:
     case StructureKind::Bricked:
+      // One value per voxel: past 2^56 no file holds them (the limit of
+      // the other kinds); checked before voxel_count, which throws past 2^64.
+      if (voxel_count_approx(d) > static_cast<double>(std::uint64_t{1} << 56))
+        fail("values", "a regular grid of " + std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" +
+                           std::to_string(d[2]) + " voxels has more than 2^56 values");
       total = voxel_count(d);
       break;
     case StructureKind::Rectilinear: {

@@ -3,7 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <new>
 #include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "ivol/error.hpp"
 #include "brick_grid.hpp"
@@ -15,6 +19,30 @@ namespace ivol {
 
 namespace {
 
+// A request's output: `per_voxel` elements of T for each voxel of `box`. A
+// box of a valid file may hold 2^62 voxels (a slice of 2^31 a side) or
+// more; what cannot be allocated is LimitExceeded naming the box and the
+// bytes, not std::bad_alloc or std::length_error.
+template <typename T>
+std::vector<T> output_for(const Box& box, std::size_t per_voxel = 1) {
+  const std::uint64_t voxels = box.voxel_count();
+  std::uint64_t count = 0, bytes = 0;
+  const bool wraps =
+      __builtin_mul_overflow(voxels, per_voxel, &count) || __builtin_mul_overflow(count, sizeof(T), &bytes);
+  const std::string what = "the output for the box " + box.to_string() + " (" + std::to_string(voxels) + " voxels";
+  try {
+    if (wraps) throw std::length_error("");
+    if (count > std::vector<T>().max_size()) throw std::length_error("");
+    return std::vector<T>(count);
+  } catch (const std::bad_alloc&) {
+  } catch (const std::length_error&) {
+  }
+  throw Error(ErrorClass::LimitExceeded,
+              what +
+                  (wraps ? ", more than 2^64 bytes" : ", " + std::to_string((bytes + (1u << 20) - 1) >> 20) + " MiB") +
+                  ") cannot be allocated: ask for a smaller box or a coarser level");
+}
+
 // Stored bits of every voxel of `box` at level of detail `lod` for the grid
 // structures of spec §8A: the cells' values at full resolution, and the mean
 // of §12.3 (binary64, z then y then x) at coarser levels.
@@ -25,7 +53,7 @@ std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigne
   const VolumeLayout& v = impl.info.layout;
   const detail::GridStructure& grid = *impl.grid;
   if (lod == 0) {
-    std::vector<std::uint32_t> bits(box.voxel_count());
+    std::vector<std::uint32_t> bits = output_for<std::uint32_t>(box);
     grid.for_each_cell(box, [&](const Box& region, std::uint64_t index) {
       std::uint32_t value = 0;
       if (!salvage) {
@@ -77,7 +105,7 @@ std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigne
       salvage->add(coarse, 0, d.message);
     }
     const std::uint64_t fx = full.hi[0] - full.lo[0], fy = full.hi[1] - full.lo[1];
-    std::vector<std::uint32_t> bits(box.voxel_count());
+    std::vector<std::uint32_t> bits = output_for<std::uint32_t>(box);
     std::size_t n = 0;
     for (std::uint32_t k = box.lo[2]; k < box.hi[2]; ++k)
       for (std::uint32_t j = box.lo[1]; j < box.hi[1]; ++j)
@@ -104,7 +132,7 @@ std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigne
   const std::uint64_t nx = box.hi[0] - box.lo[0], ny = box.hi[1] - box.lo[1];
   const std::uint64_t x_lo = std::uint64_t{box.lo[0]} << lod;
   const auto x_hi = static_cast<std::uint32_t>(std::min<std::uint64_t>(std::uint64_t{box.hi[0]} << lod, v.dims[0]));
-  std::vector<std::uint32_t> bits(box.voxel_count());
+  std::vector<std::uint32_t> bits = output_for<std::uint32_t>(box);
   std::vector<double> sums(nx * ny);
   std::size_t n = 0;
   for (std::uint32_t k = box.lo[2]; k < box.hi[2]; ++k) {
@@ -203,7 +231,7 @@ double Reader::voxel_value(std::uint32_t x, std::uint32_t y, std::uint32_t z, un
 std::vector<float> Reader::read_box(const Box& box, unsigned lod, std::vector<DamagedRegion>* damaged) {
   impl_->check_box(box, lod);
   const VolumeLayout& v = impl_->info.layout;
-  std::vector<float> out(box.voxel_count());
+  std::vector<float> out = output_for<float>(box);
   std::optional<detail::SalvageLog> log;
   if (damaged) log.emplace(detail::SalvageLog{*damaged});
   if (impl_->grid) {
@@ -245,7 +273,7 @@ std::vector<std::uint8_t> Reader::read_box_bits(const Box& box, unsigned lod, st
   impl_->check_box(box, lod);
   const VolumeLayout& v = impl_->info.layout;
   const std::size_t width = encoding_width(v.encoding);
-  std::vector<std::uint8_t> out(box.voxel_count() * width);
+  std::vector<std::uint8_t> out = output_for<std::uint8_t>(box, width);
   std::optional<detail::SalvageLog> log;
   if (damaged) log.emplace(detail::SalvageLog{*damaged});
   if (impl_->grid) {

@@ -55,8 +55,11 @@ seed 234 "$root/tests/data/itk/u16.mha"
 seed 235 "$root/tests/data/itk/u8.nrrd"
 seed 235 "$root/tests/data/itk/i8.nrrd"
 seed 236 "$root/tests/data/itk/rtk/proj.mha"
+# OpenVDB grids (selector 3; the OpenVDB reader has its own harness too,
+# run_vdb.sh), including those at the edges of the index space.
+for g in "$root"/tests/fuzz/regressions/vdb/*.vdb; do seed 3 "$g"; done
 # libhdf5 asks malloc for absurd sizes on hostile files and handles the
 # failure; under ASan that must return null as it does in a normal build.
 ASAN_OPTIONS="allocator_may_return_null=1${ASAN_OPTIONS:+:$ASAN_OPTIONS}" \
 LSAN_OPTIONS="suppressions=$root/tests/fuzz/lsan-suppressions.txt${LSAN_OPTIONS:+:$LSAN_OPTIONS}" \
-  "$out/fuzz_converters" "$out/corpus-converters" -max_len=65536 -rss_limit_mb=4096 "$@"
+  "$out/fuzz_converters" "$out/corpus-converters" -max_len=65536 -rss_limit_mb=2048 -malloc_limit_mb=1024 -timeout=20 "$@"

@@ -1,4 +1,5 @@
 // ivol convert IN OUT: between .ivol and raw, TIFF stacks, HDF5 and OpenVDB.
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <iostream>
@@ -66,6 +67,30 @@ void print_geometry(const convert::DenseVolume& shape, const ConvertSettings& s,
               << (raw ? "\n" : "; the output records it as unknown (provenance voxel_size_known = false)\n");
   for (const std::string& line : convert::geometry_summary(shape)) say << "  " << line << "\n";
   if (raw) say << "  (a raw file keeps no geometry or metadata: note them down)\n";
+}
+
+// Slices larger than the memory budget, a band of rows at a time (each
+// within the budget, at most 64 MiB): source and sink both work by rows.
+void convert_in_bands(convert::SlabReader& source, const convert::DenseVolume& shape, const std::string& output,
+                      Format to, const ForeignOptions& foreign, std::uint64_t budget, bool quiet) {
+  const std::uint64_t row = convert::slab_bytes(Dims{shape.dims[0], 1, 1}, 1, shape.type, output);
+  convert::require_within_budget(row, budget, output + ": one row of " + describe(shape));
+  const auto band = static_cast<std::uint32_t>(
+      std::clamp<std::uint64_t>(std::min<std::uint64_t>(64ull << 20, budget) / row, 1, shape.dims[1]));
+  std::vector<std::uint8_t> buffer;
+  convert::checked_resize(buffer, std::uint64_t{band} * row, output + ": a band of " + std::to_string(band) + " rows");
+  const auto sink = create_sink(output, to, shape, foreign);
+  if (!sink->writes_rows()) throw Error(ErrorClass::LimitExceeded, output + ": this output cannot be written by rows");
+  const auto progress = progress_bar("ivol convert", quiet);
+  for (std::uint32_t z = 0; z < shape.dims[2]; ++z) {
+    for (std::uint32_t y = 0; y < shape.dims[1]; y += band) {
+      const std::uint32_t n = std::min(band, shape.dims[1] - y);
+      source.read_rows(z, y, n, buffer.data());
+      sink->write_rows(buffer.data(), n);
+    }
+    if (progress) progress(z + 1, shape.dims[2]);
+  }
+  sink->finish();
 }
 
 }  // namespace
@@ -243,6 +268,14 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       // Sized before the output exists: a refusal leaves nothing behind.
       const std::uint64_t slice = convert::slab_bytes(shape.dims, 1, shape.type, s->input);
       const std::uint64_t budget = convert::memory_budget(foreign.memory_bytes);
+      // A slice beyond the budget goes a band of rows at a time where both
+      // ends can (TIFF pages by strip or tile into raw output).
+      if (slice > budget && source->reads_rows() && to == Format::Raw && !is_stdio(s->output)) {
+        convert_in_bands(*source, shape, s->output, to, foreign, budget, global.quiet);
+        if (!global.quiet) say << s->input << " -> " << s->output << " (" << describe(shape) << ", in bands of rows)\n";
+        print_geometry(shape, *s, to, say, global.quiet);
+        return kExitOk;
+      }
       convert::require_within_budget(slice, budget, s->input + ": one slice of " + describe(shape));
       const auto slab = static_cast<std::uint32_t>(
           std::clamp<std::uint64_t>(std::min<std::uint64_t>(64ull << 20, budget) / slice, 1, shape.dims[2]));
@@ -275,8 +308,9 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     const convert::LossCheck check = exactness_check(s->allow_lossy, what, type, natural, "--out-type");
     check_before_streaming(s->output, reader, box, s->level, type, check, false);
     const auto sink = create_sink(s->output, to, shape, foreign);
-    const convert::LossTally loss = convert::export_from_ivol(
-        reader, box, s->level, type, *sink, progress_bar("ivol convert", global.quiet), nullptr, check);
+    const convert::LossTally loss =
+        convert::export_from_ivol(reader, box, s->level, type, *sink, progress_bar("ivol convert", global.quiet),
+                                  nullptr, check, foreign.memory_bytes);
     if (!loss.exact() && !global.quiet)
       std::cerr << "ivol convert: lossy: " << what << ": "
                 << convert::describe_loss(loss, shape.voxel_count(), convert::sample_type_name(type)) << "\n";

@@ -50,11 +50,13 @@ Runner add_info_command(CLI::App& app, const GlobalOptions& /*global*/) {
               << "  values         " << d["value_encoding"].get<std::string>() << " (physical = " << d["value_offset"]
               << " + " << d["value_scale"] << " x stored), " << reader.metadata().quantity
               << (reader.metadata().value_unit.empty() ? "" : " in " + reader.metadata().value_unit) << "\n"
-              << "  file           " << human_bytes(d["file_bytes"]) << " (dense float32 "
-              << human_bytes(d["dense_float32_bytes"]) << ", ratio " << d["ratio_vs_float32"].get<double>() << ")\n"
-              << "  in memory      " << human_bytes(d["in_memory_bytes"]) << " (" << d["inner_nodes"]
-              << " inner nodes, " << d["values"] << " values)\n"
-              << "  blocks         " << d["blocks"] << " (index " << human_bytes(d["index_bytes"]) << ")\n"
+              << "  file           " << human_bytes(d["file_bytes"].get<std::uint64_t>()) << " (dense float32 "
+              << human_bytes(d["dense_float32_bytes"].get<double>()) << ", ratio "
+              << d["ratio_vs_float32"].get<double>() << ")\n"
+              << "  in memory      " << human_bytes(d["in_memory_bytes"].get<std::uint64_t>()) << " ("
+              << d["inner_nodes"] << " inner nodes, " << d["values"] << " values)\n"
+              << "  blocks         " << d["blocks"] << " (index " << human_bytes(d["index_bytes"].get<std::uint64_t>())
+              << ")\n"
               << "  levels         level  side   inner nodes        leaves   blocks   bytes\n";
     for (const auto& l : d["levels"]) {
       char line[160];

@@ -166,7 +166,7 @@ std::unique_ptr<convert::SlabReader> open_source(const std::string& path, Format
       if (is_stdio(path)) return stdin_raw_slabs(options.raw);
       return convert::open_raw_slabs(path, options.raw);
     case Format::Tiff:
-      return convert::open_tiff_slabs(path, convert::TiffFolderOptions{options.allow_gaps});
+      return convert::open_tiff_slabs(path, convert::TiffFolderOptions{options.allow_gaps}, options.memory_bytes);
     case Format::Hdf5: {
       convert::Hdf5SourceInfo info;
       auto source = convert::open_hdf5_slabs(path, options.dataset, &info, options.memory_bytes);

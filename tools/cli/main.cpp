@@ -2,6 +2,7 @@
 #include <iostream>
 #include <map>
 #include <new>
+#include <stdexcept>
 
 #include "commands.hpp"
 #include "isolated_worker.hpp"
@@ -74,7 +75,12 @@ int run(int argc, char** argv) {
       // A last resort: sizes are weighed before they are allocated
       // (tools/convert/sizes.hpp), so this is an allocation nobody foresaw.
       std::cerr << "ivol " << sub->get_name() << ": error (" << ivol::error_class_name(ivol::ErrorClass::LimitExceeded)
-                << "): out of memory (std::bad_alloc) while running the command; --memory may bound it\n";
+                << "): out of memory: an allocation failed while running the command; --memory may bound it\n";
+      return kExitFailure;
+    } catch (const std::length_error& e) {
+      // The same for a size past what a container can hold at all.
+      std::cerr << "ivol " << sub->get_name() << ": error (" << ivol::error_class_name(ivol::ErrorClass::LimitExceeded)
+                << "): a size past what can be allocated (" << e.what() << ")\n";
       return kExitFailure;
     } catch (const std::exception& e) {
       std::cerr << "ivol " << sub->get_name() << ": error: " << e.what() << "\n";

@@ -8,15 +8,18 @@
 
 namespace ivol::cli {
 
-std::string human_bytes(std::uint64_t bytes) {
-  const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB"};
-  double value = static_cast<double>(bytes);
+std::string human_bytes(double bytes) {
+  // Up to YiB: a valid file may describe 2^93 voxels (2^95 bytes as float32).
+  const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB", "ZiB", "YiB"};
+  double value = bytes;
   int unit = 0;
-  while (value >= 1024.0 && unit < 4) value /= 1024.0, ++unit;
-  char text[32];
+  while (value >= 1024.0 && unit < 8) value /= 1024.0, ++unit;
+  char text[48];
   std::snprintf(text, sizeof text, unit == 0 ? "%.0f %s" : "%.1f %s", value, units[unit]);
   return text;
 }
+
+std::string human_bytes(std::uint64_t bytes) { return human_bytes(static_cast<double>(bytes)); }
 
 convert::Progress progress_bar(const std::string& label, bool quiet) {
   if (quiet || !isatty(STDERR_FILENO)) return {};
@@ -54,7 +57,11 @@ nlohmann::json describe_file(Reader& reader) {
                       {"node_bytes", per_level_bytes[0][l]},
                       {"value_bytes", per_level_bytes[1][l]}});
   }
-  const std::uint64_t voxels = voxel_count(v.dims);
+  // As float32: 4 bytes a voxel, which for 2^31 voxels a side is 2^95 bytes,
+  // past 64 bits; then a JSON double (exact for powers of two).
+  const double dense_bytes = 4.0 * voxel_count_approx(v.dims);
+  const nlohmann::json dense_json =
+      dense_bytes < 0x1p64 ? nlohmann::json(4 * voxel_count(v.dims)) : nlohmann::json(dense_bytes);
   const std::uint64_t in_memory = v.total_inner() * 8 + v.total_values() * encoding_width(v.encoding);
   return {
       {"file", reader.path()},
@@ -74,8 +81,8 @@ nlohmann::json describe_file(Reader& reader) {
       {"unit", reader.metadata().unit},
       {"origin", reader.metadata().origin},
       {"file_bytes", info.file_size},
-      {"dense_float32_bytes", voxels * 4},
-      {"ratio_vs_float32", static_cast<double>(voxels * 4) / static_cast<double>(info.file_size)},
+      {"dense_float32_bytes", dense_json},
+      {"ratio_vs_float32", dense_bytes / static_cast<double>(info.file_size)},
       {"in_memory_bytes", in_memory},
       {"inner_nodes", v.total_inner()},
       {"values", v.total_values()},

@@ -11,6 +11,7 @@
 namespace ivol::cli {
 
 std::string human_bytes(std::uint64_t bytes);  // "12.3 MiB"
+std::string human_bytes(double bytes);         // beyond 2^64 too: "32768.0 YiB"
 // A progress bar on stderr, a few updates a second, only when stderr is a
 // terminal and not --quiet; otherwise nothing.
 convert::Progress progress_bar(const std::string& label, bool quiet);

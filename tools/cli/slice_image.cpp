@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "ivol/error.hpp"
+#include "sizes.hpp"
 
 namespace ivol::cli {
 
@@ -15,6 +16,16 @@ SliceImage render_slice(Reader& reader, int axis, std::uint32_t index, unsigned 
                 "--index: " + std::to_string(index) + " is outside 0 .. " + std::to_string(box.hi[axis] - 1));
   box.lo[axis] = index;
   box.hi[axis] = index + 1;
+  // The slice as float32 and as RGB pixels, before anything is read: a
+  // valid file may have 2^31 voxels a side (a slice of 2^62 voxels).
+  const double pixels = voxel_count_approx(Dims{box.hi[0] - box.lo[0], box.hi[1] - box.lo[1], box.hi[2] - box.lo[2]});
+  if (pixels * (4 + 3) > static_cast<double>(convert::kDefaultMemoryBytes))
+    throw Error(ErrorClass::LimitExceeded,
+                reader.path() + ": a slice of " + std::to_string(box.hi[0] - box.lo[0]) + "x" +
+                    std::to_string(box.hi[1] - box.lo[1]) + "x" + std::to_string(box.hi[2] - box.lo[2]) +
+                    " voxels at level " + std::to_string(level) + " needs " + convert::mib_text(pixels * (4 + 3)) +
+                    " as float32 values and RGB pixels, more than the " +
+                    convert::mib_text(convert::kDefaultMemoryBytes) + " an image may take (--level K: a coarser one)");
   const std::vector<float> values = reader.read_box(box, level);
   // The image's axes: the two axes other than the slice's, the lower first.
   const int u = axis == 0 ? 1 : 0;

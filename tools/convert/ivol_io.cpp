@@ -492,17 +492,25 @@ class MemorySink final : public SlabWriter {
 }  // namespace
 
 LossTally export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type, SlabWriter& sink,
-                           const Progress& progress, std::vector<DamagedRegion>* damaged, const LossCheck& check) {
+                           const Progress& progress, std::vector<DamagedRegion>* damaged, const LossCheck& check,
+                           std::uint64_t memory_bytes) {
   if (box.empty()) box = full_box(reader.layout().dims, lod);
-  // Slabs of about 64 MiB of float32, whole slices; a slice that alone
-  // exceeds the budget (a one-leaf file of 2^31 per side) is refused.
+  const std::uint64_t budget = memory_budget(memory_bytes);
+  // Slabs of about 64 MiB of float32 (less under a smaller budget), whole
+  // slices; a slice that alone exceeds the budget (a one-leaf file of 2^31
+  // per side) is refused.
   const Dims box_dims{box.hi[0] - box.lo[0], box.hi[1] - box.lo[1], box.hi[2] - box.lo[2]};
   const std::string what =
       "exporting " + dims_text(box_dims) + " voxels at level " + std::to_string(lod) + ": one slice";
+  // Weighed in floating point first: a slice of 2^31 x 2^31 float32 values
+  // is 2^64 bytes, which the checked products below cannot even state.
+  require_within_budget(voxel_count_approx(Dims{box_dims[0], box_dims[1], 1}) * (4.0 + sample_size(type)), budget,
+                        what + " as float32 and " + sample_type_name(type));
   const std::uint64_t slice = slice_voxels(box_dims, what);
   const std::uint64_t slice_bytes = checked_mul(slice, 4 + sample_size(type), what);
-  require_within_budget(slice_bytes, kDefaultMemoryBytes, what + " as float32 and " + sample_type_name(type));
-  const auto slab = static_cast<std::uint32_t>(std::max<std::uint64_t>(1, (64ull << 20) / slice_bytes));
+  require_within_budget(slice_bytes, budget, what + " as float32 and " + sample_type_name(type));
+  const auto slab = static_cast<std::uint32_t>(
+      std::max<std::uint64_t>(1, std::min<std::uint64_t>(64ull << 20, budget) / slice_bytes));
   ProgressTicker ticker(progress, box.hi[2] - box.lo[2]);
   std::vector<std::uint8_t> samples;
   LossTally loss;

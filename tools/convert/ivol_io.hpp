@@ -112,10 +112,12 @@ using LossCheck = std::function<void(const LossTally& loss, std::uint64_t voxels
 // for bit where the types agree, else exact or counted as loss: integers
 // rounded and clamped). With `damaged`, reads past damaged blocks
 // (Reader::read_box_bits's salvage) and lists the regions filled from coarser
-// levels. Returns what the conversion changed.
+// levels. Returns what the conversion changed. One slice (as float32 and
+// as `type`) must fit in memory_bytes (--memory; 0: kDefaultMemoryBytes),
+// and slabs take at most that, or 64 MiB.
 LossTally export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type, SlabWriter& sink,
                            const Progress& progress = {}, std::vector<DamagedRegion>* damaged = nullptr,
-                           const LossCheck& check = {});
+                           const LossCheck& check = {}, std::uint64_t memory_bytes = 0);
 // The same into memory.
 DenseVolume export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType type);
 // The sample type that holds a file's values: the source's own type where the

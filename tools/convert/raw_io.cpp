@@ -74,24 +74,18 @@ class RawSlabWriter final : public SlabWriter {
     if (fd_ >= 0) ::close(fd_);
   }
   void write(const void* samples, std::uint32_t count) override {
-    const std::uint64_t bytes = slab_bytes(shape_.dims, count, shape_.type, path_);
-    std::vector<std::uint8_t> swapped;
-    const auto* p = static_cast<const std::uint8_t*>(samples);
-    if (big_endian_) {
-      swapped.assign(p, p + bytes);
-      swap_bytes(swapped.data(), bytes, sample_size(shape_.type));
-      p = swapped.data();
-    }
-    for (std::size_t done = 0; done < bytes;) {
-      const ssize_t n = ::write(fd_, p + done, bytes - done);
-      if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) throw Error(ErrorClass::Io, path_ + ": write failed: " + std::strerror(errno));
-      done += static_cast<std::size_t>(n);
-    }
+    write_bytes(samples, slab_bytes(shape_.dims, count, shape_.type, path_));
     slices_ += count;
   }
+  bool writes_rows() const override { return true; }
+  void write_rows(const void* samples, std::uint32_t rows) override {
+    write_bytes(samples, slab_bytes(Dims{shape_.dims[0], rows, 1}, 1, shape_.type, path_));
+    rows_ += rows;
+    slices_ += rows_ / shape_.dims[1];
+    rows_ %= shape_.dims[1];
+  }
   void finish() override {
-    if (slices_ != shape_.dims[2])
+    if (slices_ != shape_.dims[2] || rows_ != 0)
       throw Error(ErrorClass::InvalidArgument,
                   path_ + ": " + std::to_string(slices_) + " of " + std::to_string(shape_.dims[2]) + " slices written");
     const int fd = fd_;
@@ -107,6 +101,23 @@ class RawSlabWriter final : public SlabWriter {
   StagedFile staged_;
   int fd_ = -1;
   std::uint32_t slices_ = 0;
+  std::uint32_t rows_ = 0;  // of the slice being written by write_rows
+
+  void write_bytes(const void* samples, std::uint64_t bytes) {
+    std::vector<std::uint8_t> swapped;
+    const auto* p = static_cast<const std::uint8_t*>(samples);
+    if (big_endian_) {
+      swapped.assign(p, p + bytes);
+      swap_bytes(swapped.data(), bytes, sample_size(shape_.type));
+      p = swapped.data();
+    }
+    for (std::size_t done = 0; done < bytes;) {
+      const ssize_t n = ::write(fd_, p + done, bytes - done);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) throw Error(ErrorClass::Io, path_ + ": write failed: " + std::strerror(errno));
+      done += static_cast<std::size_t>(n);
+    }
+  }
 };
 
 class MemorySlabReader final : public SlabReader {

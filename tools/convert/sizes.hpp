@@ -6,7 +6,9 @@
 // naming what was being allocated, not a bare std::bad_alloc.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <new>
 #include <stdexcept>
 #include <string>
@@ -27,6 +29,14 @@ inline std::string dims_text(const Dims& dims) {
 
 inline std::string mib_text(std::uint64_t bytes) {
   return std::to_string((bytes + (std::uint64_t{1} << 20) - 1) >> 20) + " MiB";
+}
+
+// The same for sizes past 2^64 (a slice of a valid file of 2^31 voxels a
+// side, as float32, is 2^64 bytes).
+inline std::string mib_text(double bytes) {
+  char text[48];
+  std::snprintf(text, sizeof text, "%.0f MiB", std::ceil(bytes / 1048576.0));
+  return text;
 }
 
 // a * b, or Error(LimitExceeded) naming `what` and both factors.
@@ -66,6 +76,14 @@ inline std::uint64_t slab_bytes(const Dims& dims, std::uint64_t slices, SampleTy
 // what needs them ("one slice of 16384x16384 u8 as float32").
 inline void require_within_budget(std::uint64_t bytes, std::uint64_t budget, const std::string& what) {
   if (bytes > budget)
+    throw Error(ErrorClass::LimitExceeded, what + " needs " + mib_text(bytes) + ", more than the " + mib_text(budget) +
+                                               " this conversion may hold (--memory MiB raises it)");
+}
+
+// The same for a size computed in floating point, for products that may
+// pass 2^64: refused with the true figure rather than "exceeds 2^64".
+inline void require_within_budget(double bytes, std::uint64_t budget, const std::string& what) {
+  if (bytes > static_cast<double>(budget))
     throw Error(ErrorClass::LimitExceeded, what + " needs " + mib_text(bytes) + ", more than the " + mib_text(budget) +
                                                " this conversion may hold (--memory MiB raises it)");
 }

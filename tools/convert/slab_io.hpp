@@ -19,6 +19,12 @@ class SlabReader {
   const DenseVolume& shape() const { return shape_; }
   // Reads slices z0 .. z0 + count into `out` ([z][y][x], native byte order).
   virtual void read(std::uint32_t z0, std::uint32_t count, void* out) = 0;
+  // Whether read_rows works: a source whose one slice may exceed the memory
+  // budget (a TIFF page of 16384^2 from a few hundred KB of deflate) reads
+  // it a band of rows at a time.
+  virtual bool reads_rows() const { return false; }
+  // Reads rows y0 .. y0 + rows of slice z into `out` ([y][x]).
+  virtual void read_rows(std::uint32_t /*z*/, std::uint32_t /*y0*/, std::uint32_t /*rows*/, void* /*out*/) {}
 
  protected:
   DenseVolume shape_;
@@ -29,12 +35,20 @@ class SlabWriter {
   virtual ~SlabWriter() = default;  // unfinished: nothing left at the target
   // Appends the next `count` slices.
   virtual void write(const void* samples, std::uint32_t count) = 0;
+  // Whether write_rows works (see SlabReader::reads_rows).
+  virtual bool writes_rows() const { return false; }
+  // Appends the next `rows` rows: slices in order, rows in order within a
+  // slice; a slice is complete after its last row. Not mixed with write().
+  virtual void write_rows(const void* /*samples*/, std::uint32_t /*rows*/) {}
   // After the last slice: the file appears at its path.
   virtual void finish() = 0;
 };
 
 std::unique_ptr<SlabReader> open_raw_slabs(const std::string& path, const RawLayout& layout);
-std::unique_ptr<SlabReader> open_tiff_slabs(const std::string& path_or_folder, const TiffFolderOptions& options = {});
+// memory_bytes (0: kDefaultMemoryBytes) bounds what libtiff may allocate at
+// once and the tile a page is read by.
+std::unique_ptr<SlabReader> open_tiff_slabs(const std::string& path_or_folder, const TiffFolderOptions& options = {},
+                                            std::uint64_t memory_bytes = 0);
 // A volume already in memory (formats read whole, e.g. OpenVDB): owned, or
 // only viewed (the volume must outlive the reader).
 std::unique_ptr<SlabReader> memory_slabs(DenseVolume volume);

@@ -79,33 +79,79 @@ PageFormat page_format(TIFF* tif, const std::string& where) {
   return f;
 }
 
-// Reads one page into `out` (width * height samples, rows top to bottom).
-void read_page(TIFF* tif, const PageFormat& f, std::uint8_t* out, const std::string& where) {
+// The buffer for one tile of a tiled page, weighed against `budget` before
+// it is allocated (the tile's size comes from the file).
+std::vector<std::uint8_t> tile_buffer(TIFF* tif, const PageFormat& f, std::uint64_t budget, const std::string& where,
+                                      std::uint32_t& tw, std::uint32_t& th) {
+  TIFFGetField(tif, TIFFTAG_TILEWIDTH, &tw);
+  TIFFGetField(tif, TIFFTAG_TILELENGTH, &th);
+  if (tw == 0 || th == 0) fail(where, "a tile of " + std::to_string(tw) + "x" + std::to_string(th) + " pixels");
+  const std::string what = where + ": a tile of " + std::to_string(tw) + "x" + std::to_string(th) + " " +
+                           sample_type_name(f.type) + " samples";
+  const std::uint64_t tile_bytes = slab_bytes(Dims{tw, th, 1}, 1, f.type, what);
+  require_within_budget(tile_bytes, budget, what);
+  if (static_cast<std::uint64_t>(TIFFTileSize64(tif)) != tile_bytes)
+    fail(where, "the tile size " + std::to_string(TIFFTileSize64(tif)) + " does not match " + std::to_string(tw) + "x" +
+                    std::to_string(th) + " samples of " + sample_type_name(f.type));
+  std::vector<std::uint8_t> tile;
+  checked_resize(tile, tile_bytes, what);
+  return tile;
+}
+
+// Reads rows y0 .. y0 + rows of the current page into `out`, one tile or
+// one scanline at a time: what is held is one tile (within `budget`) or
+// what libtiff keeps for a strip (its compressed bytes, bounded by the
+// file), never the page.
+// `next_row` is the row libtiff's scanline state is at for this page
+// (kUnknownRow after anything else read it); it is updated.
+constexpr std::uint32_t kUnknownRow = 0xFFFFFFFFu;
+void read_page_rows(TIFF* tif, const PageFormat& f, std::uint32_t y0, std::uint32_t rows, std::uint8_t* out,
+                    std::uint64_t budget, const std::string& where, std::uint32_t& next_row) {
   const std::size_t sample = sample_size(f.type);
   const std::size_t row_bytes = std::size_t{f.width} * sample;
   if (TIFFIsTiled(tif)) {
     std::uint32_t tw = 0, th = 0;
-    TIFFGetField(tif, TIFFTAG_TILEWIDTH, &tw);
-    TIFFGetField(tif, TIFFTAG_TILELENGTH, &th);
-    if (tw == 0 || th == 0) fail(where, "a tile of " + std::to_string(tw) + "x" + std::to_string(th) + " pixels");
-    // One tile at a time, copied into the rows it covers; the tile's size
-    // comes from the file, so it is weighed before it is allocated.
-    const std::string what = where + ": a tile of " + std::to_string(tw) + "x" + std::to_string(th) + " " +
-                             sample_type_name(f.type) + " samples";
-    const std::uint64_t tile_bytes = slab_bytes(Dims{tw, th, 1}, 1, f.type, what);
-    require_within_budget(tile_bytes, kDefaultMemoryBytes, what);
-    if (static_cast<std::uint64_t>(TIFFTileSize64(tif)) != tile_bytes)
-      fail(where, "the tile size " + std::to_string(TIFFTileSize64(tif)) + " does not match " + std::to_string(tw) +
-                      "x" + std::to_string(th) + " samples of " + sample_type_name(f.type));
-    std::vector<std::uint8_t> tile;
-    checked_resize(tile, tile_bytes, what);
-    for (std::uint32_t y0 = 0; y0 < f.height; y0 += th)
-      for (std::uint32_t x0 = 0; x0 < f.width; x0 += tw) {
-        if (TIFFReadTile(tif, tile.data(), x0, y0, 0, 0) < 0) fail(where, "cannot read a tile: " + last_tiff_message);
-        const std::uint32_t w = std::min(tw, f.width - x0);
-        for (std::uint32_t y = y0; y < std::min(y0 + th, f.height); ++y)
-          std::memcpy(out + y * row_bytes + x0 * sample, tile.data() + (y - y0) * std::size_t{tw} * sample, w * sample);
+    std::vector<std::uint8_t> tile = tile_buffer(tif, f, budget, where, tw, th);
+    // In 64 bits: a tile's side may be near 2^32 (weighed, but not small).
+    const std::uint64_t end = std::uint64_t{y0} + rows;
+    for (std::uint64_t ty = y0 / th * std::uint64_t{th}; ty < end; ty += th)
+      for (std::uint64_t x0 = 0; x0 < f.width; x0 += tw) {
+        if (TIFFReadTile(tif, tile.data(), static_cast<std::uint32_t>(x0), static_cast<std::uint32_t>(ty), 0, 0) < 0)
+          fail(where, "cannot read a tile: " + last_tiff_message);
+        const std::uint64_t w = std::min<std::uint64_t>(tw, f.width - x0);
+        for (std::uint64_t y = std::max<std::uint64_t>(ty, y0); y < std::min<std::uint64_t>(ty + th, end); ++y)
+          std::memcpy(out + (y - y0) * row_bytes + x0 * sample, tile.data() + (y - ty) * std::size_t{tw} * sample,
+                      w * sample);
       }
+    return;
+  }
+  // Scanlines: libtiff decodes a strip as far as the row asked for, so a
+  // strip of 65535 rows is never held decoded. A compressed strip cannot be
+  // entered in the middle: rows before y0 in its strip are decoded into a
+  // scratch row, from the strip's start unless the state is already there.
+  std::uint32_t rows_per_strip = f.height;
+  TIFFGetFieldDefaulted(tif, TIFFTAG_ROWSPERSTRIP, &rows_per_strip);
+  rows_per_strip = std::max<std::uint32_t>(1, std::min(rows_per_strip, f.height));
+  const std::uint32_t strip_start = y0 / rows_per_strip * rows_per_strip;
+  std::uint32_t y = next_row != kUnknownRow && next_row >= strip_start && next_row <= y0 ? next_row : strip_start;
+  std::vector<std::uint8_t> scratch;
+  if (y < y0) checked_resize(scratch, row_bytes, where + ": one row");
+  next_row = kUnknownRow;  // until the rows below are read
+  for (; y < y0 + rows; ++y) {
+    std::uint8_t* row = y < y0 ? scratch.data() : out + (y - y0) * row_bytes;
+    if (TIFFReadScanline(tif, row, y, 0) < 0)
+      fail(where, "cannot read row " + std::to_string(y) + ": " + last_tiff_message);
+  }
+  next_row = y0 + rows;
+}
+
+// Reads one page into `out` (width * height samples, rows top to bottom).
+void read_page(TIFF* tif, const PageFormat& f, std::uint8_t* out, std::uint64_t budget, const std::string& where) {
+  const std::size_t sample = sample_size(f.type);
+  const std::size_t row_bytes = std::size_t{f.width} * sample;
+  if (TIFFIsTiled(tif)) {
+    std::uint32_t unused = kUnknownRow;
+    read_page_rows(tif, f, 0, f.height, out, budget, where, unused);
     return;
   }
   std::uint32_t rows_per_strip = f.height;
@@ -121,12 +167,12 @@ void read_page(TIFF* tif, const PageFormat& f, std::uint8_t* out, const std::str
   }
 }
 
-TiffHandle open_tiff(const std::string& path, const char* mode) {
+TiffHandle open_tiff(const std::string& path, const char* mode, std::uint64_t budget = kDefaultMemoryBytes) {
   install_handlers();
   // libtiff allocates what a file's tags ask for (strip and tag buffers);
-  // no single allocation may exceed what a conversion holds by default.
+  // no single allocation may exceed what the conversion may hold.
   std::unique_ptr<TIFFOpenOptions, void (*)(TIFFOpenOptions*)> options(TIFFOpenOptionsAlloc(), TIFFOpenOptionsFree);
-  if (options) TIFFOpenOptionsSetMaxSingleMemAlloc(options.get(), static_cast<tmsize_t>(kDefaultMemoryBytes));
+  if (options) TIFFOpenOptionsSetMaxSingleMemAlloc(options.get(), static_cast<tmsize_t>(budget));
   TiffHandle tif(TIFFOpenExt(path.c_str(), mode, options.get()));
   if (!tif) fail(path, "not a readable TIFF file (" + last_tiff_message + ")");
   return tif;
@@ -174,7 +220,7 @@ namespace {
 // back (for the halo of a slab) reopens.
 class TiffSlabReader final : public SlabReader {
  public:
-  TiffSlabReader(const std::string& path, const TiffFolderOptions& options) {
+  TiffSlabReader(const std::string& path, const TiffFolderOptions& options, std::uint64_t budget) : budget_(budget) {
     if (std::filesystem::is_directory(path)) {
       TiffFolder folder = scan_tiff_folder(path, options);
       files_ = std::move(folder.files);
@@ -186,7 +232,7 @@ class TiffSlabReader final : public SlabReader {
     // file (and its page within that file when the file has several).
     std::string first_where;
     for (std::size_t f = 0; f < files_.size(); ++f) {
-      TiffHandle tif = open_tiff(files_[f], "r");
+      TiffHandle tif = open_tiff(files_[f], "r", budget_);
       if (f == 0) read_tiff_metadata(tif.get(), files_[0], shape_);
       tdir_t page_in_file = 0;
       do {
@@ -214,26 +260,22 @@ class TiffSlabReader final : public SlabReader {
   void read(std::uint32_t z0, std::uint32_t count, void* out) override {
     const std::uint64_t page_bytes =
         slab_bytes(Dims{format_.width, format_.height, 1}, 1, format_.type, files_.front() + ": a page");
-    for (std::uint32_t z = z0; z < z0 + count; ++z) {
-      const Page& page = pages_.at(z);
-      if (!open_ || open_file_ != page.file) {
-        open_ = open_tiff(files_[page.file], "r");
-        open_file_ = page.file;
-      }
-      // Pages are read in order: the next one is the next directory in the
-      // chain. TIFFSetDirectory walks the chain from the first page, so it
-      // is kept for going back (a slab's halo); with it for every page, a
-      // file of 100 000 pages took minutes.
-      const tdir_t current = TIFFCurrentDirectory(open_.get());
-      if (current != page.directory) {
-        const bool next = page.directory == current + 1 && TIFFReadDirectory(open_.get()) &&
-                          TIFFCurrentDirectory(open_.get()) == page.directory;
-        if (!next && !TIFFSetDirectory(open_.get(), page.directory))
-          fail(files_[page.file], "cannot find page " + std::to_string(page.directory));
-      }
-      read_page(open_.get(), format_, static_cast<std::uint8_t*>(out) + (z - z0) * page_bytes,
-                files_[page.file] + " page " + std::to_string(z));
-    }
+    scan_row_ = kUnknownRow;  // strips read whole leave no scanline state
+    for (std::uint32_t z = z0; z < z0 + count; ++z)
+      read_page(go_to_page(z), format_, static_cast<std::uint8_t*>(out) + (z - z0) * page_bytes, budget_,
+                files_[pages_.at(z).file] + " page " + std::to_string(z));
+  }
+
+  bool reads_rows() const override { return true; }
+  void read_rows(std::uint32_t z, std::uint32_t y0, std::uint32_t rows, void* out) override {
+    if (y0 > format_.height || rows > format_.height - y0)
+      fail(files_.front(), "rows " + std::to_string(y0) + " .. " + std::to_string(std::uint64_t{y0} + rows) +
+                               " are outside a page of " + std::to_string(format_.height));
+    TIFF* tif = go_to_page(z);
+    if (z != scan_page_) scan_row_ = kUnknownRow;
+    scan_page_ = z;
+    read_page_rows(tif, format_, y0, rows, static_cast<std::uint8_t*>(out), budget_,
+                   files_[pages_.at(z).file] + " page " + std::to_string(z), scan_row_);
   }
 
  private:
@@ -241,6 +283,34 @@ class TiffSlabReader final : public SlabReader {
     std::size_t file;
     tdir_t directory;
   };
+
+  // The open file, at page z's directory.
+  TIFF* go_to_page(std::uint32_t z) {
+    const Page& page = pages_.at(z);
+    if (!open_ || open_file_ != page.file) {
+      open_ = open_tiff(files_[page.file], "r", budget_);
+      open_file_ = page.file;
+      scan_row_ = kUnknownRow;
+    }
+    // Pages are read in order: the next one is the next directory in the
+    // chain. TIFFSetDirectory walks the chain from the first page, so it
+    // is kept for going back (a slab's halo); with it for every page, a
+    // file of 100 000 pages took minutes.
+    const tdir_t current = TIFFCurrentDirectory(open_.get());
+    if (current != page.directory) {
+      const bool next = page.directory == current + 1 && TIFFReadDirectory(open_.get()) &&
+                        TIFFCurrentDirectory(open_.get()) == page.directory;
+      if (!next && !TIFFSetDirectory(open_.get(), page.directory))
+        fail(files_[page.file], "cannot find page " + std::to_string(page.directory));
+      scan_row_ = kUnknownRow;
+    }
+    return open_.get();
+  }
+
+  std::uint64_t budget_;
+  // Where libtiff's scanline reading stands: page and next row.
+  std::uint32_t scan_page_ = kUnknownRow;
+  std::uint32_t scan_row_ = kUnknownRow;
   std::vector<std::string> files_;
   std::vector<Page> pages_;
   PageFormat format_;
@@ -335,8 +405,9 @@ class TiffSlabWriter final : public SlabWriter {
 
 }  // namespace
 
-std::unique_ptr<SlabReader> open_tiff_slabs(const std::string& path, const TiffFolderOptions& options) {
-  return std::make_unique<TiffSlabReader>(path, options);
+std::unique_ptr<SlabReader> open_tiff_slabs(const std::string& path, const TiffFolderOptions& options,
+                                            std::uint64_t memory_bytes) {
+  return std::make_unique<TiffSlabReader>(path, options, memory_budget(memory_bytes));
 }
 
 std::unique_ptr<SlabWriter> create_tiff_slabs(const std::string& path, const DenseVolume& shape, bool compress) {

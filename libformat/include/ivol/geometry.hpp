@@ -22,6 +22,7 @@ enum class StructureKind : std::uint8_t { Octree = 1, Regular = 2, Rectilinear =
 struct Box {
   std::array<std::uint32_t, 3> lo{0, 0, 0};
   std::array<std::uint32_t, 3> hi{0, 0, 0};
+  // Throws Error(LimitExceeded) past 2^64 - 1, as voxel_count(Dims) does.
   std::uint64_t voxel_count() const;
   bool empty() const;
   std::string to_string() const;
@@ -29,7 +30,13 @@ struct Box {
 
 // Smallest D with 2^D >= the largest dimension.
 unsigned depth_for(const Dims& dims);
+// The voxels of `dims`. A valid file may have 2^31 voxels a side, 2^93 in
+// all: a count past 2^64 - 1 throws Error(LimitExceeded) naming the dims
+// rather than wrapping (a wrapped count sized buffers and reports).
 std::uint64_t voxel_count(const Dims& dims);
+// The same as a double, for reports of any size (exact up to 2^53, and for
+// powers of two).
+double voxel_count_approx(const Dims& dims);
 // Dimensions of level of detail `lod` (ceil(size / 2^lod) per axis).
 Dims lod_dims(const Dims& dims, unsigned lod);
 // The box covering the whole volume at level of detail `lod`.
