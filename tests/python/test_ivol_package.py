@@ -349,7 +349,10 @@ class Writing(unittest.TestCase):
                     cli_file = os.path.join(tmp, f"cli_{t}_{encoding}.ivol")
                     args = ["convert", raw, cli_file, "--dims", f"{x},{y},{z}", "--type", t,
                             "--voxel-size", "0.5,0.25,2", "--origin", "1,2,3", "--unit", "um",
-                            "--quantity", "linear_attenuation", "-f"]
+                            "--quantity", "linear_attenuation", "-f",
+                            # ivol.write writes octrees; convert chooses a
+                            # bricked grid for lossless 16-bit input
+                            "--structure", "octree"]
                     if encoding:
                         args += ["--encoding", encoding, "--allow-lossy"]  # f32 -> binary16 rounds
                     run_ivol(*args, env=env)
