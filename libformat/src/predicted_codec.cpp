@@ -63,7 +63,8 @@ std::int64_t face_prediction(const std::uint16_t* u, std::size_t i, bool ax, boo
 // leave u[i] final before it returns (the decoder writes it there).
 template <class F>
 void walk_brick(const BrickDims& d, const Taps& taps, std::uint16_t* u, F&& at) {
-  const std::size_t sy = d[0], sz = std::size_t{d[0]} * d[1];
+  // Signed strides: c[-sy] steps back, which unsigned arithmetic would wrap.
+  const std::ptrdiff_t sy = d[0], sz = std::ptrdiff_t{d[0]} * d[1];
   const std::int64_t round = taps.shift ? std::int64_t{1} << (taps.shift - 1) : 0;
   const auto& t = taps.t;
   std::size_t i = 0;
@@ -129,7 +130,8 @@ bool solve(double* a, double* b, int k) {
 // the x neighbour. False when too few voxels or the fit is degenerate.
 bool fit_least_squares(const BrickDims& d, const std::uint16_t* u, Taps& out) {
   if (d[0] < 2 || d[1] < 2 || d[2] < 2 || (d[0] - 1) * std::uint64_t{d[1] - 1} * (d[2] - 1) < 64) return false;
-  const std::size_t sy = d[0], sz = std::size_t{d[0]} * d[1];
+  // Signed strides: c[-sy] steps back, which unsigned arithmetic would wrap.
+  const std::ptrdiff_t sy = d[0], sz = std::ptrdiff_t{d[0]} * d[1];
   double ata[36] = {}, atb[6] = {};
   for (std::uint32_t z = 1; z < d[2]; ++z)
     for (std::uint32_t y = 1; y < d[1]; ++y) {
@@ -167,7 +169,8 @@ bool fit_least_squares(const BrickDims& d, const std::uint16_t* u, Taps& out) {
 // computed after the taps are rounded, so their rounding costs nothing.
 bool fit_least_squares_with_level(const BrickDims& d, const std::uint16_t* u, Taps& out) {
   if (d[0] < 2 || d[1] < 2 || d[2] < 2 || (d[0] - 1) * std::uint64_t{d[1] - 1} * (d[2] - 1) < 64) return false;
-  const std::size_t sy = d[0], sz = std::size_t{d[0]} * d[1];
+  // Signed strides: c[-sy] steps back, which unsigned arithmetic would wrap.
+  const std::ptrdiff_t sy = d[0], sz = std::ptrdiff_t{d[0]} * d[1];
   const double ref = u[sz + sy + 1];
   double sum_n[7] = {}, sum_v = 0, nn[49] = {}, nv[7] = {}, count = 0;
   auto neighbours = [&](const std::uint16_t* c, double* n) {

@@ -245,13 +245,12 @@ bool choose_bricked(const ImportOptions& options, ValueEncoding encoding, std::u
   if (!options.framed_blocks) against = "format 1.2 (a bricked grid needs format 1.3)";
   if (options.structure == StructureChoice::Bricked) {
     if (!against.empty()) throw Error(ErrorClass::InvalidArgument, "--structure bricked: " + against);
-    report.structure_reason = "asked for (--structure bricked)";
     return true;
   }
-  if (options.structure == StructureChoice::Octree) {
-    report.structure_reason = "asked for (--structure octree)";
-    return false;
-  }
+  // An explicit choice records no reason (the command in the provenance
+  // says it), so that a file asked for as an octree is the one ivol.write
+  // and every other octree writer make from the same samples.
+  if (options.structure == StructureChoice::Octree) return false;
   if (against.empty() && layer_bytes > memory_budget(options.memory_bytes))
     against = "a layer of bricks (" + mib_text(layer_bytes) +
               ") exceeds the memory budget (--memory), a slab of the "
