@@ -115,6 +115,7 @@ TEST(ReconBuiltSlabs, SameFileAsOneProcess) {
   for (const bool keep : {false, true}) {
     convert::ImportOptions options;
     options.encoding = ValueEncoding::Binary16;
+    options.structure = convert::StructureChoice::Octree;  // as ivol recon asks: ranks build octree subtrees
     if (keep) options.keep = convert::KeepRule{false, 0.01F, 2};
     const std::string one_path = test::temp_path("recon-one.ivol");
     {

@@ -437,6 +437,9 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       if (!quiet) std::cerr << "ivol recon: warning: " << w << "\n";
 
     convert::ImportOptions import;
+    // Ranks under mpirun build octree subtrees of their slabs; one process
+    // writes the same octree (not a grid convert might choose).
+    import.structure = convert::StructureChoice::Octree;
     import.encoding = parse_encoding(s->encoding);
     import.framed_blocks = s->format_version == "1.3";
     import.slab_budget_bytes = (s->memory_mib << 20) / 4;
