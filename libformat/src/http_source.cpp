@@ -80,8 +80,14 @@ class HttpSource final : public ByteSource {
     if (!curl_) throw Error(ErrorClass::LimitExceeded, url + ": cannot start libcurl");
     // The first page: the header (and with metadata first, the metadata);
     // its Content-Range gives the file's size and its ETag the version.
-    Response first = fetch(0, kPage - 1, /*first=*/true);
-    store(0, first.body);
+    try {
+      Response first = fetch(0, kPage - 1, /*first=*/true);
+      store(0, first.body);
+    } catch (...) {
+      curl_easy_cleanup(curl_);  // the destructor does not run for a constructor that throws
+      curl_ = nullptr;
+      throw;
+    }
   }
   ~HttpSource() override {
     if (curl_) curl_easy_cleanup(curl_);

@@ -47,4 +47,10 @@ bad huge-export-memory-ok 0 "" -- sh -c "timeout 60 '$IVOL' -q convert '$work/hu
 # An OpenVDB file whose blosc block claims 1 TiB (20 KB; found by fuzz_vdb):
 # libopenvdb's allocation fails; a limit naming the grid and the file.
 cp "$huge_here/../../fuzz/regressions/vdb/vdb-blosc-1tib-allocation" "$work/huge-blosc.vdb"
-bad huge-vdb-blosc-1tib 2 "libopenvdb could not allocate what the grid's data claim" -- timeout 60 "${huge_cap[@]}" "$IVOL" convert "$work/huge-blosc.vdb" "$out/x.ivol"
+# ASan's operator new aborts on a 1 TiB request instead of throwing: the
+# normal build checks this case.
+if [ "${IVOL_SANITIZED:-0}" != 1 ]; then
+  bad huge-vdb-blosc-1tib 2 "libopenvdb could not allocate what the grid's data claim" -- timeout 60 "${huge_cap[@]}" "$IVOL" convert "$work/huge-blosc.vdb" "$out/x.ivol"
+else
+  echo "skip huge-vdb-blosc-1tib (AddressSanitizer's operator new aborts instead of throwing std::bad_alloc)"
+fi
