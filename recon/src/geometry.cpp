@@ -108,10 +108,14 @@ ScanGeometry reduce_scan(const ScanGeometry& geometry, unsigned view_step, unsig
 }
 
 VolumeGrid VolumeGrid::centred(std::array<std::uint32_t, 3> size, double voxel) {
+  return centred(size, Vec3{voxel, voxel, voxel});
+}
+
+VolumeGrid VolumeGrid::centred(std::array<std::uint32_t, 3> size, const Vec3& voxel) {
   VolumeGrid g;
   g.size = size;
-  g.voxel_size = {voxel, voxel, voxel};
-  for (int a = 0; a < 3; ++a) g.origin[a] = -0.5 * (static_cast<double>(size[a]) - 1.0) * voxel;
+  g.voxel_size = voxel;
+  for (int a = 0; a < 3; ++a) g.origin[a] = -0.5 * (static_cast<double>(size[a]) - 1.0) * voxel[a];
   return g;
 }
 

@@ -146,6 +146,10 @@ case_ recon-no-clobber   1 "r.ivol: exists"          -- "$IVOL" recon "$work/p.h
 case_ recon-octree       0 '"structure": "octree"'   -- "$IVOL" recon "$work/p.h5" "${recon_args[@]}" -o "$work/r-octree.ivol" --structure octree --json
 case_ recon-octree-ok    0 "OK"                      -- "$IVOL" verify "$work/r-octree.ivol"
 case_ recon-nested       0 ""                        -- "$IVOL" -q recon "$work/p.h5" "${recon_args[@]}" -o "$work/r-nested.ivol" --structure nested --nested-cell 8
+case_ recon-aniso        0 "than 20x22x12"         -- "$IVOL" recon "$work/p.h5" --geometry "$work/p.xml" --pitch 1.835 --size 20,22,12 --voxel 1.6,1.4,2.5 --origin -14,-15,-12 -o "$work/r-aniso.ivol" --structure octree
+case_ recon-aniso-size   0 "20 x 22 x 12 voxels of 1.6 x 1.4 x 2.5 mm" -- "$IVOL" info "$work/r-aniso.ivol"
+case_ recon-aniso-origin 0 "[-14.0, -15.0, -12.0]"  -- bash -c "'$IVOL' info --json '$work/r-aniso.ivol' | python3 -c 'import json,sys; print(json.load(sys.stdin)[\"origin\"])'"
+case_ recon-bad-voxel    1 "every voxel size must be a positive" -- "$IVOL" recon "$work/p.h5" "${recon_args[@]}" --voxel 1,0,1 -o "$work/x.ivol"
 case_ recon-raw          0 "24x24x24"                -- "$IVOL" recon "$work/p.raw" --geometry "$work/p-raw.xml" --pitch 1.835 --detector 48,48 --views 24 --size 24 --voxel 1.6 -o "$work/r-raw.ivol" --window hann
 case_ recon-no-pitch     1 "--pitch"                 -- "$IVOL" recon "$work/p.h5" --geometry "$work/p.xml" --size 24 --voxel 1.6 -o "$work/x.ivol"
 case_ recon-bad-kind     1 "--structure"             -- "$IVOL" recon "$work/p.h5" "${recon_args[@]}" -o "$work/x.ivol" --structure tree

@@ -31,7 +31,7 @@ struct ReconSettings {
   ScanSettings scan;
   std::string output;
   std::string size;
-  double voxel = 0.0;
+  std::string voxel;  // S or SX,SY,SZ mm
   std::string origin;
   std::string window = "ram-lak";
   double cutoff = 1.0;
@@ -52,6 +52,21 @@ struct ReconSettings {
   bool force = false;
 };
 
+// One size for every axis or one per axis (x, y, z: z along the rotation axis).
+recon::Vec3 parse_voxel(const std::string& text) {
+  const std::array<double, 3> voxel = parse_triple(text, "--voxel", true);
+  for (double v : voxel)
+    if (!(v > 0) || !std::isfinite(v))
+      throw UsageError("--voxel", "'" + text + "': every voxel size must be a positive number of mm");
+  return {voxel[0], voxel[1], voxel[2]};
+}
+
+nlohmann::json voxel_json(const recon::VolumeGrid& grid) {
+  const recon::Vec3& v = grid.voxel_size;
+  if (v[0] == v[1] && v[1] == v[2]) return v[0];
+  return nlohmann::json::array({v[0], v[1], v[2]});
+}
+
 recon::VolumeGrid make_grid(const ReconSettings& s) {
   recon::VolumeGrid grid;
   const std::array<double, 3> size = parse_triple(s.size, "--size", true);
@@ -60,8 +75,7 @@ recon::VolumeGrid make_grid(const ReconSettings& s) {
       throw UsageError("--size", "'" + s.size + "' is not N or X,Y,Z voxels (1 to 10^6)");
     grid.size[a] = static_cast<std::uint32_t>(size[a]);
   }
-  if (!(s.voxel > 0)) throw UsageError("--voxel", "the voxel size in mm must be positive");
-  grid = recon::VolumeGrid::centred(grid.size, s.voxel);
+  grid = recon::VolumeGrid::centred(grid.size, parse_voxel(s.voxel));
   if (!s.origin.empty()) grid.origin = parse_triple(s.origin, "--origin", false);
   return grid;
 }
@@ -69,13 +83,11 @@ recon::VolumeGrid make_grid(const ReconSettings& s) {
 void check_size(const std::string& value) {
   ReconSettings probe;
   probe.size = value;
-  probe.voxel = 1;
+  probe.voxel = "1";
   make_grid(probe);
 }
 
-void check_voxel(const std::string& value) {
-  if (!(parse_number(value, "--voxel") > 0)) throw UsageError("--voxel", "the voxel size in mm must be positive");
-}
+void check_voxel(const std::string& value) { parse_voxel(value); }
 
 void check_threshold(const std::string& value) {
   if (value != "otsu") parse_number(value, "--threshold");
@@ -285,7 +297,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
       {"output", s.output},
       {"structure", s.structure},
       {"size", {grid.size[0], grid.size[1], grid.size[2]}},
-      {"voxel_mm", s.voxel},
+      {"voxel_mm", voxel_json(grid)},
       {"views", scan.geometry.view_count()},
       {"devices", reconstructor.device_names()},
       {"threshold", threshold},
@@ -332,7 +344,9 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
   cmd->add_flag("-f,--force", s->force, "Replace the output if it exists");
   auto* volume = cmd->add_option_group("volume");
   volume->add_option("--size", s->size, "N or X,Y,Z voxels")->required()->check(checked(check_size));
-  volume->add_option("--voxel", s->voxel, "Voxel size, mm")->required()->check(checked(check_voxel));
+  volume->add_option("--voxel", s->voxel, "Voxel size in mm: S, or SX,SY,SZ (z along the rotation axis)")
+      ->required()
+      ->check(checked(check_voxel));
   volume->add_option("--origin", s->origin, "X,Y,Z of voxel 0's centre, mm (default: volume centred on the axis)")
       ->check(checked([](const std::string& v) { parse_triple(v, "--origin", false); }));
   auto* fdk = cmd->add_option_group("filter and devices");
@@ -528,7 +542,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     nlohmann::json report = {{"output", s->output},
                              {"size", {grid.size[0], grid.size[1], grid.size[2]}},
-                             {"voxel_mm", s->voxel},
+                             {"voxel_mm", voxel_json(grid)},
                              {"views", scan.geometry.view_count()},
                              {"devices", reconstructor.device_names()},
                              {"file_bytes", written.file_bytes},

@@ -102,6 +102,8 @@ struct VolumeGrid {
   }
   // A grid of `size` voxels of `voxel` mm centred on the isocentre.
   static VolumeGrid centred(std::array<std::uint32_t, 3> size, double voxel);
+  // The same with a voxel size per axis (anisotropic voxels, e.g. finer in-plane).
+  static VolumeGrid centred(std::array<std::uint32_t, 3> size, const Vec3& voxel);
   void validate() const;
 };
 
