@@ -150,6 +150,13 @@ case_ recon-aniso        0 "than 20x22x12"         -- "$IVOL" recon "$work/p.h5"
 case_ recon-aniso-size   0 "20 x 22 x 12 voxels of 1.6 x 1.4 x 2.5 mm" -- "$IVOL" info "$work/r-aniso.ivol"
 case_ recon-aniso-origin 0 "[-14.0, -15.0, -12.0]"  -- bash -c "'$IVOL' info --json '$work/r-aniso.ivol' | python3 -c 'import json,sys; print(json.load(sys.stdin)[\"origin\"])'"
 case_ recon-bad-voxel    1 "every voxel size must be a positive" -- "$IVOL" recon "$work/p.h5" "${recon_args[@]}" --voxel 1,0,1 -o "$work/x.ivol"
+# A detector shifted sideways (half-fan): weighted, widened and said so; one
+# that never sees the axis is refused with the numbers.
+case_ phantom-displaced  0 ""                        -- "$IVOL" -q phantom shepp-logan "${scan[@]}" --offset 28,0 -o "$work/off.h5"
+case_ recon-displaced    0 "Wang weighting over"     -- "$IVOL" recon "$work/off.h5" --geometry "$work/off.xml" --pitch 1.835 --size 24 --voxel 1.6 -o "$work/r-off.ivol"
+case_ recon-displaced-provenance 0 '"weighting": "wang"' -- "$IVOL" info --json "$work/r-off.ivol"
+case_ phantom-off-axis   0 ""                        -- "$IVOL" -q phantom shepp-logan "${scan[@]}" --offset 50,0 -o "$work/far.h5"
+case_ recon-off-axis     1 "does not see the rotation axis in every view: the columns every view shares span 6.8775 to 93.1225 mm" -- "$IVOL" recon "$work/far.h5" --geometry "$work/far.xml" --pitch 1.835 --size 24 --voxel 1.6 -o "$work/x.ivol"
 case_ recon-raw          0 "24x24x24"                -- "$IVOL" recon "$work/p.raw" --geometry "$work/p-raw.xml" --pitch 1.835 --detector 48,48 --views 24 --size 24 --voxel 1.6 -o "$work/r-raw.ivol" --window hann
 case_ recon-no-pitch     1 "--pitch"                 -- "$IVOL" recon "$work/p.h5" --geometry "$work/p.xml" --size 24 --voxel 1.6 -o "$work/x.ivol"
 case_ recon-bad-kind     1 "--structure"             -- "$IVOL" recon "$work/p.h5" "${recon_args[@]}" -o "$work/x.ivol" --structure tree

@@ -449,6 +449,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     recon::FdkReconstructor reconstructor(*scan.projections, scan.geometry, reconstructor_options);
     for (const std::string& w : reconstructor.warnings())
       if (!quiet) std::cerr << "ivol recon: warning: " << w << "\n";
+    for (const std::string& n : scan.notes)
+      if (!quiet) std::cerr << "ivol recon: " << n << "\n";
 
     convert::ImportOptions import;
     // Ranks under mpirun build octree subtrees of their slabs; one process

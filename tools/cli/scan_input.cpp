@@ -7,6 +7,7 @@
 #include <optional>
 
 #include "ivol/error.hpp"
+#include "ivol/recon/displaced_detector.hpp"
 #include "ivol/recon/rtk_geometry_xml.hpp"
 #include "option_parsing.hpp"
 #include "projection_io.hpp"
@@ -93,6 +94,28 @@ void add_scan_options(CLI::App* cmd, ScanSettings& s) {
       ->capture_default_str();
   geometry->add_option("--offset", s.offset, "U,V: detector offset in mm (without --geometry)")
       ->check(checked([](const std::string& v) { parse_numbers(v, "--offset", 2, 2); }));
+}
+
+// A detector shifted sideways sees part of the object from one side only:
+// its projections are weighted (Wang) and widened before FDK sees them, as
+// RTK's rtkfdk does. A detector that never sees the axis is refused.
+void weight_displaced_detector(const std::string& projections, OpenedScan& scan) {
+  recon::DisplacedDetector displaced;
+  try {
+    displaced = recon::analyse_displaced_detector(scan.geometry);
+  } catch (const std::invalid_argument& e) {
+    bad(projections + ": " + e.what());
+  }
+  scan.description["geometry"]["displaced_detector"] = {{"weighting", displaced.weighted() ? "wang" : "none"},
+                                                        {"columns_span_mm", {displaced.inferior, displaced.superior}},
+                                                        {"overlap_mm", displaced.overlap},
+                                                        {"padding_columns", displaced.padding}};
+  if (!displaced.weighted()) return;
+  scan.notes.push_back(displaced.describe());
+  const recon::ScanGeometry measured = scan.geometry;
+  scan.geometry = recon::widen_for_displaced_detector(measured, displaced);
+  scan.projections =
+      std::make_unique<recon::DisplacedDetectorProjections>(std::move(scan.projections), measured, displaced);
 }
 
 OpenedScan open_scan(const ScanSettings& s) {
@@ -224,6 +247,7 @@ OpenedScan open_scan(const ScanSettings& s) {
                                      {"pitch_mm", {detector.pitch_u, detector.pitch_v}},
                                      {"pitch_from", pitch_from},
                                      {"quantity", intensities ? "intensities" : "line_integrals"}};
+  weight_displaced_detector(s.projections, scan);
   return scan;
 }
 

@@ -39,7 +39,8 @@ void add_scan_options(CLI::App* command, ScanSettings& settings);
 struct OpenedScan {
   std::unique_ptr<recon::ProjectionSource> projections;
   recon::ScanGeometry geometry;
-  nlohmann::json description;  // for the file's provenance
+  nlohmann::json description;      // for the file's provenance
+  std::vector<std::string> notes;  // what was done to the projections, for the user
 };
 
 // Throws ivol::Error (InvalidArgument) naming the option for bad options,

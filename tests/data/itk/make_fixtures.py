@@ -116,11 +116,55 @@ writer.Update()
 n, voxel = 24, 1.6
 volume_origin = [-(n - 1) / 2 * voxel] * 3
 volume = constant([n, n, n], [voxel] * 3, volume_origin)
+# As rtkfdk does: behind the displaced-detector weighting, which acts here
+# (the origin moves the detector 3 mm, over 10 % of its width between edges).
+weighting = rtk.DisplacedDetectorImageFilter[Image].New()
+weighting.SetInput(phantom.GetOutput())
+weighting.SetGeometry(geometry)
 fdk = rtk.FDKConeBeamReconstructionFilter[Image].New()
 fdk.SetInput(0, volume.GetOutput())
-fdk.SetInput(1, phantom.GetOutput())
+fdk.SetInput(1, weighting.GetOutput())
 fdk.SetGeometry(geometry)
 fdk.Update()
 rtk_array = itk.array_view_from_image(fdk.GetOutput())  # [k = -our y, j = our z, i = our x]
 np.save(os.path.join(out, "rtk", "fdk.npy"), np.ascontiguousarray(rtk_array[::-1, :, :].transpose(1, 0, 2)))
 print("fixtures written to", out)
+
+# ---- RTK, displaced detector -------------------------------------------------
+# rtk/displaced_*: the detector shifted 18 mm sideways (its near edge 11 mm
+# from the axis at the detector, a half-fan scan), 60 views over 360°; RTK's
+# FDK behind its DisplacedDetectorImageFilter, and the phantom drawn by RTK.
+views = 60
+geometry = rtk.ThreeDCircularProjectionGeometry.New()
+for i in range(views):
+    geometry.AddProjection(100.0, 180.0, i * 360.0 / views, 18.0, 0.0)
+rtk.write_geometry(geometry, os.path.join(out, "rtk", "displaced_geometry.xml"))
+centred_origin = [-(columns - 1) / 2 * pitch[0], -(rows - 1) / 2 * pitch[1], 0.0]
+projections_source = constant([columns, rows, views], [pitch[0], pitch[1], 1.0], centred_origin)
+phantom = rtk.SheppLoganPhantomFilter[Image, Image].New()
+phantom.SetInput(projections_source.GetOutput())
+phantom.SetGeometry(geometry)
+phantom.SetPhantomScale(16.0)
+phantom.Update()
+writer = itk.ImageFileWriter[Image].New()
+writer.SetFileName(os.path.join(out, "rtk", "displaced_proj.mha"))
+writer.SetInput(phantom.GetOutput())
+writer.SetUseCompression(True)
+writer.Update()
+weighting = rtk.DisplacedDetectorImageFilter[Image].New()
+weighting.SetInput(phantom.GetOutput())
+weighting.SetGeometry(geometry)
+fdk = rtk.FDKConeBeamReconstructionFilter[Image].New()
+fdk.SetInput(0, volume.GetOutput())
+fdk.SetInput(1, weighting.GetOutput())
+fdk.SetGeometry(geometry)
+fdk.Update()
+rtk_array = itk.array_view_from_image(fdk.GetOutput())
+np.save(os.path.join(out, "rtk", "displaced_fdk.npy"), np.ascontiguousarray(rtk_array[::-1, :, :].transpose(1, 0, 2)))
+draw = rtk.DrawSheppLoganFilter[Image, Image].New()
+draw.SetInput(volume.GetOutput())
+draw.SetPhantomScale(16.0)
+draw.Update()
+truth = itk.array_view_from_image(draw.GetOutput())
+np.save(os.path.join(out, "rtk", "displaced_truth.npy"), np.ascontiguousarray(truth[::-1, :, :].transpose(1, 0, 2)))
+print("displaced-detector fixtures written")
