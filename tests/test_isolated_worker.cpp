@@ -2,26 +2,26 @@
 // and the HDF5 readers that use it: a library crash on a damaged file must
 // become an ivol::Error naming the file, clean errors must come back
 // unchanged, and the values must be those of the in-process readers.
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <hdf5.h>
-#include <fcntl.h>
 #include <pthread.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
-#include <memory>
-#include <thread>
-
 #include <cerrno>
 #include <csignal>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
+#include "expect_error.hpp"
 #include "hdf5_io.hpp"
 #include "isolated_worker.hpp"
 #include "ivol/error.hpp"
@@ -31,19 +31,8 @@
 namespace ivol::convert {
 namespace {
 
-// Runs `call` and returns the ivol::Error it throws (a failure if none).
-template <typename Call>
-Error error_of(Call call) {
-  try {
-    call();
-  } catch (const Error& e) {
-    return e;
-  }
-  ADD_FAILURE() << "no ivol::Error was thrown";
-  return Error(ErrorClass::InvalidArgument, "");
-}
-
-bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+using test::contains;
+using test::error_of;
 
 // The worker kinds these tests start: the child is this test binary started
 // again (tests/support/test_main.cpp), so they are registered here.
@@ -186,7 +175,8 @@ TEST(IsolatedWorker, StartsWhileOtherThreadsAllocate) {
     busy.emplace_back([&stop] {
       while (!stop.load(std::memory_order_relaxed)) {
         std::vector<std::unique_ptr<std::string>> held;
-        for (int i = 0; i < 64; ++i) held.push_back(std::make_unique<std::string>(static_cast<std::size_t>(i * 37), 'x'));
+        for (int i = 0; i < 64; ++i)
+          held.push_back(std::make_unique<std::string>(static_cast<std::size_t>(i * 37), 'x'));
       }
     });
   for (int round = 0; round < 20; ++round) {

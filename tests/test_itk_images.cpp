@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "expect_error.hpp"
 #include "itk_image_header.hpp"
 #include "itk_image_io.hpp"
 #include "itk_image_samples.hpp"
@@ -54,18 +55,8 @@ Npy load_npy(const std::string& path) {
   return npy;
 }
 
-template <typename Call>
-Error error_of(Call call) {
-  try {
-    call();
-  } catch (const Error& e) {
-    return e;
-  }
-  ADD_FAILURE() << "no ivol::Error was thrown";
-  return Error(ErrorClass::InvalidArgument, "");
-}
-
-bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+using test::contains;
+using test::error_of;
 
 struct VolumeCase {
   const char* file;
@@ -81,9 +72,9 @@ TEST_P(ItkVolumes, ValuesSpacingAndOriginAreThoseItsLibraryWrote) {
   const std::string stem = std::filesystem::path(c.file).stem().string();
   const Npy expected = load_npy(fixture(stem + ".npy"));
   ASSERT_EQ(expected.shape.size(), 3u);
-  EXPECT_EQ(shape.dims, (Dims{static_cast<std::uint32_t>(expected.shape[2]),
-                              static_cast<std::uint32_t>(expected.shape[1]),
-                              static_cast<std::uint32_t>(expected.shape[0])}));
+  EXPECT_EQ(shape.dims,
+            (Dims{static_cast<std::uint32_t>(expected.shape[2]), static_cast<std::uint32_t>(expected.shape[1]),
+                  static_cast<std::uint32_t>(expected.shape[0])}));
   EXPECT_EQ(shape.type, c.type);
   EXPECT_EQ(shape.voxel_size, (std::array<double, 3>{0.5, 0.25, 2.0}));
   EXPECT_EQ(shape.origin, (std::array<double, 3>{-3.5, 1.25, 10.0}));
@@ -111,19 +102,17 @@ TEST_P(ItkVolumes, ValuesSpacingAndOriginAreThoseItsLibraryWrote) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Fixtures, ItkVolumes,
-                         testing::Values(VolumeCase{"u16.mha", SampleType::UInt16},
-                                         VolumeCase{"i16_z.mha", SampleType::Int16},
-                                         VolumeCase{"f32.mhd", SampleType::Float32},
-                                         VolumeCase{"u8.nrrd", SampleType::UInt8},
-                                         VolumeCase{"i8.nrrd", SampleType::Int16},
-                                         VolumeCase{"f32_be.nhdr", SampleType::Float32}),
-                         [](const testing::TestParamInfo<VolumeCase>& info) {
-                           std::string name = info.param.file;
-                           for (char& ch : name)
-                             if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
-                           return name;
-                         });
+INSTANTIATE_TEST_SUITE_P(
+    Fixtures, ItkVolumes,
+    testing::Values(VolumeCase{"u16.mha", SampleType::UInt16}, VolumeCase{"i16_z.mha", SampleType::Int16},
+                    VolumeCase{"f32.mhd", SampleType::Float32}, VolumeCase{"u8.nrrd", SampleType::UInt8},
+                    VolumeCase{"i8.nrrd", SampleType::Int16}, VolumeCase{"f32_be.nhdr", SampleType::Float32}),
+    [](const testing::TestParamInfo<VolumeCase>& info) {
+      std::string name = info.param.file;
+      for (char& ch : name)
+        if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
+      return name;
+    });
 
 TEST(ItkImages, ARotatedDirectionIsRefusedNotDropped) {
   const Error e = error_of([] { open_itk_image_slabs(fixture("rotated.mha")); });
@@ -172,8 +161,9 @@ TEST(ItkImages, DamagedFilesAreRefusedNamingTheFileAndWhat) {
   EXPECT_TRUE(contains(e3.what(), "are 1680 bytes")) << e3.what();
   // Sizes whose product overflows, a header without its end.
   const std::string huge = ivol::test::temp_path("huge.mha");
-  write_file(huge, "NDims = 3\nDimSize = 4294967295 4294967295 4294967295\nElementType = MET_FLOAT\n"
-                   "ElementDataFile = LOCAL\n");
+  write_file(huge,
+             "NDims = 3\nDimSize = 4294967295 4294967295 4294967295\nElementType = MET_FLOAT\n"
+             "ElementDataFile = LOCAL\n");
   EXPECT_EQ(error_of([&] { open_itk_image_slabs(huge); }).error_class(), ErrorClass::LimitExceeded);
   const std::string endless = ivol::test::temp_path("endless.nrrd");
   write_file(endless, "NRRD0004\n" + std::string(2 << 20, '#'));
@@ -182,8 +172,8 @@ TEST(ItkImages, DamagedFilesAreRefusedNamingTheFileAndWhat) {
   write_file(list, "NDims = 3\nDimSize = 2 2 2\nElementType = MET_FLOAT\nElementDataFile = LIST\n");
   EXPECT_TRUE(contains(error_of([&] { open_itk_image_slabs(list); }).what(), "several files"));
   const std::string doubles = ivol::test::temp_path("doubles.mha");
-  write_file(doubles, "NDims = 3\nDimSize = 1 1 1\nElementType = MET_DOUBLE\nElementDataFile = LOCAL\n" +
-                          std::string(8, '\0'));
+  write_file(doubles,
+             "NDims = 3\nDimSize = 1 1 1\nElementType = MET_DOUBLE\nElementDataFile = LOCAL\n" + std::string(8, '\0'));
   const Error e4 = error_of([&] { open_itk_image_slabs(doubles); });
   EXPECT_TRUE(contains(e4.what(), "float64 samples")) << e4.what();
 }
