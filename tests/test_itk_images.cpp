@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "expect_error.hpp"
+#include "hdf5_io.hpp"
 #include "itk_image_header.hpp"
 #include "itk_image_io.hpp"
 #include "itk_image_samples.hpp"
@@ -119,6 +120,32 @@ TEST(ItkImages, ARotatedDirectionIsRefusedNotDropped) {
   EXPECT_EQ(e.error_class(), ErrorClass::InvalidArgument);
   EXPECT_TRUE(contains(e.what(), "rotated.mha: MetaImage TransformMatrix")) << e.what();
   EXPECT_TRUE(contains(e.what(), "not the identity")) << e.what();
+}
+
+// ITK's HDF5 image layout, written by SimpleITK: found without naming the
+// dataset, with its spacing and origin, and refused when rotated.
+TEST(ItkImages, ItkHdf5ImagesReadWithTheirGeometry) {
+  Hdf5SourceInfo source;
+  auto reader = open_hdf5_slabs(fixture("u16_itk.h5"), kDefaultDataset, &source);
+  const DenseVolume& shape = reader->shape();
+  EXPECT_EQ(source.dataset, "/ITKImage/0/VoxelData");
+  const Npy expected = load_npy(fixture("u16.npy"));
+  EXPECT_EQ(shape.dims,
+            (Dims{static_cast<std::uint32_t>(expected.shape[2]), static_cast<std::uint32_t>(expected.shape[1]),
+                  static_cast<std::uint32_t>(expected.shape[0])}));
+  EXPECT_EQ(shape.type, SampleType::UInt16);
+  EXPECT_EQ(shape.voxel_size, (std::array<double, 3>{0.5, 0.25, 2.0}));
+  EXPECT_EQ(shape.origin, (std::array<double, 3>{-3.5, 1.25, 10.0}));
+  EXPECT_EQ(shape.unit, "mm");
+  EXPECT_TRUE(shape.has_geometry);
+  EXPECT_TRUE(contains(shape.voxel_size_from, "/ITKImage/0/Spacing")) << shape.voxel_size_from;
+  std::vector<std::uint8_t> got(static_cast<std::size_t>(shape.voxel_count()) * 2);
+  reader->read(0, shape.dims[2], got.data());
+  EXPECT_TRUE(got == expected.bytes);
+
+  const Error e = error_of([] { open_hdf5_slabs(fixture("rotated_itk.h5")); });
+  EXPECT_EQ(e.error_class(), ErrorClass::InvalidArgument);
+  EXPECT_TRUE(contains(e.what(), "/ITKImage/0/Directions is not the identity")) << e.what();
 }
 
 std::string read_file(const std::string& path) {

@@ -201,12 +201,16 @@ bool read_dxchange_pixel_size(hid_t file, const std::string& context, DenseVolum
 
 // voxel_size / pixel_size / origin / unit / quantity / value_unit /
 // provenance, as documented in the header.
-void read_geometry(hid_t file, hid_t dataset, const std::string& context, DenseVolume& volume) {
+bool read_itk_geometry(hid_t file, const std::string& dataset_name, const std::string& context, DenseVolume& volume);
+
+void read_geometry(hid_t file, hid_t dataset, const std::string& dataset_name, const std::string& context,
+                   DenseVolume& volume) {
   if (attribute_exists(dataset, "quantity")) volume.quantity = read_string(dataset, "quantity", context);
   if (attribute_exists(dataset, "value_unit")) volume.value_unit = read_string(dataset, "value_unit", context);
   if (!volume.quantity.empty() || !volume.value_unit.empty())
     volume.quantity_from = "HDF5 attributes quantity, value_unit";
   if (attribute_exists(dataset, "provenance")) volume.provenance = read_string(dataset, "provenance", context);
+  if (read_itk_geometry(file, dataset_name, context, volume)) return;
   const char* size_name = attribute_exists(dataset, "voxel_size")   ? "voxel_size"
                           : attribute_exists(dataset, "pixel_size") ? "pixel_size"
                                                                     : nullptr;
@@ -234,6 +238,72 @@ void read_geometry(hid_t file, hid_t dataset, const std::string& context, DenseV
       break;
     }
   volume.has_geometry = !voxel_size_marked_unknown(volume.provenance);
+}
+
+// Whether every group on the way to `path` and the link itself exist
+// (H5Lexists fails on a missing intermediate group).
+bool link_exists(hid_t file, const std::string& path) {
+  for (std::size_t slash = path.find('/', 1);; slash = path.find('/', slash + 1)) {
+    const std::string prefix = slash == std::string::npos ? path : path.substr(0, slash);
+    if (H5Lexists(file, prefix.c_str(), H5P_DEFAULT) <= 0) return false;
+    if (slash == std::string::npos) return true;
+  }
+}
+
+constexpr const char* kItkVoxelData = "/ITKImage/0/VoxelData";
+
+// ITK's HDF5ImageIO keeps the image's geometry in datasets beside its
+// VoxelData: Spacing and Origin (x, y, z), Directions (3 × 3). Spacing is
+// in ITK's millimetres; a rotated or flipped image is refused, as for
+// MetaImage (ivol stores axis-aligned grids).
+bool read_itk_geometry(hid_t file, const std::string& dataset_name, const std::string& context, DenseVolume& volume) {
+  const std::string suffix = "/VoxelData";
+  if (dataset_name.size() <= suffix.size() ||
+      dataset_name.compare(dataset_name.size() - suffix.size(), suffix.size(), suffix) != 0)
+    return false;
+  const std::string group = dataset_name.substr(0, dataset_name.size() - suffix.size());
+  if (!link_exists(file, group + "/Spacing")) return false;
+  auto read_vector = [&](const std::string& name, std::size_t count) {
+    const std::string where = context + ": " + name;
+    Handle dataset(H5Dopen2(file, name.c_str(), H5P_DEFAULT), H5Dclose);
+    if (!dataset.valid()) throw Error(ErrorClass::Malformed, where + ": not a dataset");
+    Handle space(H5Dget_space(dataset.get()), H5Sclose);
+    Handle type(H5Dget_type(dataset.get()), H5Tclose);
+    const H5T_class_t type_class = H5Tget_class(type.get());
+    if ((type_class != H5T_FLOAT && type_class != H5T_INTEGER) ||
+        H5Sget_simple_extent_npoints(space.get()) != static_cast<hssize_t>(count))
+      throw Error(ErrorClass::Malformed, where + ": needs " + std::to_string(count) + " numbers");
+    std::vector<double> values(count);
+    if (H5Dread(dataset.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data()) < 0)
+      throw Error(ErrorClass::Malformed, where + ": cannot read" + hdf5_reason());
+    for (double v : values)
+      if (!std::isfinite(v)) throw Error(ErrorClass::Malformed, where + ": not finite");
+    return values;
+  };
+  const std::vector<double> spacing = read_vector(group + "/Spacing", 3);
+  for (double v : spacing)
+    if (!(v > 0)) throw Error(ErrorClass::Malformed, context + ": " + group + "/Spacing must be positive");
+  if (link_exists(file, group + "/Directions")) {
+    const std::vector<double> m = read_vector(group + "/Directions", 9);
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c)
+        if (std::abs(m[static_cast<std::size_t>(r * 3 + c)] - (r == c ? 1.0 : 0.0)) > 1e-9)
+          throw Error(ErrorClass::InvalidArgument,
+                      context + ": " + group +
+                          "/Directions is not the identity: ivol stores axis-aligned grids, and a rotated or flipped "
+                          "image cannot be kept without resampling (resample it to the identity direction first)");
+  }
+  volume.voxel_size = {spacing[0], spacing[1], spacing[2]};
+  volume.voxel_size_from = "ITK HDF5 " + group + "/Spacing";
+  if (link_exists(file, group + "/Origin")) {
+    const std::vector<double> origin = read_vector(group + "/Origin", 3);
+    volume.origin = {origin[0], origin[1], origin[2]};
+    volume.origin_from = "ITK HDF5 " + group + "/Origin";
+  }
+  volume.unit = "mm";
+  volume.unit_from = "ITK's convention (its HDF5 images have no unit)";
+  volume.has_geometry = true;
+  return true;
 }
 
 void describe_layout(hid_t dataset, Hdf5SourceInfo& source) {
@@ -280,15 +350,20 @@ namespace {
 // Reads a dataset slab by slab with hyperslab selections.
 class Hdf5SlabReader final : public SlabReader {
  public:
-  Hdf5SlabReader(const std::string& path, const std::string& dataset_name, Hdf5SourceInfo* source,
-                 std::uint64_t memory_bytes)
-      : context_(where(path, dataset_name)) {
+  Hdf5SlabReader(const std::string& path, const std::string& requested, Hdf5SourceInfo* source,
+                 std::uint64_t memory_bytes) {
     QuietHdf5Errors quiet;
     std::error_code ec;
     if (!std::filesystem::is_regular_file(path, ec)) throw Error(ErrorClass::Io, path + ": cannot open: no such file");
     if (H5Fis_hdf5(path.c_str()) <= 0) throw Error(ErrorClass::Malformed, path + ": not an HDF5 file");
     file_ = Handle(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
     if (!file_.valid()) throw Error(ErrorClass::Io, path + ": cannot open the HDF5 file" + hdf5_reason());
+    // The default name, absent, in a file ITK wrote: ITK's image is meant.
+    dataset_name_ = requested;
+    if (requested == kDefaultDataset && !link_exists(file_.get(), requested) && link_exists(file_.get(), kItkVoxelData))
+      dataset_name_ = kItkVoxelData;
+    const std::string& dataset_name = dataset_name_;
+    context_ = where(path, dataset_name);
     const Handle access = hdf5::access_caching_one_image(
         file_.get(), dataset_name.c_str(), static_cast<std::size_t>((memory_bytes ? memory_bytes : 1ull << 30) / 4));
     dataset_ = Handle(H5Dopen2(file_.get(), dataset_name.c_str(), access.get()), H5Dclose);
@@ -313,8 +388,9 @@ class Hdf5SlabReader final : public SlabReader {
     shape_.dims = {static_cast<std::uint32_t>(shape[2]), static_cast<std::uint32_t>(shape[1]),
                    static_cast<std::uint32_t>(shape[0])};
     shape_.type = mapping_.sample;
-    read_geometry(file_.get(), dataset_.get(), context_, shape_);
+    read_geometry(file_.get(), dataset_.get(), dataset_name_, context_, shape_);
     if (source) {
+      source->dataset = dataset_name;
       source->stored_type = mapping_.stored_name;
       source->narrowed_to_f32 = mapping_.narrowed;
       describe_layout(dataset_.get(), *source);
@@ -334,6 +410,7 @@ class Hdf5SlabReader final : public SlabReader {
   }
 
  private:
+  std::string dataset_name_;
   std::string context_;
   Handle file_;
   Handle dataset_;

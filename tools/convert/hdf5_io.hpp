@@ -18,6 +18,11 @@
 //               strings: what the values are (ivol's value.quantity and
 //               value.unit), e.g. "linear_attenuation", "1/mm";
 //   provenance  string: a JSON object, ivol's provenance (volume_metadata.hpp).
+// A file ITK wrote (HDF5ImageIO: /ITKImage/0/VoxelData with Spacing, Origin
+// and Directions datasets beside it, x-y-z order, ITK's millimetres) is read
+// with that geometry, also when no dataset is named (the default
+// /exchange/data is absent there); a Directions other than the identity is
+// refused.
 // Without voxel_size and pixel_size, DXchange's
 // /measurement/instrument/detector/actual_pixel_size_x (and _y, for z) give
 // the voxel size: x = y = actual_pixel_size_x, z = actual_pixel_size_y, in
@@ -38,12 +43,15 @@ namespace ivol::convert {
 
 // What the file held, for reports: read_hdf5 may convert on the way.
 struct Hdf5SourceInfo {
+  std::string dataset;                               // the dataset read (the default may resolve to ITK's)
   std::string stored_type;                           // "u8", "u16", "i16", "f16", "f32", "f64"
   bool narrowed_to_f32 = false;                      // float64 samples were rounded to float32
   bool chunked = false;                              // chunked layout (else contiguous or compact)
   std::array<unsigned long long, 3> chunk{0, 0, 0};  // (z, y, x), when chunked
   std::string filters;                               // e.g. "shuffle,deflate", empty for none
 };
+
+inline constexpr const char* kDefaultDataset = "/exchange/data";
 
 // Reads a 3-D dataset of u8, u16, i16, 16-bit float, f32 or f64 (returned as
 // f32, reported in *source). Any layout and any filter the HDF5 library has.

@@ -48,7 +48,7 @@ WorkerHandler volume_handler(std::string_view parameters) {
       reply.put(source.chunk).put_string(source.filters);
       reply.put_string(shape.quantity).put_string(shape.value_unit).put_string(shape.provenance);
       reply.put_string(shape.voxel_size_from).put_string(shape.origin_from).put_string(shape.unit_from);
-      reply.put_string(shape.quantity_from);
+      reply.put_string(shape.quantity_from).put_string(source.dataset);
       out.reply = std::move(reply.bytes());
       return;
     }
@@ -91,6 +91,7 @@ class IsolatedHdf5SlabReader final : public SlabReader {
     shape_.origin_from = reply.get_string();
     shape_.unit_from = reply.get_string();
     shape_.quantity_from = reply.get_string();
+    info.dataset = reply.get_string();
     if (source) *source = std::move(info);
   }
 
@@ -204,7 +205,8 @@ std::unique_ptr<SlabReader> open_hdf5_slabs(const std::string& path, const std::
 }
 
 DxchangeProjections open_dxchange_projections(const std::string& path, const DxchangeOptions& options) {
-  auto worker = std::make_unique<IsolatedWorker>(path, kLibrary, kProjectionWorker, projection_parameters(path, options));
+  auto worker =
+      std::make_unique<IsolatedWorker>(path, kLibrary, kProjectionWorker, projection_parameters(path, options));
   WireWriter request;
   request.put(kOpen);
   WireReader reply(worker->call(request.bytes(), "opening the DXchange datasets"));

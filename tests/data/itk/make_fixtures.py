@@ -14,6 +14,8 @@ Volumes (SimpleITK / pynrrd), each with the numpy array it holds as NAME.npy
   u8.nrrd        NRRD (pynrrd), uint8, gzip
   i8.nrrd        NRRD (pynrrd), int8, raw
   f32_be.nhdr    NRRD detached header + f32_be.raw, big-endian float32
+  u16_itk.h5     ITK's HDF5 image layout, the values of u16.npy
+  rotated_itk.h5 the same with a direction that is not the identity
   rotated.mha    a direction that is not the identity (must be refused)
 RTK (itk-rtk 2.7): rtk/proj.mha, Shepp-Logan line integrals of 24 views of
 40x30 pixels, pitch 1.5 x 1.25 mm, projection origin off centre by (+3, -2)
@@ -76,6 +78,10 @@ save("f32_be", f32be.astype("<f4"))
 rotated = sitk_image(u16)
 rotated.SetDirection((0, 1, 0, 1, 0, 0, 0, 0, 1))
 sitk.WriteImage(rotated, os.path.join(out, "rotated.mha"))
+# ITK's own HDF5 layout (HDF5ImageIO): /ITKImage/0/VoxelData with Spacing,
+# Origin and Directions beside it.
+sitk.WriteImage(sitk_image(u16), os.path.join(out, "u16_itk.h5"))
+sitk.WriteImage(rotated, os.path.join(out, "rotated_itk.h5"))
 
 # ---- RTK ------------------------------------------------------------------
 import itk
