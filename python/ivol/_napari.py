@@ -8,7 +8,29 @@ reader it returns with the same path (or a list of paths).
 
 import os
 
+import numpy as np
+
 from . import open as _open
+
+# The level napari's contrast is taken from: the finest one of at most this
+# many voxels, read whole once when the file is opened.
+CONTRAST_LEVEL_VOXELS = 1 << 21
+
+
+def contrast_limits(f):
+    """[low, high] of the values, from the finest level of at most
+    CONTRAST_LEVEL_VOXELS voxels: napari takes a multiscale image's limits
+    from its coarsest level (one voxel here: a blank view) or [0, 1]."""
+    for k in range(f.levels):
+        level = f.level(k)
+        if int(np.prod(level.shape)) <= CONTRAST_LEVEL_VOXELS:
+            values = np.asarray(level[...], dtype=np.float64)
+            finite = values[np.isfinite(values)]
+            if finite.size == 0:
+                return [0.0, 1.0]
+            low, high = float(finite.min()), float(finite.max())
+            return [low, high] if high > low else [low, low + 1.0]
+    return [0.0, 1.0]
 
 
 def get_reader(path):
@@ -39,6 +61,7 @@ def read_layers(path):
         "translate": f.origin,
         "metadata": {"ivol": f.metadata, "unit": f.unit},
         "multiscale": len(pyramid) > 1,
+        "contrast_limits": contrast_limits(f),
     }
     # A file of one level (a volume of one voxel) is a plain image to napari.
     data = pyramid if len(pyramid) > 1 else pyramid[0]

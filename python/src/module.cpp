@@ -27,12 +27,22 @@ namespace py = pybind11;
 
 namespace {
 
-// numpy arrays that own the std::vector libformat returned: no copy.
+// numpy arrays that own the std::vector libformat returned: no copy. The
+// strides are given, from sizeof(T): left out, pybind11 before 2.12 (Debian
+// 12 has 2.10) takes them from the dtype's item size as numpy 1 laid out its
+// descriptor, which reads 0 under numpy 2 — every element would alias the
+// first (python_numpy2 in tests/CMakeLists.txt keeps that from coming back).
 template <typename T>
 py::array owning_array(std::vector<T>&& data, const std::vector<py::ssize_t>& shape, const py::dtype& dtype) {
+  std::vector<py::ssize_t> strides(shape.size());
+  py::ssize_t stride = sizeof(T);
+  for (std::size_t a = shape.size(); a-- > 0;) {
+    strides[a] = stride;
+    stride *= shape[a];
+  }
   auto* held = new std::vector<T>(std::move(data));
   py::capsule owner(held, [](void* p) { delete static_cast<std::vector<T>*>(p); });
-  return py::array(dtype, shape, {}, held->data(), owner);
+  return py::array(dtype, shape, strides, held->data(), owner);
 }
 
 // Messages quote bytes of the file (a metadata block that is not UTF-8):

@@ -420,4 +420,7 @@ class Writing(unittest.TestCase):
 
 
 if __name__ == "__main__":
+    # ctest python_numpy2 must not pass on numpy 1 by mistake.
+    if os.environ.get("IVOL_REQUIRE_NUMPY2") == "1" and int(np.__version__.split(".")[0]) < 2:
+        raise SystemExit(f"python_numpy2 needs numpy 2, this interpreter has {np.__version__}")
     unittest.main(verbosity=1)

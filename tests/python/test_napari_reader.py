@@ -8,7 +8,9 @@ written array (a dense float64 reference), with the voxel size as scale.
 With IVOL_NAPARI=1 (ctest python_napari_viewer, registered only when CMake is
 given IVOL_NAPARI_PYTHON, an interpreter that has napari and npe2): napari's
 viewer model opens the file through the plugin as a multiscale image layer
-and slices it (no Qt window: its OpenGL canvas cannot start headless here).
+and slices it; where a display is there (DISPLAY, e.g. under xvfb-run: Qt's
+offscreen platform gives vispy no OpenGL context) the Qt viewer itself opens
+it and its canvas shows the slice, not a blank picture.
 
 PYTHONPATH=<build>/python.
 """
@@ -125,6 +127,29 @@ class Viewer(unittest.TestCase):
             self.assertEqual(shown.ndim, 2)
             level = layer.data_level
             np.testing.assert_array_equal(shown, np.asarray(layer.data[level][3 >> level]))
+            # The contrast spans the values (napari's own guess for a
+            # multiscale image is the one-voxel coarsest level's).
+            low, high = layer.contrast_limits
+            self.assertLess(low, -2.0)
+            self.assertGreater(high, 2.0)
+
+    @unittest.skipUnless(os.environ.get("DISPLAY"), "no display: run under xvfb-run for the Qt canvas")
+    def test_qt_canvas_shows_the_slice(self):
+        import napari
+        from qtpy.QtWidgets import QApplication
+
+        with Volume() as v:
+            viewer = napari.Viewer(show=True)
+            try:
+                viewer.open(v.path, plugin="ivol")
+                for _ in range(20):
+                    QApplication.processEvents()
+                picture = viewer.screenshot(canvas_only=True, flash=False)[..., :3]
+                # Noise of unit variance, shown with the limits above: many
+                # grey levels, not the one colour of a blank canvas.
+                self.assertGreater(len(np.unique(picture)), 50)
+            finally:
+                viewer.close()
 
 
 if __name__ == "__main__":
