@@ -191,6 +191,7 @@ StreamingOptions import_streaming_options(const DenseVolume& shape, const Import
   streaming.write.framed_blocks = options.framed_blocks;
   streaming.write.encoder = options.encoder;
   if (options.slab_budget_bytes) streaming.slab_budget_bytes = options.slab_budget_bytes;
+  streaming.spill_directory = options.temp_directory;
   return streaming;
 }
 
@@ -230,6 +231,8 @@ void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, cons
   report.max_abs_error = result.max_abs_error;
   report.kept_voxels = result.kept_voxels;
   report.file_bytes = result.write.file_bytes;
+  report.temp_bytes = result.spill_bytes;
+  report.temp_directory = result.spill_directory;
 }
 
 namespace {
