@@ -36,6 +36,7 @@ struct ConvertSettings {
   bool allow_lossy = false;
   bool allow_gaps = false;
   std::string temp_dir;
+  bool no_disk_check = false;
   bool json = false;
 };
 
@@ -156,6 +157,8 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       ->check(whole_number());
   into->add_option("--temp-dir", s->temp_dir,
                    "Directory of the octree writer's temporary spill file (default: $TMPDIR, else OUT's directory)");
+  into->add_flag("--no-disk-check", s->no_disk_check,
+                 "Skip the check that OUT's and the spill file's disks have the room the run is estimated to need");
   into->add_flag("--json", s->json, "Print the outcome as JSON on stdout (sizes, peak temporary disk)");
   into->add_option("--quantity", s->quantity, "What the values are, e.g. linear_attenuation");
   into->add_option("--value-unit", s->value_unit, "Unit of the values, e.g. 1/mm");
@@ -238,6 +241,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       options.allow_lossy = s->allow_lossy;
       options.what = s->input + " -> " + s->output;
       options.temp_directory = s->temp_dir;
+      options.check_disk_space = !s->no_disk_check;
       const convert::ImportReport r = convert::import_to_ivol(*source, s->output, options);
       if (s->json) {
         const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

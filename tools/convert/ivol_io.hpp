@@ -51,6 +51,7 @@ struct ImportOptions {
   std::uint64_t memory_bytes = 0;         // all the conversion may hold (--memory); 0: kDefaultMemoryBytes
   std::shared_ptr<BlockEncoder> encoder;  // where blocks are compressed; null: here (ivol/block_encoder.hpp)
   std::string temp_directory;             // the octree writer's spill (--temp-dir); empty: TMPDIR, else the output's
+  bool check_disk_space = true;           // refuse before any work when the disks lack room (disk_space.hpp)
   Metadata metadata;                      // provenance etc.; geometry from the volume
   // Called after the last slab, before the metadata is written: adds what was
   // computed meanwhile (the sources' digests, tools/cli/fixity.hpp).
