@@ -3,6 +3,7 @@
 #include "ivol/octree_slab_builder.hpp"
 
 #include <cstring>
+#include <mutex>
 #include <string>
 
 #include "slab_subtrees.hpp"
@@ -51,11 +52,13 @@ BuiltSlab build_typed(const Dims& dims, const StreamingOptions& options, std::ui
   std::vector<BuiltSubtreeRecord> records(count);
   std::vector<std::uint64_t> counts(std::size_t{count} * grid.levels * 2);
   std::vector<std::uint8_t> data;
+  std::mutex data_mutex;
   const unsigned threads =
       std::max(1u, options.build.threads ? options.build.threads : std::thread::hardware_concurrency());
   const BuildStats stats = detail::build_slab_subtrees<Source, Stored>(
       builder, grid, slab, samples, keep, threads,
       [&](std::uint32_t n, const SubtreeRecord& record, const LevelArrays<Stored>& arrays) {
+        std::lock_guard<std::mutex> lock(data_mutex);
         records[n] = detail::to_wire(record, data.size());
         for (unsigned l = grid.subtree_level; l <= grid.depth; ++l) {
           const auto& nodes = arrays.nodes[l];

@@ -76,8 +76,9 @@ struct SubtreeRecord {
 };
 
 // Receives subtree n = j * grid[0] + i of a slab, once built: its record and
-// its node words and values of levels subtree_level .. depth. Called under a
-// lock, one subtree at a time.
+// its node words and values of levels subtree_level .. depth. Called on the
+// building threads, several subtrees at once (so that a sink can compress
+// them in parallel): the sink locks whatever it shares.
 template <typename Stored>
 using SubtreeSink = std::function<void(std::uint32_t n, const SubtreeRecord&, const LevelArrays<Stored>&)>;
 
@@ -94,7 +95,7 @@ BuildStats build_slab_subtrees(Builder<Source, Stored>& builder, const SlabGrid&
                                             grid.subtree_level);
   builder.set_slab(samples, z0, pyramid.get());
   std::atomic<std::uint32_t> next{0};
-  std::mutex sink_mutex;
+  std::mutex failure_mutex;
   std::exception_ptr failure;
   std::vector<BuildStats> thread_stats(threads);
   auto work = [&](unsigned t) {
@@ -106,10 +107,9 @@ BuildStats build_slab_subtrees(Builder<Source, Stored>& builder, const SlabGrid&
         record.root = builder.build(grid.subtree_level, i, j, k, arrays, thread_stats[t]);
         if (keep) record.stats = builder.region_stats(grid.subtree_level, i, j, k);
         record.any_kept = !pyramid || pyramid->any(grid.subtree_level, i, j, k);
-        std::lock_guard<std::mutex> lock(sink_mutex);
         sink(n, record, arrays);
       } catch (...) {
-        std::lock_guard<std::mutex> lock(sink_mutex);
+        std::lock_guard<std::mutex> lock(failure_mutex);
         failure = std::current_exception();
       }
     }

@@ -2,12 +2,10 @@
 // levels above them built at the end, the file written level by level.
 #include "ivol/streaming_writer.hpp"
 
-#include <fcntl.h>
-#include <unistd.h>
-
 #include <atomic>
 #include <cerrno>
 #include <chrono>
+#include <cstdlib>
 #include <cstring>
 #include <mutex>
 #include <thread>
@@ -16,6 +14,7 @@
 #include "ivol/error.hpp"
 #include "ivol/octree_slab_builder.hpp"
 #include "slab_subtrees.hpp"
+#include "spill_file.hpp"
 
 namespace ivol {
 namespace {
@@ -30,49 +29,33 @@ using detail::RegionStats;
 using detail::SlabGrid;
 using detail::SubtreeRecord;
 
+// Calls work(0 .. count - 1) on `threads` threads; rethrows the first failure.
+template <class Work>
+void parallel_for(std::uint32_t count, unsigned threads, Work&& work) {
+  std::atomic<std::uint32_t> next{0};
+  std::mutex failure_mutex;
+  std::exception_ptr failure;
+  auto run = [&] {
+    for (std::uint32_t n; (n = next.fetch_add(1)) < count;) {
+      try {
+        work(n);
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(failure_mutex);
+        if (!failure) failure = std::current_exception();
+      }
+    }
+  };
+  std::vector<std::thread> pool;
+  for (unsigned t = 1; t < std::min<unsigned>(threads, count); ++t) pool.emplace_back(run);
+  run();
+  for (auto& thread : pool) thread.join();
+  if (failure) std::rethrow_exception(failure);
+}
+
 std::string directory_of(const std::string& path) {
   const auto slash = path.find_last_of('/');
   return slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
 }
-
-// A temporary file, unlinked at once so that nothing is left behind whatever
-// happens; read and written with pread/pwrite.
-class SpillFile {
- public:
-  explicit SpillFile(const std::string& directory) {
-    std::string name = directory + "/.ivol-spill-XXXXXX";
-    fd_ = mkstemp(name.data());
-    if (fd_ < 0) throw Error(ErrorClass::Io, directory + ": cannot create a spill file: " + std::strerror(errno));
-    ::unlink(name.c_str());
-  }
-  ~SpillFile() { ::close(fd_); }
-  std::uint64_t append(const void* data, std::size_t size) {
-    const std::uint64_t at = size_;
-    const auto* p = static_cast<const std::uint8_t*>(data);
-    for (std::size_t done = 0; done < size;) {
-      const ssize_t n = ::pwrite(fd_, p + done, size - done, static_cast<off_t>(at + done));
-      if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) throw Error(ErrorClass::Io, std::string("spill file: write failed: ") + std::strerror(errno));
-      done += static_cast<std::size_t>(n);
-    }
-    size_ += size;
-    return at;
-  }
-  void read(std::uint64_t at, void* out, std::size_t size) const {
-    auto* p = static_cast<std::uint8_t*>(out);
-    for (std::size_t done = 0; done < size;) {
-      const ssize_t n = ::pread(fd_, p + done, size - done, static_cast<off_t>(at + done));
-      if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) throw Error(ErrorClass::Io, std::string("spill file: read failed: ") + std::strerror(errno));
-      done += static_cast<std::size_t>(n);
-    }
-  }
-  std::uint64_t size() const { return size_; }
-
- private:
-  int fd_ = -1;
-  std::uint64_t size_ = 0;
-};
 
 }  // namespace
 
@@ -98,7 +81,8 @@ class Engine final : public StreamingOctreeWriter::Impl {
         options_(options),
         builder_(nullptr, volume_dims, options.build, nullptr),
         slab_grid_(volume_dims, slab),
-        spill_(options.spill_directory.empty() ? directory_of(path) : options.spill_directory) {
+        spill_(spill_directory_for(path, options.spill_directory)),
+        spill_level_(options.spill_zstd_level) {
     dims = volume_dims;
     slab_slices = slab;
     is_float = std::is_same_v<Source, float>;
@@ -109,6 +93,7 @@ class Engine final : public StreamingOctreeWriter::Impl {
     records_.resize(count);
     levels_ = depth_ - subtree_level_ + 1;
     counts_.assign(count * levels_ * 2, 0);
+    stored_.assign(count * levels_ * 2, 0);
     threads_ = std::max(1u, options.build.threads ? options.build.threads : std::thread::hardware_concurrency());
   }
 
@@ -120,15 +105,13 @@ class Engine final : public StreamingOctreeWriter::Impl {
         builder_, slab_grid_, k, static_cast<const Source*>(samples), keep, threads_,
         [&](std::uint32_t n, const SubtreeRecord& record, const LevelArrays<Stored>& arrays) {
           const std::uint64_t index = std::uint64_t{k} * slab_grid_.subtrees_per_slab() + n;
-          records_[index] = Record{record, spill_.size()};
+          std::vector<detail::PackedChunk> chunks;
           for (unsigned l = subtree_level_; l <= depth_; ++l) {
-            const auto& nodes = arrays.nodes[l];
-            const auto& values = arrays.values[l];
-            spill_.append(nodes.data(), nodes.size() * 8);
-            spill_.append(values.data(), values.size() * sizeof(Stored));
-            counts_[(index * levels_ + (l - subtree_level_)) * 2] = nodes.size();
-            counts_[(index * levels_ + (l - subtree_level_)) * 2 + 1] = values.size();
+            chunks.push_back(detail::pack_chunk(arrays.nodes[l].data(), arrays.nodes[l].size(), 8, spill_level_));
+            chunks.push_back(
+                detail::pack_chunk(arrays.values[l].data(), arrays.values[l].size(), sizeof(Stored), spill_level_));
           }
+          store_subtree(index, record, chunks);
         });
     stats_.merge(slab_stats);
     ++slabs_done;
@@ -173,7 +156,8 @@ class Engine final : public StreamingOctreeWriter::Impl {
       throw Error(ErrorClass::Malformed, what + " " + std::to_string(k) + ": " + std::to_string(bytes.size()) +
                                              " bytes do not hold its " + std::to_string(subtrees) + " subtrees");
     begin_slab(k, header.with_keep != 0);
-    const std::uint64_t base = spill_.append(bytes.data() + data_at, header.data_bytes);
+    std::vector<SubtreeRecord> subtree_records(subtrees);
+    std::vector<std::uint64_t> data_offsets(subtrees);
     for (std::uint32_t n = 0; n < subtrees; ++n) {
       BuiltSubtreeRecord wire;
       std::memcpy(&wire, bytes.data() + records_at + std::uint64_t{n} * sizeof wire, sizeof wire);
@@ -186,8 +170,23 @@ class Engine final : public StreamingOctreeWriter::Impl {
       if (wire.data_offset > header.data_bytes || size > header.data_bytes - wire.data_offset)
         throw Error(ErrorClass::Malformed,
                     what + " " + std::to_string(k) + ": subtree " + std::to_string(n) + " lies outside its data");
-      records_[index] = Record{detail::from_wire(wire), base + wire.data_offset};
+      subtree_records[n] = detail::from_wire(wire);
+      data_offsets[n] = wire.data_offset;
     }
+    // Checked whole before any of it is compressed into the spill file.
+    const std::uint8_t* data = bytes.data() + data_at;
+    parallel_for(subtrees, threads_, [&](std::uint32_t n) {
+      const std::uint64_t index = std::uint64_t{k} * subtrees + n;
+      std::vector<detail::PackedChunk> chunks;
+      std::uint64_t at = data_offsets[n];
+      for (unsigned l = subtree_level_; l <= depth_; ++l) {
+        chunks.push_back(detail::pack_chunk(data + at, count(index, l, 0), 8, spill_level_));
+        at += count(index, l, 0) * 8;
+        chunks.push_back(detail::pack_chunk(data + at, count(index, l, 1), sizeof(Stored), spill_level_));
+        at += count(index, l, 1) * sizeof(Stored);
+      }
+      store_subtree(index, subtree_records[n], chunks);
+    });
     BuildStats slab_stats;
     slab_stats.max_abs_error = header.max_abs_error;
     slab_stats.kept = header.kept;
@@ -212,6 +211,7 @@ class Engine final : public StreamingOctreeWriter::Impl {
     result.lossless = stats_.max_abs_error == 0.0 && !stats_.coarsened;
     result.kept_voxels = stats_.kept + (depth_ == 0 ? 1 : 0);
     result.spill_bytes = spill_.size();
+    result.spill_directory = spill_.directory();
     result.build_seconds = build_seconds_;
     Metadata metadata = given_metadata;
     if (amend) amend(metadata, result);
@@ -240,7 +240,7 @@ class Engine final : public StreamingOctreeWriter::Impl {
         for_each_subtree([&](std::uint64_t s) {
           const std::uint64_t n = count(s, l, 1);
           buffer.resize(n * sizeof(Stored));
-          spill_.read(spill_offset(s, l, 1), buffer.data(), buffer.size());
+          spill_.read_chunk(spill_offset(s, l, 1), stored(s, l, 1), buffer.data(), n, sizeof(Stored));
           values.append(buffer.data(), n);
         });
       }
@@ -261,7 +261,7 @@ class Engine final : public StreamingOctreeWriter::Impl {
         for_each_subtree([&](std::uint64_t s) {
           const std::uint64_t n = count(s, l, 0);
           std::vector<std::uint64_t> words(n);
-          spill_.read(spill_offset(s, l, 0), words.data(), n * 8);
+          spill_.read_chunk(spill_offset(s, l, 0), stored(s, l, 0), words.data(), n, 8);
           emit_nodes(words.data(), n);
         });
       }
@@ -294,14 +294,28 @@ class Engine final : public StreamingOctreeWriter::Impl {
   std::uint64_t count(std::uint64_t subtree, unsigned level, int stream) const {
     return counts_[(subtree * levels_ + (level - subtree_level_)) * 2 + stream];
   }
+  std::uint64_t stored(std::uint64_t subtree, unsigned level, int stream) const {
+    return stored_[(subtree * levels_ + (level - subtree_level_)) * 2 + stream];
+  }
+
+  // Appends a subtree's packed chunks (per level: nodes, values) to the spill
+  // file; called from several building threads at once.
+  void store_subtree(std::uint64_t index, const SubtreeRecord& record, const std::vector<detail::PackedChunk>& chunks) {
+    std::lock_guard<std::mutex> lock(spill_mutex_);
+    records_[index] = Record{record, spill_.size()};
+    for (std::size_t c = 0; c < chunks.size(); ++c) {
+      spill_.append(chunks[c].stored.data(), chunks[c].stored.size());
+      stored_[index * levels_ * 2 + c] = chunks[c].stored.size();
+      counts_[index * levels_ * 2 + c] = chunks[c].raw_bytes / (c % 2 == 0 ? 8 : sizeof(Stored));
+    }
+  }
 
   // Where a subtree's nodes (stream 0) or values (stream 1) of `level` lie in
   // the spill file: after its earlier levels.
   std::uint64_t spill_offset(std::uint64_t subtree, unsigned level, int stream) const {
     std::uint64_t at = records_[subtree].spill_offset;
-    for (unsigned l = subtree_level_; l < level; ++l)
-      at += count(subtree, l, 0) * 8 + count(subtree, l, 1) * sizeof(Stored);
-    if (stream == 1) at += count(subtree, level, 0) * 8;
+    for (unsigned l = subtree_level_; l < level; ++l) at += stored(subtree, l, 0) + stored(subtree, l, 1);
+    if (stream == 1) at += stored(subtree, level, 0);
     return at;
   }
 
@@ -347,14 +361,17 @@ class Engine final : public StreamingOctreeWriter::Impl {
   StreamingOptions options_;
   detail::Builder<Source, Stored> builder_;
   SlabGrid slab_grid_;
-  SpillFile spill_;
+  detail::SpillFile spill_;
+  int spill_level_ = 1;
+  std::mutex spill_mutex_;
   unsigned depth_ = 0;
   unsigned subtree_level_ = 0;
   unsigned levels_ = 0;
   unsigned threads_ = 1;
   std::uint32_t grid_[3] = {1, 1, 1};
   std::vector<Record> records_;
-  std::vector<std::uint64_t> counts_;  // per subtree, level, stream (nodes, values)
+  std::vector<std::uint64_t> counts_;  // per subtree, level, stream (nodes, values): elements
+  std::vector<std::uint64_t> stored_;  // the same chunks' bytes in the spill file
   BuildStats stats_;
   bool with_keep_ = false;
   double build_seconds_ = 0.0;
@@ -371,6 +388,13 @@ std::unique_ptr<StreamingOctreeWriter::Impl> make_engine(const std::string& path
 
 }  // namespace
 
+std::string spill_directory_for(const std::string& output_path, const std::string& spill_directory) {
+  if (!spill_directory.empty()) return spill_directory;
+  const char* tmpdir = std::getenv("TMPDIR");
+  if (tmpdir != nullptr && *tmpdir != '\0') return tmpdir;
+  return directory_of(output_path);
+}
+
 struct StreamingState {
   std::string path;
   Dims dims;
@@ -380,6 +404,9 @@ struct StreamingState {
 StreamingOctreeWriter::StreamingOctreeWriter(const std::string& path, const Dims& dims,
                                              const StreamingOptions& options) {
   detail::check_streaming_options(dims, options);
+  // The spill file's directory is tried now, before any slab is computed: an
+  // unnamed file, closed at once.
+  detail::SpillFile probe(spill_directory_for(path, options.spill_directory));
   // The engine is made for the sample type of the first slab; until then keep
   // what it needs.
   pending_ = std::make_unique<StreamingState>(StreamingState{path, dims, options});

@@ -102,9 +102,9 @@ mkdir -p "$full"
 if mount -t tmpfs -o size=256k tmpfs "$full" 2>/dev/null; then
   /usr/bin/python3 -c "import numpy as np; np.random.default_rng(1).random(64**3, dtype=np.float32).tofile('$work/noise.raw')"
   out="$full"
-  bad full-disk-convert    2 "No space left"          -- "$IVOL" convert "$work/noise.raw" "$full/x.ivol" --dims 64,64,64
+  bad full-disk-convert    2 "No space left"          -- "$IVOL" convert "$work/noise.raw" "$full/x.ivol" --dims 64,64,64 --no-disk-check
   bad full-disk-tiff       2 "No space left"             -- "$IVOL" convert "$work/noise.raw" "$full/x.tif" --dims 64,64,64
-  bad full-disk-recon      2 "No space left"          -- "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 64 --voxel 0.4 --encoding float32 -o "$full/x.ivol"
+  bad full-disk-recon      2 "No space left"          -- "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 64 --voxel 0.4 --encoding float32 -o "$full/x.ivol" --no-disk-check
   bad full-disk-phantom    2 "No space left"          -- "$IVOL" phantom shepp-logan --views 64 --detector 96 -o "$full/x.h5"
 else
   echo "skipped full-disk cases: cannot mount a tmpfs here (needs root or CAP_SYS_ADMIN)"

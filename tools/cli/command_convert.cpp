@@ -35,6 +35,9 @@ struct ConvertSettings {
   bool force = false;
   bool allow_lossy = false;
   bool allow_gaps = false;
+  std::string temp_dir;
+  bool no_disk_check = false;
+  bool json = false;
 };
 
 std::string describe(const convert::DenseVolume& v) {
@@ -152,6 +155,11 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       ->capture_default_str();
   into->add_option("--memory", s->memory_mib, "About how many MiB the conversion may hold (default 2048)")
       ->check(whole_number());
+  into->add_option("--temp-dir", s->temp_dir,
+                   "Directory of the octree writer's temporary spill file (default: $TMPDIR, else OUT's directory)");
+  into->add_flag("--no-disk-check", s->no_disk_check,
+                 "Skip the check that OUT's and the spill file's disks have the room the run is estimated to need");
+  into->add_flag("--json", s->json, "Print the outcome as JSON on stdout (sizes, peak temporary disk)");
   into->add_option("--quantity", s->quantity, "What the values are, e.g. linear_attenuation");
   into->add_option("--value-unit", s->value_unit, "Unit of the values, e.g. 1/mm");
   auto* out_of = cmd->add_option_group("out of .ivol");
@@ -229,10 +237,27 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
         options.metadata.origin = {0.0, 0.0, 0.0};
         options.metadata.unit = "pixel";
       }
-      options.progress = progress_bar("ivol convert", global.quiet);
+      options.progress = progress_bar("ivol convert", global.quiet || s->json);
       options.allow_lossy = s->allow_lossy;
       options.what = s->input + " -> " + s->output;
+      options.temp_directory = s->temp_dir;
+      options.check_disk_space = !s->no_disk_check;
       const convert::ImportReport r = convert::import_to_ivol(*source, s->output, options);
+      if (s->json) {
+        const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        nlohmann::json report = {{"output", s->output},
+                                 {"structure", r.structure},
+                                 {"encoding", encoding_name(r.encoding)},
+                                 {"lossless", r.lossless && !rounded},
+                                 {"max_abs_error", r.max_abs_error},
+                                 {"input_bytes", convert::slab_bytes(shape.dims, shape.dims[2], shape.type, s->input)},
+                                 {"file_bytes", r.file_bytes},
+                                 {"temp_bytes", r.temp_bytes},
+                                 {"seconds", seconds}};
+        if (!r.temp_directory.empty()) report["temp_directory"] = r.temp_directory;
+        std::cout << report.dump(2) << "\n";
+        return kExitOk;
+      }
       if (global.verbose)
         std::cerr << "ivol convert: " << encoding_name(r.encoding) << " (physical = " << r.value_offset << " + "
                   << r.value_scale << " x stored), slabs of " << r.slab_slices << " slices, "
@@ -297,8 +322,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     }
 
     Reader reader(s->input);
-    const convert::SampleType natural =
-        natural_export_type(to, reader);
+    const convert::SampleType natural = natural_export_type(to, reader);
     const convert::SampleType type = s->out_type.empty() ? natural : parse_sample_type(s->out_type, "--out-type");
     check_export_type(to, type, "--out-type");
     const Box box = full_box(reader.layout().dims, s->level);

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "commands.hpp"
+#include "disk_space.hpp"
 #include "fixity.hpp"
 #include "ivol/error.hpp"
 #include "ivol/metadata.hpp"
@@ -48,6 +49,8 @@ struct ReconSettings {
   std::uint32_t nested_cell = 16;
   unsigned preview_factor = 0;  // 0: the rule's own (2 for detection, 4 for the preview rule and --keep)
   std::uint64_t memory_mib = 1024;
+  std::string temp_dir;  // the octree writer's spill file (--temp-dir)
+  bool no_disk_check = false;
   bool json = false;
   bool force = false;
 };
@@ -256,6 +259,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   StreamingOptions options;
   options.build.encoding = parse_encoding(s.encoding);
   options.slab_budget_bytes = (s.memory_mib << 20) / 4;
+  options.spill_directory = s.temp_dir;
   // The other ranks take a share of the compression once their slabs are
   // sent; the writer calls it on this (the MPI) thread.
   if (mpi) options.write.encoder = mpi->block_encoder();
@@ -306,6 +310,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
       {"structure_bytes", memory.total()},
       {"dense_float32_bytes", grid.voxel_count() * 4},
       {"file_bytes", written.write.file_bytes},
+      {"temp_bytes", written.spill_bytes},
       {"peak_value_bytes", values.peak_bytes()},
       {"gups", gups},
       {"voxel_updates", voxel_updates},
@@ -410,6 +415,12 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
   out->add_option("--memory", s->memory_mib, "About how many MiB the writer may hold")
       ->check(whole_number())
       ->capture_default_str();
+  out->add_option(
+      "--temp-dir", s->temp_dir,
+      "Directory of the octree writer's temporary spill file (default: $TMPDIR, else the output's directory)");
+  out->add_flag("--no-disk-check", s->no_disk_check,
+                "Skip the check that the output's and the spill file's disks have the room the run is estimated to "
+                "need");
   cmd->add_flag("--json", s->json, "Print the report as JSON on stdout");
 
   // mpi: this process is one rank of a distributed run (mpirun), or null.
@@ -431,6 +442,12 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     std::shared_ptr<SourceDigests> digests;
     if (writes) digests = std::make_shared<SourceDigests>(inputs, roles);
     const recon::VolumeGrid grid = make_grid(*s);
+    // Before any work (the preview included): the file and, for an octree,
+    // the spill file must find room (convert/disk_space.hpp).
+    if (writes && !s->no_disk_check)
+      convert::require_disk_space(convert::ivol_disk_needs(grid.size, parse_encoding(s->encoding),
+                                                           s->structure.empty() || s->structure == "octree", s->output,
+                                                           s->temp_dir));
     OpenedScan scan = open_scan(s->scan);
     recon::FdkOptions options;
     options.window = recon::parse_ramp_window(s->window);
@@ -459,6 +476,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     import.encoding = parse_encoding(s->encoding);
     import.framed_blocks = s->format_version == "1.3";
     import.slab_budget_bytes = (s->memory_mib << 20) / 4;
+    import.temp_directory = s->temp_dir;
+    import.check_disk_space = false;  // checked above
     double preview_seconds = 0.0;
     const unsigned keep_factor = s->preview_factor ? s->preview_factor : 4;
     if (!s->keep.empty()) {
@@ -548,6 +567,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
                              {"views", scan.geometry.view_count()},
                              {"devices", reconstructor.device_names()},
                              {"file_bytes", written.file_bytes},
+                             {"temp_bytes", written.temp_bytes},
                              {"kept_voxels", written.kept_voxels},
                              {"gups", gups},
                              {"seconds",

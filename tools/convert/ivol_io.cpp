@@ -5,6 +5,7 @@
 #include <cstring>
 #include <filesystem>
 
+#include "disk_space.hpp"
 #include "ivol/binary16.hpp"
 #include "ivol/bricked_writer.hpp"
 #include "ivol/build.hpp"
@@ -191,6 +192,7 @@ StreamingOptions import_streaming_options(const DenseVolume& shape, const Import
   streaming.write.framed_blocks = options.framed_blocks;
   streaming.write.encoder = options.encoder;
   if (options.slab_budget_bytes) streaming.slab_budget_bytes = options.slab_budget_bytes;
+  streaming.spill_directory = options.temp_directory;
   return streaming;
 }
 
@@ -230,6 +232,8 @@ void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, cons
   report.max_abs_error = result.max_abs_error;
   report.kept_voxels = result.kept_voxels;
   report.file_bytes = result.write.file_bytes;
+  report.temp_bytes = result.spill_bytes;
+  report.temp_directory = result.spill_directory;
 }
 
 namespace {
@@ -354,7 +358,10 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
       layer_voxels * (sample_size(shape.type) + (codes || raw_binary16 ? 0 : 4) + 2 + 2);
   const std::uint64_t layer =
       layer_bytes > ~std::uint64_t{0} ? ~std::uint64_t{0} : static_cast<std::uint64_t>(layer_bytes);
-  if (choose_bricked(options, build.encoding, layer, report)) {
+  const bool bricked = choose_bricked(options, build.encoding, layer, report);
+  if (options.check_disk_space)
+    require_disk_space(ivol_disk_needs(shape.dims, build.encoding, !bricked, path, options.temp_directory));
+  if (bricked) {
     report.structure = "bricked";
     import_bricked(source, path, options, streaming, report);
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -50,6 +50,8 @@ struct ImportOptions {
   std::uint64_t slab_budget_bytes = 0;    // 0: the library's default
   std::uint64_t memory_bytes = 0;         // all the conversion may hold (--memory); 0: kDefaultMemoryBytes
   std::shared_ptr<BlockEncoder> encoder;  // where blocks are compressed; null: here (ivol/block_encoder.hpp)
+  std::string temp_directory;             // the octree writer's spill (--temp-dir); empty: TMPDIR, else the output's
+  bool check_disk_space = true;           // refuse before any work when the disks lack room (disk_space.hpp)
   Metadata metadata;                      // provenance etc.; geometry from the volume
   // Called after the last slab, before the metadata is written: adds what was
   // computed meanwhile (the sources' digests, tools/cli/fixity.hpp).
@@ -76,6 +78,8 @@ struct ImportReport {
   std::uint64_t kept_voxels = 0;
   std::uint64_t file_bytes = 0;
   std::uint64_t slab_slices = 0;
+  std::uint64_t temp_bytes = 0;  // peak temporary disk (the octree writer's spill file); 0 for a bricked grid
+  std::string temp_directory;    // where it was
   double seconds = 0.0;
 };
 

@@ -2,12 +2,15 @@
 //
 // The volume arrives as slabs of 2^s slices (z increasing). Each slab is cut
 // into subtrees of side 2^s, built at once (in parallel), and spilled to a
-// temporary file next to the output. finish() builds the levels above the
+// temporary file (spill_directory_for). finish() builds the levels above the
 // subtrees from their roots and writes the file level by level, reading the
 // spilled subtrees in Morton order. Peak memory: one slab of samples (and its
 // keep mask), one subtree per thread, the subtrees' roots and spill index
 // (about 32·(s + 2) bytes per subtree), the levels above them, and one batch
-// of blocks. The temporary spill file holds the octree uncompressed.
+// of blocks. The temporary spill file holds the octree's node words and
+// values compressed as the file's blocks are (zstd over byte planes), in
+// chunks of one level of one subtree; it has no name (O_TMPFILE, or unlinked
+// at once), so it never outlives the process.
 //
 // The result is the same file, bit for bit, as build_octree + write_octree
 // give for the same volume and options, whatever the slab thickness (tested).
@@ -36,15 +39,24 @@ struct StreamingOptions {
   // samples fit in `slab_budget_bytes` (at least 8 slices, or the volume).
   std::uint32_t slab_slices = 0;
   std::uint64_t slab_budget_bytes = 512ull << 20;
-  std::string spill_directory;  // empty: the output's directory
+  // Where the temporary spill file goes: this directory; empty: $TMPDIR when
+  // set and not empty, else the output's directory (spill_directory_for).
+  std::string spill_directory;
+  // zstd level of the spill file's chunks (byte planes, as the file's blocks).
+  int spill_zstd_level = 1;
 };
+
+// The directory the spill file of an output at `output_path` goes to, by
+// the precedence above.
+std::string spill_directory_for(const std::string& output_path, const std::string& spill_directory);
 
 struct StreamingResult {
   WriteStats write;
   double max_abs_error = 0.0;
   bool lossless = true;
   std::uint64_t kept_voxels = 0;
-  std::uint64_t spill_bytes = 0;  // largest size of the temporary spill file
+  std::uint64_t spill_bytes = 0;  // largest size of the temporary spill file (compressed)
+  std::string spill_directory;    // where it was
   double build_seconds = 0.0;     // building subtrees and the top levels
 };
 
