@@ -23,8 +23,8 @@ std::string crc_text(std::uint32_t actual, std::uint32_t expected) {
   return text;
 }
 
-std::string block_part(const RandomAccessFile& file, const BlockInfo& block, std::size_t index) {
-  return file.path() + ": block " + std::to_string(index) + " (" + stream_name(block.stream) + ", level " +
+std::string block_part(const std::string& path, const BlockInfo& block, std::size_t index) {
+  return path + ": block " + std::to_string(index) + " (" + stream_name(block.stream) + ", level " +
          std::to_string(block.level) + ", elements " + std::to_string(block.first_element) + " .. " +
          std::to_string(block.first_element + block.element_count) + ", offset " + std::to_string(block.file_offset) +
          "): ";
@@ -35,7 +35,7 @@ std::string block_part(const RandomAccessFile& file, const BlockInfo& block, std
 void check_block_crc(RandomAccessFile& file, const BlockInfo& block, std::size_t index) {
   const std::uint32_t actual = crc32c_of_range(file, block.file_offset, block.stored_size);
   if (actual != block.crc)
-    throw Error(ErrorClass::Checksum, block_part(file, block, index) + crc_text(actual, block.crc));
+    throw Error(ErrorClass::Checksum, block_part(file.path(), block, index) + crc_text(actual, block.crc));
 }
 
 std::uint32_t crc32c_of_range(RandomAccessFile& file, std::uint64_t offset, std::uint64_t size) {
@@ -54,7 +54,7 @@ std::uint32_t crc32c_of_range(RandomAccessFile& file, std::uint64_t offset, std:
 std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const BlockInfo& block, std::size_t index,
                                                 std::size_t width, bool known, bool framed,
                                                 const std::optional<Dims>& brick) {
-  const std::string part = block_part(file, block, index);
+  const std::string part = block_part(file.path(), block, index);
   // A block of a stream this reader does not know (ignorable, or the index
   // would have been refused) has no size limit but the file's (spec §6.4):
   // its CRCs are checked while streaming, before anything is allocated for
@@ -72,7 +72,14 @@ std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const Bl
     return {};
   }
   // Known streams: the index bounded stored_size by the decoded size (spec §7).
-  std::vector<std::uint8_t> stored = file.read(block.file_offset, block.stored_size);
+  return decode_stored_block(file.path(), block, index, width, framed, brick,
+                             file.read(block.file_offset, block.stored_size));
+}
+
+std::vector<std::uint8_t> decode_stored_block(const std::string& path, const BlockInfo& block, std::size_t index,
+                                              std::size_t width, bool framed, const std::optional<Dims>& brick,
+                                              std::vector<std::uint8_t> stored) {
+  const std::string part = block_part(path, block, index);
   const std::uint32_t actual = crc32c(stored.data(), stored.size());
   if (actual != block.crc) throw Error(ErrorClass::Checksum, part + crc_text(actual, block.crc));
   if (framed) {  // spec §7.1: the block header repeats the index entry; the payload follows it

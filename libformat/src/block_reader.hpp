@@ -24,6 +24,12 @@ namespace ivol::detail {
 std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const BlockInfo& block, std::size_t index,
                                                 std::size_t width, bool known, bool framed,
                                                 const std::optional<Dims>& brick = std::nullopt);
+// The same for a known stream's block whose stored bytes the caller read
+// (a batch of blocks is read together, then decoded on several threads):
+// thread-safe, `path` only names the file in errors.
+std::vector<std::uint8_t> decode_stored_block(const std::string& path, const BlockInfo& block, std::size_t index,
+                                              std::size_t width, bool framed, const std::optional<Dims>& brick,
+                                              std::vector<std::uint8_t> stored);
 // Checks block `index`'s CRC a chunk at a time (Error(Checksum) if it fails),
 // holding 1 MiB whatever its stored size.
 void check_block_crc(RandomAccessFile& file, const BlockInfo& block, std::size_t index);
@@ -36,6 +42,8 @@ using BlockData = std::shared_ptr<const std::vector<std::uint8_t>>;
 class BlockCache {
  public:
   explicit BlockCache(std::uint64_t capacity_bytes) : capacity_(capacity_bytes) {}
+  std::uint64_t capacity() const { return capacity_; }
+  bool contains(std::size_t block) const { return entries_.count(block) != 0; }
   BlockData find(std::size_t block);
   // Returns the blocks evicted to make room, so that the caller can drop
   // other references to them (the memory is freed only then).

@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <cstdlib>
 #include <cstring>
+#include <deque>
+#include <iterator>
 #include <list>
 #include <map>
 #include <mutex>
@@ -90,6 +92,8 @@ class HttpSource final : public ByteSource {
     }
   }
   ~HttpSource() override {
+    for (CURL* h : handles_) curl_easy_cleanup(h);
+    if (multi_) curl_multi_cleanup(multi_);
     if (curl_) curl_easy_cleanup(curl_);
   }
 
@@ -99,6 +103,7 @@ class HttpSource final : public ByteSource {
 
   void read(std::uint64_t offset, void* out, std::size_t size) override {
     auto* p = static_cast<std::uint8_t*>(out);
+    if (read_from_spans(offset, p, size)) return;
     const std::uint64_t first = offset / kPage, last = (offset + size - 1) / kPage;
     // Missing pages, fetched a contiguous run at a time.
     for (std::uint64_t page = first; page <= last;) {
@@ -125,26 +130,71 @@ class HttpSource final : public ByteSource {
     }
   }
 
+  // The ranges a read is about to need, fetched exactly (not as whole pages:
+  // a slice's blocks are a few KiB each, scattered) in one request per run
+  // of ranges less than kMergeGap apart, at most kParallel requests at a
+  // time; held as spans until read or until the budget needs the room.
   void prefetch(const std::vector<std::pair<std::uint64_t, std::uint64_t>>& ranges) override {
-    // Pages wanted, then runs of them merged over gaps of up to a page.
-    std::vector<std::uint64_t> wanted;
-    for (const auto& [offset, size] : ranges) {
-      if (size == 0) continue;
-      for (std::uint64_t page = offset / kPage; page <= (offset + size - 1) / kPage; ++page)
-        if (!pages_.count(page)) wanted.push_back(page);
-    }
+    std::vector<std::pair<std::uint64_t, std::uint64_t>> wanted;  // [begin, end)
+    for (const auto& [offset, size] : ranges)
+      if (size > 0 && offset < size_ && !covered(offset, size))
+        wanted.emplace_back(offset, std::min(offset + size, size_));
     std::sort(wanted.begin(), wanted.end());
-    wanted.erase(std::unique(wanted.begin(), wanted.end()), wanted.end());
-    const std::uint64_t room = std::max<std::uint64_t>(budget_ / kPage / 2, 1);
-    for (std::size_t i = 0; i < wanted.size();) {
-      std::size_t j = i;
-      while (j + 1 < wanted.size() && wanted[j + 1] <= wanted[j] + 2 && wanted[j + 1] - wanted[i] < room) ++j;
-      fetch_pages(wanted[i], wanted[j]);
-      i = j + 1;
+    std::vector<std::pair<std::uint64_t, std::uint64_t>> runs;
+    const std::uint64_t longest = std::max<std::uint64_t>(budget_ / 4, kPage);
+    for (const auto& [begin, end] : wanted) {
+      if (!runs.empty() && begin <= runs.back().second + kMergeGap &&
+          std::max(end, runs.back().second) - runs.back().first <= longest)
+        runs.back().second = std::max(runs.back().second, end);
+      else
+        runs.emplace_back(begin, end);
+    }
+    for (std::size_t at = 0; at < runs.size(); at += kParallel) {
+      const std::size_t count = std::min(kParallel, runs.size() - at);
+      std::vector<Response> got = fetch_parallel(runs.data() + at, count);
+      for (std::size_t i = 0; i < count; ++i) keep_span(runs[at + i].first, std::move(got[i].body));
     }
   }
 
  private:
+  // Ranges closer than this are fetched as one: a request costs a round
+  // trip, a few KiB more of a response almost nothing.
+  static constexpr std::uint64_t kMergeGap = 4 * 1024;
+  static constexpr std::size_t kParallel = 8;
+
+  bool covered(std::uint64_t offset, std::uint64_t size) const {
+    auto it = spans_.upper_bound(offset);
+    if (it != spans_.begin() && offset + size <= std::prev(it)->first + std::prev(it)->second.size()) return true;
+    for (std::uint64_t page = offset / kPage; page <= (offset + size - 1) / kPage; ++page)
+      if (!pages_.count(page)) return false;
+    return true;
+  }
+
+  bool read_from_spans(std::uint64_t offset, std::uint8_t* out, std::size_t size) {
+    auto it = spans_.upper_bound(offset);
+    if (it == spans_.begin()) return false;
+    --it;
+    const std::vector<std::uint8_t>& bytes = it->second;
+    if (offset + size > it->first + bytes.size()) return false;
+    std::memcpy(out, bytes.data() + (offset - it->first), size);
+    return true;
+  }
+
+  void keep_span(std::uint64_t offset, std::vector<std::uint8_t> bytes) {
+    // Spans share the page cache's budget; the oldest go first, never the
+    // one just fetched.
+    span_held_ += bytes.size();
+    span_order_.push_back(offset);
+    spans_[offset] = std::move(bytes);
+    while (span_held_ > budget_ && span_order_.size() > 1) {
+      const auto old = spans_.find(span_order_.front());
+      span_order_.pop_front();
+      if (old == spans_.end()) continue;
+      span_held_ -= old->second.size();
+      spans_.erase(old);
+    }
+  }
+
   struct Page {
     std::vector<std::uint8_t> bytes;
     std::list<std::uint64_t>::iterator age;
@@ -162,8 +212,9 @@ class HttpSource final : public ByteSource {
       if (pages_.count(page)) continue;
       lru_.push_front(page);
       Page entry;
-      entry.bytes.assign(bytes.begin() + static_cast<std::ptrdiff_t>(at),
-                         bytes.begin() + static_cast<std::ptrdiff_t>(std::min<std::uint64_t>(at + kPage, bytes.size())));
+      entry.bytes.assign(
+          bytes.begin() + static_cast<std::ptrdiff_t>(at),
+          bytes.begin() + static_cast<std::ptrdiff_t>(std::min<std::uint64_t>(at + kPage, bytes.size())));
       entry.age = lru_.begin();
       held_ += entry.bytes.size();
       pages_.emplace(page, std::move(entry));
@@ -187,41 +238,98 @@ class HttpSource final : public ByteSource {
 
   [[noreturn]] void fail(ErrorClass c, const std::string& what) const { throw Error(c, url_ + ": " + what); }
 
+  // Sets up `handle` to fetch bytes [begin, end] into `r`; *headers is
+  // freed by the caller after the transfer.
+  void configure(CURL* handle, Response& r, const std::string& range, bool first, curl_slist** headers) const {
+    curl_easy_reset(handle);
+    curl_easy_setopt(handle, CURLOPT_URL, url_.c_str());
+    curl_easy_setopt(handle, CURLOPT_RANGE, range.c_str());
+    curl_easy_setopt(handle, CURLOPT_FOLLOWLOCATION, 1L);
+    curl_easy_setopt(handle, CURLOPT_MAXREDIRS, 5L);
+    curl_easy_setopt(handle, CURLOPT_PROTOCOLS_STR, "http,https");
+    curl_easy_setopt(handle, CURLOPT_REDIR_PROTOCOLS_STR, "http,https");
+    curl_easy_setopt(handle, CURLOPT_CONNECTTIMEOUT, 30L);
+    curl_easy_setopt(handle, CURLOPT_LOW_SPEED_LIMIT, 1024L);
+    curl_easy_setopt(handle, CURLOPT_LOW_SPEED_TIME, 60L);
+    curl_easy_setopt(handle, CURLOPT_NOSIGNAL, 1L);
+    curl_easy_setopt(handle, CURLOPT_HEADERFUNCTION, on_header);
+    curl_easy_setopt(handle, CURLOPT_HEADERDATA, &r);
+    curl_easy_setopt(handle, CURLOPT_WRITEFUNCTION, on_body);
+    curl_easy_setopt(handle, CURLOPT_WRITEDATA, &r);
+    *headers = nullptr;
+    if (!first && !version_.empty()) {
+      const std::string condition = (etag_.empty() ? "If-Unmodified-Since: " : "If-Match: ") + version_;
+      *headers = curl_slist_append(*headers, condition.c_str());
+      curl_easy_setopt(handle, CURLOPT_HTTPHEADER, *headers);
+    }
+  }
+
   Response fetch(std::uint64_t begin, std::uint64_t end, bool first) {
     Response r;
     r.limit = end - begin + 1;
-    curl_easy_reset(curl_);
     const std::string range = std::to_string(begin) + "-" + std::to_string(end);
-    curl_easy_setopt(curl_, CURLOPT_URL, url_.c_str());
-    curl_easy_setopt(curl_, CURLOPT_RANGE, range.c_str());
-    curl_easy_setopt(curl_, CURLOPT_FOLLOWLOCATION, 1L);
-    curl_easy_setopt(curl_, CURLOPT_MAXREDIRS, 5L);
-    curl_easy_setopt(curl_, CURLOPT_PROTOCOLS_STR, "http,https");
-    curl_easy_setopt(curl_, CURLOPT_REDIR_PROTOCOLS_STR, "http,https");
-    curl_easy_setopt(curl_, CURLOPT_CONNECTTIMEOUT, 30L);
-    curl_easy_setopt(curl_, CURLOPT_LOW_SPEED_LIMIT, 1024L);
-    curl_easy_setopt(curl_, CURLOPT_LOW_SPEED_TIME, 60L);
-    curl_easy_setopt(curl_, CURLOPT_NOSIGNAL, 1L);
-    curl_easy_setopt(curl_, CURLOPT_HEADERFUNCTION, on_header);
-    curl_easy_setopt(curl_, CURLOPT_HEADERDATA, &r);
-    curl_easy_setopt(curl_, CURLOPT_WRITEFUNCTION, on_body);
-    curl_easy_setopt(curl_, CURLOPT_WRITEDATA, &r);
     curl_slist* headers = nullptr;
-    if (!first && !version_.empty()) {
-      const std::string condition = (etag_.empty() ? "If-Unmodified-Since: " : "If-Match: ") + version_;
-      headers = curl_slist_append(headers, condition.c_str());
-      curl_easy_setopt(curl_, CURLOPT_HTTPHEADER, headers);
-    }
+    configure(curl_, r, range, first, &headers);
     const CURLcode code = curl_easy_perform(curl_);
     if (headers) curl_slist_free_all(headers);
-    ++requests_;
     long status = 0;
     curl_easy_getinfo(curl_, CURLINFO_RESPONSE_CODE, &status);
+    check(r, code, status, begin, end, first);
+    return r;
+  }
+
+  // Runs [begin, end) fetched at the same time, one connection each (the
+  // handles and their connections are kept for the next batch).
+  std::vector<Response> fetch_parallel(const std::pair<std::uint64_t, std::uint64_t>* runs, std::size_t count) {
+    if (count == 1) return {fetch(runs[0].first, runs[0].second - 1, false)};
+    if (!multi_) multi_ = curl_multi_init();
+    if (!multi_) throw Error(ErrorClass::LimitExceeded, url_ + ": cannot start libcurl");
+    while (handles_.size() < count) {
+      CURL* h = curl_easy_init();
+      if (!h) throw Error(ErrorClass::LimitExceeded, url_ + ": cannot start libcurl");
+      handles_.push_back(h);
+    }
+    std::vector<Response> out(count);
+    std::vector<std::string> range(count);
+    std::vector<curl_slist*> headers(count, nullptr);
+    for (std::size_t i = 0; i < count; ++i) {
+      out[i].limit = runs[i].second - runs[i].first;
+      range[i] = std::to_string(runs[i].first) + "-" + std::to_string(runs[i].second - 1);
+      configure(handles_[i], out[i], range[i], false, &headers[i]);
+      curl_multi_add_handle(multi_, handles_[i]);
+    }
+    int running = 0;
+    do {
+      if (curl_multi_perform(multi_, &running) != CURLM_OK) break;
+      if (running) curl_multi_poll(multi_, nullptr, 0, 1000, nullptr);
+    } while (running);
+    std::vector<CURLcode> codes(count, CURLE_OK);
+    int left = 0;
+    while (CURLMsg* m = curl_multi_info_read(multi_, &left))
+      if (m->msg == CURLMSG_DONE)
+        for (std::size_t i = 0; i < count; ++i)
+          if (m->easy_handle == handles_[i]) codes[i] = m->data.result;
+    for (std::size_t i = 0; i < count; ++i) {
+      curl_multi_remove_handle(multi_, handles_[i]);
+      if (headers[i]) curl_slist_free_all(headers[i]);
+    }
+    for (std::size_t i = 0; i < count; ++i) {
+      long status = 0;
+      curl_easy_getinfo(handles_[i], CURLINFO_RESPONSE_CODE, &status);
+      check(out[i], codes[i], status, runs[i].first, runs[i].second - 1, false);
+    }
+    return out;
+  }
+
+  // Counts a response and refuses what is not exactly the asked range.
+  void check(Response& r, CURLcode code, long status, std::uint64_t begin, std::uint64_t end, bool first) {
+    const std::string range = std::to_string(begin) + "-" + std::to_string(end);
+    ++requests_;
     fetched_ += r.body.size();
     if (status == 200 || (r.overflow && status != 206))
-      fail(ErrorClass::InvalidArgument,
-           "the server does not answer range requests (HTTP " + std::to_string(status) +
-               " for bytes " + range + "); ivol reads remote files by range only, never whole");
+      fail(ErrorClass::InvalidArgument, "the server does not answer range requests (HTTP " + std::to_string(status) +
+                                            " for bytes " + range +
+                                            "); ivol reads remote files by range only, never whole");
     if (status == 412) fail(ErrorClass::Io, "the file changed on the server while it was open (HTTP 412)");
     if (status == 416 && first) fail(ErrorClass::Truncated, "the file is empty (HTTP 416)");
     if (code != CURLE_OK)
@@ -241,9 +349,8 @@ class HttpSource final : public ByteSource {
     }
     const std::uint64_t want_end = std::min(end, total - 1);
     if (got_begin != begin || got_end != want_end || r.body.size() != want_end - begin + 1)
-      fail(ErrorClass::Io, "asked for bytes " + range + ", received " + std::to_string(r.body.size()) +
-                               " bytes as '" + r.content_range + "'");
-    return r;
+      fail(ErrorClass::Io, "asked for bytes " + range + ", received " + std::to_string(r.body.size()) + " bytes as '" +
+                               r.content_range + "'");
   }
 
   std::string url_;
@@ -254,6 +361,11 @@ class HttpSource final : public ByteSource {
   std::map<std::uint64_t, Page> pages_;
   std::list<std::uint64_t> lru_;
   std::uint64_t held_ = 0;
+  std::map<std::uint64_t, std::vector<std::uint8_t>> spans_;  // exact ranges prefetch() fetched, by offset
+  std::deque<std::uint64_t> span_order_;                      // their offsets, oldest first
+  std::uint64_t span_held_ = 0;
+  CURLM* multi_ = nullptr;
+  std::vector<CURL*> handles_;  // prefetch()'s parallel transfers
   std::uint64_t requests_ = 0;
   std::uint64_t fetched_ = 0;
 };

@@ -5,8 +5,10 @@
 //
 // Reads go through a cache of aligned pages (64 KiB; at most 64 MiB or
 // IVOL_HTTP_CACHE_MIB); the pages a read misses are fetched in one request
-// per contiguous run, and prefetch() fetches the ranges a read is about to
-// need in one request per cluster (ranges less than a page apart merge).
+// per contiguous run. prefetch() fetches the exact ranges a read is about to
+// need (the Reader plans them: the blocks a slice, box or level touches),
+// ranges less than 16 KiB apart merged into one request, up to 8 requests
+// at a time over parallel connections.
 // Every response must be a 206 with the asked Content-Range, and the file's
 // ETag (or Last-Modified) must not change while it is open (If-Match): a
 // server that ignores ranges, or a file replaced under the reader, is an

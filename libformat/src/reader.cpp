@@ -9,8 +9,9 @@
 #include <string>
 #include <vector>
 
-#include "ivol/error.hpp"
 #include "brick_grid.hpp"
+#include "grid_copy.hpp"
+#include "ivol/error.hpp"
 #include "layout.hpp"
 #include "reader_impl.hpp"
 #include "tree_walk.hpp"
@@ -41,6 +42,15 @@ std::vector<T> output_for(const Box& box, std::size_t per_voxel = 1) {
               what +
                   (wraps ? ", more than 2^64 bytes" : ", " + std::to_string((bytes + (1u << 20) - 1) >> 20) + " MiB") +
                   ") cannot be allocated: ask for a smaller box or a coarser level");
+}
+
+// Physical values of all 65536 codes of a 16-bit encoding: cheaper than
+// decoding each voxel when a box is large.
+std::vector<float> physical_table(const VolumeLayout& v) {
+  std::vector<float> table(65536);
+  for (std::uint32_t code = 0; code < 65536; ++code)
+    table[code] = static_cast<float>(v.physical(decode_value(v.encoding, code)));
+  return table;
 }
 
 // Stored bits of every voxel of `box` at level of detail `lod` for the grid
@@ -136,6 +146,9 @@ std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigne
   std::vector<double> sums(nx * ny);
   std::size_t n = 0;
   for (std::uint32_t k = box.lo[2]; k < box.hi[2]; ++k) {
+    // The blocks under one output layer at a time: a level of detail of a
+    // large grid reads every block once, never more than the cache holds.
+    impl.plan_box(Box{{box.lo[0], box.lo[1], k}, {box.hi[0], box.hi[1], k + 1}}, lod);
     std::fill(sums.begin(), sums.end(), 0.0);
     const std::uint64_t z_lo = std::uint64_t{k} << lod;
     const std::uint64_t z_hi = std::min<std::uint64_t>((std::uint64_t{k} + 1) << lod, v.dims[2]);
@@ -232,6 +245,18 @@ std::vector<float> Reader::read_box(const Box& box, unsigned lod, std::vector<Da
   impl_->check_box(box, lod);
   const VolumeLayout& v = impl_->info.layout;
   std::vector<float> out = output_for<float>(box);
+  if (detail::grid_copies(*impl_, lod) && !damaged) {
+    if (encoding_width(v.encoding) == 2) {
+      const std::vector<float> table = physical_table(v);
+      detail::copy_grid(*impl_, box, out.data(), [&](std::uint32_t bits) { return table[bits]; });
+    } else {
+      detail::copy_grid(*impl_, box, out.data(), [&](std::uint32_t bits) {
+        return static_cast<float>(v.physical(decode_value(v.encoding, bits)));
+      });
+    }
+    return out;
+  }
+  if (!impl_->grid || lod == 0) impl_->plan_box(box, lod);
   std::optional<detail::SalvageLog> log;
   if (damaged) log.emplace(detail::SalvageLog{*damaged});
   if (impl_->grid) {
@@ -244,12 +269,7 @@ std::vector<float> Reader::read_box(const Box& box, unsigned lod, std::vector<Da
   if (encoding_width(v.encoding) == 2) {
     // Physical values of all 65536 codes, once per call: cheaper than
     // decoding each voxel when the box is large.
-    std::vector<float> table;
-    if (box.voxel_count() >= 65536) {
-      table.resize(65536);
-      for (std::uint32_t code = 0; code < 65536; ++code)
-        table[code] = static_cast<float>(v.physical(decode_value(v.encoding, code)));
-    }
+    const std::vector<float> table = box.voxel_count() >= 65536 ? physical_table(v) : std::vector<float>();
     detail::walk_box(
         access, v, impl_->ranges, box, lod,
         [&](const Box& region, std::uint32_t bits) {
@@ -274,6 +294,16 @@ std::vector<std::uint8_t> Reader::read_box_bits(const Box& box, unsigned lod, st
   const VolumeLayout& v = impl_->info.layout;
   const std::size_t width = encoding_width(v.encoding);
   std::vector<std::uint8_t> out = output_for<std::uint8_t>(box, width);
+  if (detail::grid_copies(*impl_, lod) && !damaged) {
+    if (width == 2)
+      detail::copy_grid(*impl_, box, reinterpret_cast<std::uint16_t*>(out.data()),
+                        [](std::uint32_t bits) { return static_cast<std::uint16_t>(bits); });
+    else
+      detail::copy_grid(*impl_, box, reinterpret_cast<std::uint32_t*>(out.data()),
+                        [](std::uint32_t bits) { return bits; });
+    return out;
+  }
+  if (!impl_->grid || lod == 0) impl_->plan_box(box, lod);
   std::optional<detail::SalvageLog> log;
   if (damaged) log.emplace(detail::SalvageLog{*damaged});
   if (impl_->grid) {
@@ -361,10 +391,10 @@ std::vector<std::uint8_t> Reader::read_block(std::size_t block_index) {
   if (block_index >= impl_->info.blocks.size())
     throw Error(ErrorClass::InvalidArgument, path() + ": no block " + std::to_string(block_index));
   const BlockInfo& b = impl_->info.blocks[block_index];
-  return detail::read_and_decode_block(
-      impl_->file, b, block_index, detail::stream_width(b.stream, impl_->info.layout.encoding),
-      detail::is_known_stream(b.stream, impl_->info.layout.kind), impl_->info.framed(),
-      detail::brick_of_block(impl_->info.layout, b.stream, b.first_element));
+  return detail::read_and_decode_block(impl_->file, b, block_index,
+                                       detail::stream_width(b.stream, impl_->info.layout.encoding),
+                                       detail::is_known_stream(b.stream, impl_->info.layout.kind), impl_->info.framed(),
+                                       detail::brick_of_block(impl_->info.layout, b.stream, b.first_element));
 }
 
 }  // namespace ivol

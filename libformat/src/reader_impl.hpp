@@ -122,6 +122,11 @@ struct Reader::Impl {
       failures.emplace(index, e);
       throw;
     }
+    remember(index, data);
+    return data;
+  }
+
+  void remember(std::size_t index, const detail::BlockData& data) {
     ++stats.blocks_decoded;
     // The hints count against the cache's budget: a block the cache lets go
     // is let go here too, else one block per level and stream stays held.
@@ -129,8 +134,28 @@ struct Reader::Impl {
       for (auto& per_stream : hint)
         for (Hint& h : per_stream)
           if (h.block == evicted) h = Hint{};
-    return data;
   }
+
+  // Fetch planning (fetch_plan.cpp). The block of `stream` holding
+  // `element`, or SIZE_MAX.
+  std::size_t block_of(std::uint8_t stream, std::uint64_t element) const {
+    const auto& list = stream_blocks[stream];
+    auto it = std::upper_bound(list.begin(), list.end(), element,
+                               [&](std::uint64_t e, std::size_t b) { return e < info.blocks[b].first_element; });
+    if (it == list.begin()) return SIZE_MAX;
+    const BlockInfo& b = info.blocks[*(it - 1)];
+    return element - b.first_element < b.element_count ? *(it - 1) : SIZE_MAX;
+  }
+  // Reads the blocks not yet held in few requests (ByteSource::prefetch),
+  // decodes them on several threads and puts them in the cache, as many as
+  // its budget holds; a block that fails is remembered as failed, for the
+  // walk to meet.
+  void load_blocks(std::vector<std::size_t> blocks);
+  void load_chunk(const std::vector<std::size_t>& blocks);
+  // Loads the blocks a read of `box` at level of detail `lod` touches: for
+  // a grid from the geometry, for an octree a level at a time (the node
+  // words of one level name the blocks of the next).
+  void plan_box(const Box& box, unsigned lod);
 
   // Pointer to element `element` of `stream` in a decoded block, which stays
   // alive until the next call.
