@@ -60,38 +60,92 @@ double exact_sum(const double* a, const double* b, std::uint32_t len, bool produ
   return (s[0] + s[1]) + (s[2] + s[3]);
 }
 
+// Two rows' product and their products at a lag of one voxel:
+// lag_ab = Σ_{x ≥ 1} a(x)·b(x − 1), lag_ba = Σ_{x ≥ 1} a(x − 1)·b(x).
+struct RowPair {
+  std::int64_t full = 0, lag_ab = 0, lag_ba = 0;
+};
+
 }  // namespace
 
+// The moments of all interior rows from a few sums per brick row: the eight
+// features of a voxel are four rows (its own, the one before along y, along
+// z, along both) at x and at x − 1, so Σ f_i·f_j over a row is a product of
+// two whole rows (less one end voxel) or a product at a lag of one voxel; and
+// each pair of rows recurs for several interior rows. 14 products per voxel
+// instead of 36.
 bool brick_moments(const BrickDims& d, const std::uint16_t* u, BrickMoments& out) {
   if (!enough_interior(d)) return false;
   out = BrickMoments{};
-  // Signed strides: a step back along y or z is a negative offset.
-  const std::ptrdiff_t sy = d[0], sz = std::ptrdiff_t{d[0]} * d[1];
-  const double ref = u[sz + sy + 1];
-  // One row's features, f_i at x in feature[i][x - 1]; a row's sums stay
-  // below 2^40 (at most 255 products below 2^32), exact in a double, whose
+  const std::uint32_t e = d[0], ey = d[1], ez = d[2];
+  const std::size_t sy = e, sz = std::size_t{e} * ey, rows = std::size_t{ey} * ez;
+  const std::uint16_t ref = u[sz + sy + 1];
+  // The values less ref, as doubles: a row's sums of products stay below
+  // 2^40 (at most 256 products below 2^32), exact in a double, whose
   // products vectorise where 64-bit integer ones do not.
-  const std::uint32_t len = d[0] - 1;
-  std::vector<double> features(8 * std::size_t{len});
-  for (std::uint32_t z = 1; z < d[2]; ++z)
-    for (std::uint32_t y = 1; y < d[1]; ++y) {
-      const std::uint16_t* c = u + z * sz + y * sy + 1;
-      const std::uint16_t* rows[8] = {c, c - 1, c - sy, c - sz, c - 1 - sy, c - 1 - sz, c - sy - sz, c - 1 - sy - sz};
-      for (int i = 0; i < 8; ++i) {
-        double* f = features.data() + i * std::size_t{len};
-        for (std::uint32_t x = 0; x < len; ++x) f[x] = rows[i][x] - ref;
+  std::vector<double> v(sz * ez);
+  for (std::size_t i = 0; i < v.size(); ++i) v[i] = static_cast<double>(std::int32_t{u[i]} - ref);
+  auto row = [&](std::uint32_t y, std::uint32_t z) { return v.data() + z * sz + y * sy; };
+  auto pair = [&](const double* a, const double* b) {
+    return RowPair{static_cast<std::int64_t>(exact_sum(a, b, e, true)),
+                   static_cast<std::int64_t>(exact_sum(a + 1, b, e - 1, true)),
+                   static_cast<std::int64_t>(exact_sum(a, b + 1, e - 1, true))};
+  };
+  // Per brick row (index z * ey + y): its sum and ends, its product with
+  // itself, with the row before it along y, along z, along both, and of the
+  // rows (y − 1, z) and (y, z − 1).
+  std::vector<std::int64_t> sum(rows);
+  std::vector<RowPair> self(rows), along_y(rows), along_z(rows), diagonal(rows), antidiagonal(rows);
+  for (std::uint32_t z = 0; z < ez; ++z)
+    for (std::uint32_t y = 0; y < ey; ++y) {
+      const std::size_t r = std::size_t{z} * ey + y;
+      const double* c = row(y, z);
+      sum[r] = static_cast<std::int64_t>(exact_sum(c, c, e, false));
+      self[r] = pair(c, c);
+      if (y > 0) along_y[r] = pair(c, row(y - 1, z));
+      if (z > 0) along_z[r] = pair(c, row(y, z - 1));
+      if (y > 0 && z > 0)
+        diagonal[r] = pair(c, row(y - 1, z - 1)), antidiagonal[r] = pair(row(y - 1, z), row(y, z - 1));
+    }
+  // Feature i is row kRow[i] of (own, y − 1, z − 1, both) at x (kNow) or x − 1.
+  static constexpr int kRow[8] = {0, 0, 1, 2, 1, 2, 3, 3};
+  static constexpr bool kNow[8] = {true, false, true, true, false, false, true, false};
+  for (std::uint32_t z = 1; z < ez; ++z)
+    for (std::uint32_t y = 1; y < ey; ++y) {
+      const std::size_t r[4] = {std::size_t{z} * ey + y, std::size_t{z} * ey + y - 1, std::size_t{z - 1} * ey + y,
+                                std::size_t{z - 1} * ey + y - 1};
+      // full[a][b] = Σ_x R_a·R_b, lag[a][b] = Σ_{x ≥ 1} R_a(x)·R_b(x − 1).
+      std::int64_t full[4][4], lag[4][4];
+      auto set = [&](int a, int b, const RowPair& p) {
+        full[a][b] = full[b][a] = p.full;
+        lag[a][b] = p.lag_ab, lag[b][a] = p.lag_ba;
+      };
+      for (int a = 0; a < 4; ++a) set(a, a, self[r[a]]);
+      set(0, 1, along_y[r[0]]);
+      set(2, 3, along_y[r[2]]);
+      set(0, 2, along_z[r[0]]);
+      set(1, 3, along_z[r[1]]);
+      set(0, 3, diagonal[r[0]]);
+      set(1, 2, antidiagonal[r[0]]);
+      std::int64_t first[4], last[4];
+      for (int a = 0; a < 4; ++a) {
+        const double* p = v.data() + (r[a] / ey) * sz + (r[a] % ey) * sy;
+        first[a] = static_cast<std::int64_t>(p[0]), last[a] = static_cast<std::int64_t>(p[e - 1]);
       }
       for (int i = 0; i < 8; ++i) {
-        const double* fi = features.data() + i * std::size_t{len};
-        out.sum[i] += static_cast<std::int64_t>(exact_sum(fi, fi, len, false));
-        for (int j = i; j < 8; ++j) {
-          const auto product =
-              static_cast<std::int64_t>(exact_sum(fi, features.data() + j * std::size_t{len}, len, true));
-          out.product[i][j] += product;
-          if (j != i) out.product[j][i] += product;
+        const int a = kRow[i];
+        out.sum[i] += sum[r[a]] - (kNow[i] ? first[a] : last[a]);
+        for (int j = 0; j < 8; ++j) {
+          const int b = kRow[j];
+          if (kNow[i] && kNow[j])
+            out.product[i][j] += full[a][b] - first[a] * first[b];
+          else if (!kNow[i] && !kNow[j])
+            out.product[i][j] += full[a][b] - last[a] * last[b];
+          else
+            out.product[i][j] += kNow[i] ? lag[a][b] : lag[b][a];
         }
       }
-      out.count += len;
+      out.count += e - 1;
     }
   return true;
 }
