@@ -27,16 +27,17 @@ inline constexpr PredictorTaps kLorenzoTaps{0, {1, 1, 1, -1, -1, -1, 1}, 0};
 
 // The taps in the form the row loops use (see the top of this file).
 struct RowPredictor {
-  explicit RowPredictor(const PredictorTaps& taps) : t(taps.t), shift(taps.shift) {
+  explicit RowPredictor(const PredictorTaps& taps) : shift(taps.shift) {
+    for (int k = 0; k < 7; ++k) t[k] = static_cast<std::int16_t>(taps.t[k]);
     round = shift ? std::int32_t{1} << (shift - 1) : 0;
     std::int64_t sum = 0, sum_abs = 0;
-    for (std::int32_t tap : t) sum += tap, sum_abs += std::llabs(tap);
+    for (std::int32_t tap : taps.t) sum += tap, sum_abs += std::llabs(tap);
     level = taps.bias + sum * (std::int64_t{1} << (15 - shift));
     const std::int64_t s_max = 32768 * sum_abs + round;
     const std::int64_t q_max = (s_max >> shift) + 1;
     narrow = s_max < (std::int64_t{1} << 31) && q_max + std::llabs(level) < (std::int64_t{1} << 31);
   }
-  std::array<std::int32_t, 7> t;
+  std::array<std::int16_t, 7> t;  // every tap is an i16 (spec §7.2), and products of i16 vectorise best
   unsigned shift;
   std::int32_t round;
   std::int64_t level;  // L + Σt·2^(15−s)
