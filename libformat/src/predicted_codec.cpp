@@ -234,6 +234,7 @@ void decode_predicted(const std::uint8_t* payload, std::size_t size, const Brick
   // The row's sums of the neighbours in earlier rows (decode_row).
   std::vector<std::int32_t> partial32(p.narrow ? dims[0] : 0);
   std::vector<std::int64_t> partial64(p.narrow ? 0 : dims[0]);
+  std::vector<std::uint16_t> delta(dims[0]);
   walk_rows(
       dims, out,
       [&](std::size_t i, std::uint32_t y, std::uint32_t z, std::uint32_t count) {
@@ -244,9 +245,9 @@ void decode_predicted(const std::uint8_t* payload, std::size_t size, const Brick
       [&](std::uint16_t* c, const RowNeighbours& neighbours) {
         const std::size_t i = static_cast<std::size_t>(c - out);
         if (p.narrow)
-          detail::decode_row<std::int32_t>(p, c, neighbours, dims[0], lo + i, hi + i, partial32.data());
+          detail::decode_row<std::int32_t>(p, c, neighbours, dims[0], lo + i, hi + i, partial32.data(), delta.data());
         else
-          detail::decode_row<std::int64_t>(p, c, neighbours, dims[0], lo + i, hi + i, partial64.data());
+          detail::decode_row<std::int64_t>(p, c, neighbours, dims[0], lo + i, hi + i, partial64.data(), delta.data());
       });
   if (payload[1] == kMapBinary16Order)
     for (std::size_t i = 0; i < n; ++i) out[i] = unmap_binary16(out[i]);

@@ -109,23 +109,25 @@ std::int64_t level_row(const RowPredictor& p, const std::uint16_t* c, const RowN
 }
 
 // Decodes c[1 .. len) of an interior row from its residuals (low bytes lo[],
-// high bytes hi[]): the six neighbours in earlier rows are summed for the
-// whole row first (vectorised), then the chain along x voxel by voxel.
+// high bytes hi[]): the six neighbours in earlier rows (and the rounding)
+// are summed and the residuals unzigzagged for the whole row first
+// (vectorised), which leaves the chain along x as short as it can be.
 template <class Acc>
 void decode_row(const RowPredictor& p, std::uint16_t* c, const RowNeighbours& n, std::uint32_t len,
-                const std::uint8_t* lo, const std::uint8_t* hi, Acc* partial) {
+                const std::uint8_t* lo, const std::uint8_t* hi, Acc* partial, std::uint16_t* delta) {
   const Acc t0 = p.t[0], t1 = p.t[1], t2 = p.t[2], t3 = p.t[3], t4 = p.t[4], t5 = p.t[5], t6 = p.t[6];
   const Acc round = p.round, level = static_cast<Acc>(p.level);
   const unsigned shift = p.shift;
   const std::uint16_t *up = n.up, *back = n.back, *ub = n.up_back;
-  for (std::uint32_t x = 1; x < len; ++x)
+  for (std::uint32_t x = 1; x < len; ++x) {
     partial[x] = t1 * centred<Acc>(up[x]) + t2 * centred<Acc>(back[x]) + t3 * centred<Acc>(up[x - 1]) +
-                 t4 * centred<Acc>(back[x - 1]) + t5 * centred<Acc>(ub[x]) + t6 * centred<Acc>(ub[x - 1]);
+                 t4 * centred<Acc>(back[x - 1]) + t5 * centred<Acc>(ub[x]) + t6 * centred<Acc>(ub[x - 1]) + round;
+    delta[x] = unzigzag16(static_cast<std::uint16_t>(lo[x] | hi[x] << 8), 0);
+  }
   std::uint16_t previous = c[0];
   for (std::uint32_t x = 1; x < len; ++x) {
-    const Acc s = partial[x] + t0 * centred<Acc>(previous);
-    const Acc q = clamp16<Acc>(((s + round) >> shift) + level);
-    previous = unzigzag16(static_cast<std::uint16_t>(lo[x] | hi[x] << 8), static_cast<std::uint16_t>(q));
+    const Acc q = clamp16<Acc>(((partial[x] + t0 * centred<Acc>(previous)) >> shift) + level);
+    previous = static_cast<std::uint16_t>(q + delta[x]);
     c[x] = previous;
   }
 }
