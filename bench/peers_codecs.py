@@ -2,7 +2,7 @@
 """Issue 22: ivol's lossless files against the compressors users would pick
 instead, on the same voxels, side by side in one run.
 
-    python bench/peers_codecs.py --work DIR [--ivol BINARY] [--only NAME,...]
+    python bench/peers_codecs.py --work DIR [--ivol BINARY] [--phantoms A,B] [--only TEXT,...] [--skip TEXT,...]
 
 DIR holds PHANTOM.f32 (N^3 float32, x fastest: an ivol reconstruction, as
 bench/run_peers_codecs.sh makes it). Each volume is kept three ways, every
@@ -178,9 +178,11 @@ def main():
     parser.add_argument("--work", required=True)
     parser.add_argument("--ivol", default="build/tools/ivol")
     parser.add_argument("--phantoms", default="pencil-holder,connector-board,lattice-part")
-    parser.add_argument("--only", default="")
+    parser.add_argument("--only", default="", help="methods whose label contains one of these (comma-separated)")
+    parser.add_argument("--skip", default="", help="methods whose label contains one of these (comma-separated)")
     args = parser.parse_args()
     only = set(filter(None, args.only.split(",")))
+    skip = set(filter(None, args.skip.split(",")))
     methods = [
         ("ivol (convert, --structure auto)", lambda v, k, tmp: method_ivol(v, k, tmp, args.ivol)),
         ("blosc2 64^3, zstd 9 + shuffle", method_blosc2),
@@ -221,7 +223,7 @@ def main():
                                     lambda v, k, tmp, t=threshold: method_ivol(v, k, tmp, args.ivol, keep=t)))
                 ivol_bytes = None
                 for label, run in rows:
-                    if only and not any(o in label for o in only):
+                    if (only and not any(o in label for o in only)) or any(o in label for o in skip):
                         continue
                     try:
                         size, seconds, same = run(v, kind, tmp)

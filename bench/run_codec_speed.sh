@@ -3,12 +3,15 @@
 # on the same raw bytes, side by side in one run, and codec 3's own encode
 # and decode speed per core (build/bench/codec_bench, the thread's CPU time).
 #
-#   bash bench/run_codec_speed.sh --work DIR [--build DIR] [--ivol BINARY ...] [--repeat N]
+#   bash bench/run_codec_speed.sh --work DIR [--build DIR] [--ivol BINARY ...] [--codec-bench BINARY ...]
+#                                 [--repeat N]
 #
 # DIR holds r.raw (256^3 float32, as bench/run_bricked.sh leaves it) and the
 # 16-bit files v-f16.raw and v-u16.raw made from it (run_bricked.sh makes
 # them too). Each --ivol adds a binary to compare (e.g. a build of main);
-# default: the build's own. Every command runs N times (default 3),
+# default: the build's own; each --codec-bench likewise a codec_bench (e.g.
+# bench/codec_bench.cpp linked with main's predicted_codec.cpp), run
+# alternately N times. Every command runs N times (default 3),
 # alternating, and the best wall time and its CPU time (user + sys) are
 # printed: on a shared machine the best run is the one least disturbed.
 set -euo pipefail
@@ -17,19 +20,22 @@ build=build
 work=
 repeat=3
 binaries=()
+benches=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --work) work=$2; shift ;;
     --build) build=$2; shift ;;
     --ivol) binaries+=("$2"); shift ;;
+    --codec-bench) benches+=("$2"); shift ;;
     --repeat) repeat=$2; shift ;;
-    *) echo "usage: bash bench/run_codec_speed.sh --work DIR [--build DIR] [--ivol BINARY ...] [--repeat N]" >&2
+    *) echo "usage: bash bench/run_codec_speed.sh --work DIR [--build DIR] [--ivol BINARY ...] [--codec-bench BINARY ...] [--repeat N]" >&2
        exit 1 ;;
   esac
   shift
 done
 [ -n "$work" ] && [ -f "$work/v-u16.raw" ] || { echo "run_codec_speed: --work DIR with v-f16.raw, v-u16.raw" >&2; exit 1; }
 [ ${#binaries[@]} -gt 0 ] || binaries=("$build/tools/ivol")
+[ ${#benches[@]} -gt 0 ] || benches=("$build/bench/codec_bench")
 out=$(mktemp -d /tmp/ivol-codec-speed.XXXXXX)
 trap 'rm -rf "$out"' EXIT
 size=$(/usr/bin/python3 -c "import os; print(round((os.path.getsize('$work/v-u16.raw') // 2) ** (1 / 3)))")
@@ -61,4 +67,8 @@ for kind in f16 u16; do
   done
 done
 echo
-"$build/bench/codec_bench" "$work/r.raw" "$size" 5
+for ((i = 0; i < repeat; i++)); do
+  for bench in "${benches[@]}"; do
+    echo "$bench: $("$bench" "$work/r.raw" "$size" 5 | tr '\n' ' ')"
+  done
+done

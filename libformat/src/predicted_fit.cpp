@@ -83,9 +83,13 @@ bool brick_moments(const BrickDims& d, const std::uint16_t* u, BrickMoments& out
   // The values less ref, as doubles: a row's sums of products stay below
   // 2^40 (at most 256 products below 2^32), exact in a double, whose
   // products vectorise where 64-bit integer ones do not.
-  std::vector<double> v(sz * ez);
-  for (std::size_t i = 0; i < v.size(); ++i) v[i] = static_cast<double>(std::int32_t{u[i]} - ref);
-  auto row = [&](std::uint32_t y, std::uint32_t z) { return v.data() + z * sz + y * sy; };
+  // Kept per thread: a 32^3 brick's 256 KiB, allocated anew for every
+  // brick, would be mapped and faulted in anew every time.
+  thread_local std::vector<double> values;
+  values.resize(sz * ez);
+  double* const v = values.data();
+  for (std::size_t i = 0; i < sz * ez; ++i) v[i] = static_cast<double>(std::int32_t{u[i]} - ref);
+  auto row = [&](std::uint32_t y, std::uint32_t z) { return v + z * sz + y * sy; };
   auto pair = [&](const double* a, const double* b) {
     return RowPair{static_cast<std::int64_t>(exact_sum(a, b, e, true)),
                    static_cast<std::int64_t>(exact_sum(a + 1, b, e - 1, true)),
@@ -129,7 +133,7 @@ bool brick_moments(const BrickDims& d, const std::uint16_t* u, BrickMoments& out
       set(1, 2, antidiagonal[r[0]]);
       std::int64_t first[4], last[4];
       for (int a = 0; a < 4; ++a) {
-        const double* p = v.data() + (r[a] / ey) * sz + (r[a] % ey) * sy;
+        const double* p = v + (r[a] / ey) * sz + (r[a] % ey) * sy;
         first[a] = static_cast<std::int64_t>(p[0]), last[a] = static_cast<std::int64_t>(p[e - 1]);
       }
       for (int i = 0; i < 8; ++i) {
