@@ -9,9 +9,9 @@
 // zstd level 3; prints bytes, and encode and decode MB/s of 16-bit values
 // per second of the thread's CPU time.
 #include <algorithm>
-#include <ctime>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <fstream>
 #include <string>
 #include <vector>
