@@ -198,6 +198,37 @@ TEST(PredictedCodec, ArbitraryTapsDecodeAsTheSpecSays) {
   }
 }
 
+TEST(PredictedCodec, TapsAtTheEdgeOf32BitSumsDecodeAsTheSpecSays) {
+  // The decoder sums in 32 bits when the taps and level allow it (Σ|t| up
+  // to 65534, |level| below 2^31 less the prediction's reach) and in 64 bits
+  // otherwise: taps and levels on either side of that line, against the
+  // spec's formulas in 64 bits.
+  std::mt19937 rng(2024);
+  const BrickDims d{9, 6, 5};
+  const std::int64_t levels[] = {0, 1000, -70000, 1 << 20, -(1 << 29), (1LL << 31) - 1, -(1LL << 31), 1 << 30};
+  for (int trial = 0; trial < 400; ++trial) {
+    std::vector<std::uint8_t> planes(2 * count(d));
+    for (auto& b : planes) b = static_cast<std::uint8_t>(rng() % 4 ? rng() % 8 : rng());  // mostly small residuals
+    std::vector<std::uint8_t> payload(24, 0);
+    payload[0] = 1;
+    payload[1] = rng() % 2;
+    payload[2] = static_cast<std::uint8_t>(trial % 16);
+    payload[3] = 1;
+    const int reach = trial % 2 ? 9362 : 9363;  // 7 * 9362 = 65534
+    for (int k = 0; k < 7; ++k) {
+      const auto tap = static_cast<std::uint16_t>(static_cast<std::int16_t>(
+          trial % 5 == 0 ? (k % 2 ? -reach : reach) : static_cast<int>(rng() % (2 * reach + 1)) - reach));
+      payload[4 + 2 * k] = static_cast<std::uint8_t>(tap), payload[5 + 2 * k] = static_cast<std::uint8_t>(tap >> 8);
+    }
+    const auto level = static_cast<std::uint32_t>(static_cast<std::int32_t>(levels[trial % 8]));
+    for (int k = 0; k < 4; ++k) payload[18 + k] = static_cast<std::uint8_t>(level >> (8 * k));
+    std::vector<std::uint8_t> frame(ZSTD_compressBound(planes.size()));
+    frame.resize(ZSTD_compress(frame.data(), frame.size(), planes.data(), planes.size(), 1));
+    payload.insert(payload.end(), frame.begin(), frame.end());
+    ASSERT_EQ(decode(payload, d), reference_decode(payload, d)) << trial;
+  }
+}
+
 void expect_refused(const std::vector<std::uint8_t>& payload, const BrickDims& d, ivol::ErrorClass c,
                     const std::string& text) {
   try {

@@ -1,6 +1,7 @@
 // Codec 3, predicted 16-bit (spec §7.2). The encoder and the decoder share
-// one walk over the brick (walk_brick), so that they predict every voxel
-// from exactly the same neighbours with exactly the same integer arithmetic.
+// one walk over the brick's rows (walk_rows) and one row arithmetic
+// (predicted_rows.hpp), so that they predict every voxel from exactly the
+// same neighbours with exactly the same integer arithmetic.
 #include "ivol/predicted_codec.hpp"
 
 #include <zstd.h>
@@ -12,220 +13,101 @@
 #include <string>
 
 #include "ivol/error.hpp"
+#include "predicted_fit.hpp"
+#include "predicted_rows.hpp"
 
 namespace ivol {
 namespace {
+
+using detail::PredictorTaps;
+using detail::RowNeighbours;
+using detail::RowPredictor;
 
 constexpr std::uint8_t kPredictorLinear = 1;   // seven integer taps and a shift
 constexpr std::uint8_t kMapIdentity = 0;       // the u16 as it is
 constexpr std::uint8_t kMapBinary16Order = 1;  // binary16 bit patterns in numeric order
 constexpr std::uint8_t kEntropyZstdPlanes = 1;
 constexpr unsigned kMaxShift = 15;
-// Least-squares taps are stored in units of 2^-12: fine enough that rounding
-// them costs nothing measurable, coarse enough for taps up to ±8 in an i16.
-constexpr unsigned kLeastSquaresShift = 12;
 
-struct Taps {
-  unsigned shift = 0;
-  // Neighbours (x-1), (y-1), (z-1), (x-1,y-1), (x-1,z-1), (y-1,z-1), (x-1,y-1,z-1).
-  std::array<std::int32_t, 7> t{};
-  std::int32_t bias = 0;  // added after the shift: a level that noise-dominated bricks predict best
-};
-constexpr Taps kLorenzo{0, {1, 1, 1, -1, -1, -1, 1}, 0};
-
-std::uint16_t map_value(std::uint16_t v, std::uint8_t map) {
-  if (map == kMapIdentity) return v;
-  // Negative numbers reversed below the positive ones: -0 (0x8000) becomes
-  // 0x7FFF, right below +0 (0x8000); a bijection on all 65536 patterns.
-  return (v & 0x8000) ? static_cast<std::uint16_t>(v ^ 0xFFFF) : static_cast<std::uint16_t>(v | 0x8000);
+// Negative numbers reversed below the positive ones: -0 (0x8000) becomes
+// 0x7FFF, right below +0 (0x8000); a bijection on all 65536 patterns. Written
+// without branches (the sign bit spread over the word) so that it vectorises.
+std::uint16_t map_binary16(std::uint16_t v) {
+  const auto sign = static_cast<std::uint16_t>(static_cast<std::int16_t>(v) >> 15);
+  return static_cast<std::uint16_t>(v ^ (sign | 0x8000));
 }
 
-std::uint16_t unmap_value(std::uint16_t u, std::uint8_t map) {
-  if (map == kMapIdentity) return u;
-  return (u & 0x8000) ? static_cast<std::uint16_t>(u ^ 0x8000) : static_cast<std::uint16_t>(u ^ 0xFFFF);
+std::uint16_t unmap_binary16(std::uint16_t u) {
+  const auto sign = static_cast<std::uint16_t>(static_cast<std::int16_t>(u) >> 15);
+  return static_cast<std::uint16_t>(u ^ (static_cast<std::uint16_t>(~sign) | 0x8000));
 }
 
 std::int64_t clamp_u16(std::int64_t p) { return p < 0 ? 0 : p > 65535 ? 65535 : p; }
 
 // Prediction for a voxel on the brick's low faces (spec §7.2): the Lorenzo
 // predictor over the axes along which it has a neighbour.
-std::int64_t face_prediction(const std::uint16_t* u, std::size_t i, bool ax, bool ay, bool az, std::size_t sy,
-                             std::size_t sz) {
+std::uint16_t face_prediction(const std::uint16_t* u, std::size_t i, bool ax, bool ay, bool az, std::ptrdiff_t sy,
+                              std::ptrdiff_t sz) {
   const int axes = int{ax} + int{ay} + int{az};
   if (axes == 0) return 0;
-  if (axes == 1) return u[i - (ax ? 1 : ay ? sy : sz)];
-  const std::size_t s1 = ax ? 1 : sy;
-  const std::size_t s2 = az ? sz : sy;
-  return clamp_u16(std::int64_t{u[i - s1]} + u[i - s2] - u[i - s1 - s2]);
+  const std::ptrdiff_t at = static_cast<std::ptrdiff_t>(i);
+  if (axes == 1) return u[at - (ax ? 1 : ay ? sy : sz)];
+  const std::ptrdiff_t s1 = ax ? 1 : sy;
+  const std::ptrdiff_t s2 = az ? sz : sy;
+  return static_cast<std::uint16_t>(clamp_u16(std::int64_t{u[at - s1]} + u[at - s2] - u[at - s1 - s2]));
 }
 
-// Visits every voxel in raster order with its prediction; `at(i, p)` must
-// leave u[i] final before it returns (the decoder writes it there).
-template <class F>
-void walk_brick(const BrickDims& d, const Taps& taps, std::uint16_t* u, F&& at) {
-  // Signed strides: c[-sy] steps back, which unsigned arithmetic would wrap.
+// Visits the brick's rows in raster order: `face(i, x0, x1, y, z)` for the
+// voxels x0 .. x1 of a row predicted by face_prediction (whole rows with y or
+// z = 0, the first voxel of the others), `interior(c, neighbours)` for the
+// rest of a row with y, z > 0 (c points at the row's first voxel).
+template <class Face, class Interior>
+void walk_rows(const BrickDims& d, std::uint16_t* u, Face&& face, Interior&& interior) {
   const std::ptrdiff_t sy = d[0], sz = std::ptrdiff_t{d[0]} * d[1];
-  const std::int64_t round = taps.shift ? std::int64_t{1} << (taps.shift - 1) : 0;
-  const auto& t = taps.t;
   std::size_t i = 0;
   for (std::uint32_t z = 0; z < d[2]; ++z)
-    for (std::uint32_t y = 0; y < d[1]; ++y) {
-      if (y == 0 || z == 0) {
-        for (std::uint32_t x = 0; x < d[0]; ++x, ++i)
-          at(i, static_cast<std::uint16_t>(face_prediction(u, i, x > 0, y > 0, z > 0, sy, sz)));
+    for (std::uint32_t y = 0; y < d[1]; ++y, i += d[0]) {
+      if (y == 0 || z == 0 || d[0] == 1) {
+        face(i, y, z, d[0]);
         continue;
       }
-      at(i, static_cast<std::uint16_t>(face_prediction(u, i, false, true, true, sy, sz)));
-      ++i;
-      for (std::uint32_t x = 1; x < d[0]; ++x, ++i) {
-        const std::uint16_t* c = u + i;
-        const std::int64_t sum = t[0] * std::int64_t{c[-1]} + t[1] * std::int64_t{c[-sy]} +
-                                 t[2] * std::int64_t{c[-sz]} + t[3] * std::int64_t{c[-1 - sy]} +
-                                 t[4] * std::int64_t{c[-1 - sz]} + t[5] * std::int64_t{c[-sy - sz]} +
-                                 t[6] * std::int64_t{c[-1 - sy - sz]};
-        at(i, static_cast<std::uint16_t>(clamp_u16(((sum + round) >> taps.shift) + taps.bias)));
-      }
+      face(i, y, z, 1);
+      std::uint16_t* c = u + i;
+      interior(c, RowNeighbours{c - sy, c - sz, c - sy - sz});
     }
 }
 
-std::uint16_t zigzag(std::uint16_t value, std::uint16_t prediction) {
-  const auto s = static_cast<std::int16_t>(static_cast<std::uint16_t>(value - prediction));
-  return s >= 0 ? static_cast<std::uint16_t>(2 * s) : static_cast<std::uint16_t>(-2 * std::int32_t{s} - 1);
-}
-
-std::uint16_t unzigzag(std::uint16_t z, std::uint16_t prediction) {
-  const std::int32_t s = (z & 1) ? -(std::int32_t{z} + 1) / 2 : std::int32_t{z} / 2;
-  return static_cast<std::uint16_t>(prediction + s);
-}
-
-// Solves the k x k system a x = b (row-major a) by elimination with partial
-// pivoting; false when it is singular.
-bool solve(double* a, double* b, int k) {
-  for (int c = 0; c < k; ++c) {
-    int pivot = c;
-    for (int r = c + 1; r < k; ++r)
-      if (std::fabs(a[r * k + c]) > std::fabs(a[pivot * k + c])) pivot = r;
-    if (!(std::fabs(a[pivot * k + c]) > 1e-9)) return false;
-    if (pivot != c) {
-      for (int j = 0; j < k; ++j) std::swap(a[c * k + j], a[pivot * k + j]);
-      std::swap(b[c], b[pivot]);
-    }
-    for (int r = c + 1; r < k; ++r) {
-      const double f = a[r * k + c] / a[c * k + c];
-      for (int j = c; j < k; ++j) a[r * k + j] -= f * a[c * k + j];
-      b[r] -= f * b[c];
-    }
-  }
-  for (int c = k - 1; c >= 0; --c) {
-    double s = b[c];
-    for (int j = c + 1; j < k; ++j) s -= a[c * k + j] * b[j];
-    b[c] = s / a[c * k + c];
-  }
-  return true;
-}
-
-// Least-squares taps for the brick's interior voxels, constrained to sum to
-// one (so that rounding them to integers costs nothing on a constant level):
-// the value minus its x neighbour is fitted on the other six neighbours minus
-// the x neighbour. False when too few voxels or the fit is degenerate.
-bool fit_least_squares(const BrickDims& d, const std::uint16_t* u, Taps& out) {
-  if (d[0] < 2 || d[1] < 2 || d[2] < 2 || (d[0] - 1) * std::uint64_t{d[1] - 1} * (d[2] - 1) < 64) return false;
-  // Signed strides: c[-sy] steps back, which unsigned arithmetic would wrap.
+// Zigzag residuals of the voxels a face predicts, into z[].
+void face_residuals(const BrickDims& d, const std::uint16_t* u, std::uint16_t* z) {
   const std::ptrdiff_t sy = d[0], sz = std::ptrdiff_t{d[0]} * d[1];
-  double ata[36] = {}, atb[6] = {};
-  for (std::uint32_t z = 1; z < d[2]; ++z)
-    for (std::uint32_t y = 1; y < d[1]; ++y) {
-      const std::uint16_t* c = u + z * sz + y * sy + 1;
-      for (std::uint32_t x = 1; x < d[0]; ++x, ++c) {
-        const double a = c[-1];
-        const double n[6] = {c[-sy] - a,     c[-sz] - a,      c[-1 - sy] - a,
-                             c[-1 - sz] - a, c[-sy - sz] - a, c[-1 - sy - sz] - a};
-        const double v = c[0] - a;
-        for (int r = 0; r < 6; ++r) {
-          atb[r] += n[r] * v;
-          for (int k = r; k < 6; ++k) ata[r * 6 + k] += n[r] * n[k];
-        }
-      }
-    }
-  for (int r = 0; r < 6; ++r)
-    for (int k = 0; k < r; ++k) ata[r * 6 + k] = ata[k * 6 + r];
-  if (!solve(ata, atb, 6)) return false;
-  out.shift = kLeastSquaresShift;
-  std::int32_t rest = 0;
-  for (int r = 0; r < 6; ++r) {
-    const double scaled = std::nearbyint(atb[r] * (1 << kLeastSquaresShift));
-    if (!(std::fabs(scaled) <= 16384)) return false;
-    out.t[r + 1] = static_cast<std::int32_t>(scaled);
-    rest += out.t[r + 1];
-  }
-  out.t[0] = (1 << kLeastSquaresShift) - rest;  // the taps sum to exactly 2^shift
-  return out.t[0] >= -32768 && out.t[0] <= 32767;
+  walk_rows(
+      d, const_cast<std::uint16_t*>(u),
+      [&](std::size_t i, std::uint32_t y, std::uint32_t zz, std::uint32_t count) {
+        for (std::uint32_t x = 0; x < count; ++x)
+          z[i + x] = detail::zigzag16(u[i + x], face_prediction(u, i + x, x > 0, y > 0, zz > 0, sy, sz));
+      },
+      [](std::uint16_t*, const RowNeighbours&) {});
 }
 
-// Least-squares taps with a level (intercept), for bricks where noise
-// dominates: predicting every voxel from its neighbours' sum would add their
-// noise, predicting the level does not. Fitted on values less the brick's
-// first interior voxel (so that the sums keep their precision); the level is
-// computed after the taps are rounded, so their rounding costs nothing.
-bool fit_least_squares_with_level(const BrickDims& d, const std::uint16_t* u, Taps& out) {
-  if (d[0] < 2 || d[1] < 2 || d[2] < 2 || (d[0] - 1) * std::uint64_t{d[1] - 1} * (d[2] - 1) < 64) return false;
-  // Signed strides: c[-sy] steps back, which unsigned arithmetic would wrap.
-  const std::ptrdiff_t sy = d[0], sz = std::ptrdiff_t{d[0]} * d[1];
-  const double ref = u[sz + sy + 1];
-  double sum_n[7] = {}, sum_v = 0, nn[49] = {}, nv[7] = {}, count = 0;
-  auto neighbours = [&](const std::uint16_t* c, double* n) {
-    n[0] = c[-1] - ref, n[1] = c[-sy] - ref, n[2] = c[-sz] - ref, n[3] = c[-1 - sy] - ref;
-    n[4] = c[-1 - sz] - ref, n[5] = c[-sy - sz] - ref, n[6] = c[-1 - sy - sz] - ref;
-  };
-  for (std::uint32_t z = 1; z < d[2]; ++z)
-    for (std::uint32_t y = 1; y < d[1]; ++y) {
-      const std::uint16_t* c = u + z * sz + y * sy + 1;
-      for (std::uint32_t x = 1; x < d[0]; ++x, ++c) {
-        double n[7];
-        neighbours(c, n);
-        const double v = c[0] - ref;
-        count += 1, sum_v += v;
-        for (int r = 0; r < 7; ++r) {
-          sum_n[r] += n[r], nv[r] += n[r] * v;
-          for (int k = r; k < 7; ++k) nn[r * 7 + k] += n[r] * n[k];
-        }
-      }
-    }
-  double cov[49], rhs[7];
-  for (int r = 0; r < 7; ++r) {
-    rhs[r] = nv[r] - sum_n[r] * sum_v / count;
-    for (int k = r; k < 7; ++k) cov[r * 7 + k] = cov[k * 7 + r] = nn[r * 7 + k] - sum_n[r] * sum_n[k] / count;
-  }
-  if (!solve(cov, rhs, 7)) return false;
-  out.shift = kLeastSquaresShift;
-  for (int r = 0; r < 7; ++r) {
-    const double scaled = std::nearbyint(rhs[r] * (1 << kLeastSquaresShift));
-    if (!(std::fabs(scaled) <= 32767)) return false;
-    out.t[r] = static_cast<std::int32_t>(scaled);
-  }
-  // The level: the mean of what the rounded taps leave, over the interior.
-  out.bias = 0;
-  double left = 0;
-  const std::int64_t round = std::int64_t{1} << (kLeastSquaresShift - 1);
-  for (std::uint32_t z = 1; z < d[2]; ++z)
-    for (std::uint32_t y = 1; y < d[1]; ++y) {
-      const std::uint16_t* c = u + z * sz + y * sy + 1;
-      for (std::uint32_t x = 1; x < d[0]; ++x, ++c) {
-        const std::int64_t sum = out.t[0] * std::int64_t{c[-1]} + out.t[1] * std::int64_t{c[-sy]} +
-                                 out.t[2] * std::int64_t{c[-sz]} + out.t[3] * std::int64_t{c[-1 - sy]} +
-                                 out.t[4] * std::int64_t{c[-1 - sz]} + out.t[5] * std::int64_t{c[-sy - sz]} +
-                                 out.t[6] * std::int64_t{c[-1 - sy - sz]};
-        left += static_cast<double>(c[0] - ((sum + round) >> kLeastSquaresShift));
-      }
-    }
-  out.bias = static_cast<std::int32_t>(std::nearbyint(left / count));
-  return true;
-}
-
-// Sum of the residuals' magnitudes: what the candidate taps are judged by.
-std::uint64_t residual_cost(const BrickDims& d, const Taps& taps, const std::uint16_t* u) {
+// Zigzag residuals of the interior voxels under `taps` into z[]; returns
+// their sum (what the candidate taps are judged by: the faces' residuals do
+// not depend on the taps).
+std::uint64_t interior_residuals(const BrickDims& d, const PredictorTaps& taps, const std::uint16_t* u,
+                                 std::uint16_t* z) {
+  const RowPredictor p(taps);
   std::uint64_t cost = 0;
-  walk_brick(d, taps, const_cast<std::uint16_t*>(u), [&](std::size_t i, std::uint16_t p) { cost += zigzag(u[i], p); });
+  walk_rows(
+      d, const_cast<std::uint16_t*>(u), [](std::size_t, std::uint32_t, std::uint32_t, std::uint32_t) {},
+      [&](std::uint16_t* c, const RowNeighbours& n) {
+        std::uint16_t* row = z + (c - u);
+        if (p.narrow)
+          detail::residual_row<std::int32_t>(p, c, n, d[0], row);
+        else
+          detail::residual_row<std::int64_t>(p, c, n, d[0], row);
+        std::uint32_t sum = 0;  // at most 255 residuals below 2^16
+        for (std::uint32_t x = 1; x < d[0]; ++x) sum += row[x];
+        cost += sum;
+      });
   return cost;
 }
 
@@ -255,27 +137,37 @@ std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const Br
   const std::size_t n = std::size_t{dims[0]} * dims[1] * dims[2];
   if (n == 0) throw Error(ErrorClass::InvalidArgument, "encode_predicted: an empty brick");
   const std::uint8_t map = encoding == ValueEncoding::Binary16 ? kMapBinary16Order : kMapIdentity;
-  std::vector<std::uint16_t> u(n);
-  for (std::size_t i = 0; i < n; ++i) u[i] = map_value(values[i], map);
+  std::vector<std::uint16_t> u(values, values + n);
+  if (map == kMapBinary16Order)
+    for (std::size_t i = 0; i < n; ++i) u[i] = map_binary16(u[i]);
 
-  // Candidates judged by the sum of their residuals' magnitudes.
-  Taps taps = kLorenzo;
+  // Candidates judged by the sum of their residuals' magnitudes; the
+  // residuals of the best so far are kept (no second pass for the winner).
+  std::vector<std::uint16_t> best_z(n), candidate_z(n);
+  PredictorTaps taps = detail::kLorenzoTaps;
+  std::uint64_t best = ~std::uint64_t{0};
+  bool have = false;
+  auto consider = [&](const PredictorTaps& candidate) {
+    const std::uint64_t cost = interior_residuals(dims, candidate, u.data(), candidate_z.data());
+    if (!have || cost < best) best = cost, taps = candidate, have = true, best_z.swap(candidate_z);
+  };
+  if (options.taps != PredictedOptions::Taps::LeastSquares) consider(detail::kLorenzoTaps);
   if (options.taps != PredictedOptions::Taps::Lorenzo) {
-    std::uint64_t best =
-        options.taps == PredictedOptions::Taps::Best ? residual_cost(dims, kLorenzo, u.data()) : ~std::uint64_t{0};
-    Taps fitted;
-    if (fit_least_squares(dims, u.data(), fitted))
-      if (const std::uint64_t cost = residual_cost(dims, fitted, u.data()); cost < best) best = cost, taps = fitted;
-    if (fit_least_squares_with_level(dims, u.data(), fitted))
-      if (const std::uint64_t cost = residual_cost(dims, fitted, u.data()); cost < best) best = cost, taps = fitted;
+    detail::BrickMoments moments;
+    PredictorTaps fitted;
+    if (detail::brick_moments(dims, u.data(), moments)) {
+      if (detail::fit_least_squares(moments, fitted)) consider(fitted);
+      if (detail::fit_least_squares_with_level(dims, u.data(), moments, fitted)) consider(fitted);
+    }
   }
+  if (!have) interior_residuals(dims, taps, u.data(), best_z.data());
+  face_residuals(dims, u.data(), best_z.data());
 
   std::vector<std::uint8_t> planes(2 * n);
-  walk_brick(dims, taps, u.data(), [&](std::size_t i, std::uint16_t p) {
-    const std::uint16_t z = zigzag(u[i], p);
-    planes[i] = static_cast<std::uint8_t>(z);
-    planes[n + i] = static_cast<std::uint8_t>(z >> 8);
-  });
+  for (std::size_t i = 0; i < n; ++i) {
+    planes[i] = static_cast<std::uint8_t>(best_z[i]);
+    planes[n + i] = static_cast<std::uint8_t>(best_z[i] >> 8);
+  }
 
   std::vector<std::uint8_t> out(predicted_payload_bound(n));
   out[0] = kPredictorLinear;
@@ -315,7 +207,7 @@ void decode_predicted(const std::uint8_t* payload, std::size_t size, const Brick
   if (payload[3] != kEntropyZstdPlanes)
     bad(ErrorClass::UnsupportedFeature, "entropy coder " + std::to_string(payload[3]) + " is not known");
   if (payload[22] != 0 || payload[23] != 0) bad(ErrorClass::Malformed, "the reserved bytes 22 .. 24 are not 0");
-  Taps taps;
+  PredictorTaps taps;
   taps.shift = payload[2];
   for (int k = 0; k < 7; ++k)
     taps.t[k] = static_cast<std::int16_t>(static_cast<std::uint16_t>(payload[4 + 2 * k] | payload[5 + 2 * k] << 8));
@@ -336,12 +228,29 @@ void decode_predicted(const std::uint8_t* payload, std::size_t size, const Brick
   if (got != planes.size())
     bad(ErrorClass::Malformed,
         "the residuals decoded to " + std::to_string(got) + " bytes, the brick needs " + std::to_string(planes.size()));
-  walk_brick(dims, taps, out, [&](std::size_t i, std::uint16_t p) {
-    out[i] = unzigzag(static_cast<std::uint16_t>(planes[i] | planes[n + i] << 8), p);
-  });
-  const std::uint8_t map = payload[1];
-  if (map != kMapIdentity)
-    for (std::size_t i = 0; i < n; ++i) out[i] = unmap_value(out[i], map);
+  const RowPredictor p(taps);
+  const std::uint8_t *lo = planes.data(), *hi = planes.data() + n;
+  const std::ptrdiff_t sy = dims[0], sz = std::ptrdiff_t{dims[0]} * dims[1];
+  // The row's sums of the neighbours in earlier rows (decode_row).
+  std::vector<std::int32_t> partial32(p.narrow ? dims[0] : 0);
+  std::vector<std::int64_t> partial64(p.narrow ? 0 : dims[0]);
+  std::vector<std::uint16_t> delta(dims[0]);
+  walk_rows(
+      dims, out,
+      [&](std::size_t i, std::uint32_t y, std::uint32_t z, std::uint32_t count) {
+        for (std::uint32_t x = 0; x < count; ++x)
+          out[i + x] = detail::unzigzag16(static_cast<std::uint16_t>(lo[i + x] | hi[i + x] << 8),
+                                          face_prediction(out, i + x, x > 0, y > 0, z > 0, sy, sz));
+      },
+      [&](std::uint16_t* c, const RowNeighbours& neighbours) {
+        const std::size_t i = static_cast<std::size_t>(c - out);
+        if (p.narrow)
+          detail::decode_row<std::int32_t>(p, c, neighbours, dims[0], lo + i, hi + i, partial32.data(), delta.data());
+        else
+          detail::decode_row<std::int64_t>(p, c, neighbours, dims[0], lo + i, hi + i, partial64.data(), delta.data());
+      });
+  if (payload[1] == kMapBinary16Order)
+    for (std::size_t i = 0; i < n; ++i) out[i] = unmap_binary16(out[i]);
 }
 
 }  // namespace ivol

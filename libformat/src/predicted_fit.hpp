@@ -1,0 +1,35 @@
+// The encoder's choice of taps for a codec 3 brick (spec §7.2): least
+// squares fitted to the brick, with and without a level.
+#pragma once
+
+#include <cstdint>
+
+#include "ivol/predicted_codec.hpp"
+#include "predicted_rows.hpp"
+
+namespace ivol::detail {
+
+// The sums both fits need, over the brick's interior voxels (x, y, z > 0) of
+// the mapped values u: count, Σf_i and Σf_i·f_j for f = (U, its seven causal
+// neighbours in the order of the taps) less the first interior voxel. Exact
+// integers (no rounding in any order of summation).
+struct BrickMoments {
+  std::int64_t count = 0;
+  std::int64_t sum[8] = {};
+  std::int64_t product[8][8] = {};
+};
+
+// False when the brick has fewer than 64 interior voxels (no fit is tried).
+bool brick_moments(const BrickDims& d, const std::uint16_t* u, BrickMoments& out);
+
+// Taps summing to exactly 2^12 (so that rounding them costs nothing on a
+// constant level): U − U(x−1) fitted on the other six neighbours less
+// U(x−1). False when the fit is degenerate or a tap does not fit.
+bool fit_least_squares(const BrickMoments& m, PredictorTaps& out);
+
+// Taps with a level (intercept), for bricks where noise dominates: the level
+// is the mean of what the rounded taps leave (one more pass over u).
+bool fit_least_squares_with_level(const BrickDims& d, const std::uint16_t* u, const BrickMoments& m,
+                                  PredictorTaps& out);
+
+}  // namespace ivol::detail

@@ -1,0 +1,135 @@
+// The per-voxel arithmetic of codec 3 (spec §7.2), one brick row at a time,
+// shared by the encoder, the decoder and the least-squares fit so that all
+// three predict every voxel exactly alike.
+//
+// Speed: the spec's sum S = Σ t_k·U_k needs 35 bits on u16 values. On the
+// centred values C = U − 32768 (which fit an i16) S = S_c + 32768·Σt, and
+// since s ≤ 15, floor((S + r) / 2^s) = floor((S_c + r) / 2^s) + Σt·2^(15−s):
+// the constant moves into the level. For every realistic set of taps S_c and
+// the prediction then fit 32 bits, and the row loops vectorise; taps that do
+// not (any i16 taps are valid) take the same loops in 64 bits.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <cstdlib>
+
+namespace ivol::detail {
+
+struct PredictorTaps {
+  unsigned shift = 0;
+  // Neighbours (x-1), (y-1), (z-1), (x-1,y-1), (x-1,z-1), (y-1,z-1), (x-1,y-1,z-1).
+  std::array<std::int32_t, 7> t{};
+  std::int32_t bias = 0;  // the level L, added after the shift
+};
+inline constexpr PredictorTaps kLorenzoTaps{0, {1, 1, 1, -1, -1, -1, 1}, 0};
+
+// The taps in the form the row loops use (see the top of this file).
+struct RowPredictor {
+  explicit RowPredictor(const PredictorTaps& taps) : shift(taps.shift) {
+    for (int k = 0; k < 7; ++k) t[k] = static_cast<std::int16_t>(taps.t[k]);
+    round = shift ? std::int32_t{1} << (shift - 1) : 0;
+    std::int64_t sum = 0, sum_abs = 0;
+    for (std::int32_t tap : taps.t) sum += tap, sum_abs += std::llabs(tap);
+    level = taps.bias + sum * (std::int64_t{1} << (15 - shift));
+    const std::int64_t s_max = 32768 * sum_abs + round;
+    const std::int64_t q_max = (s_max >> shift) + 1;
+    narrow = s_max < (std::int64_t{1} << 31) && q_max + std::llabs(level) < (std::int64_t{1} << 31);
+  }
+  std::array<std::int16_t, 7> t;  // every tap is an i16 (spec §7.2), and products of i16 vectorise best
+  unsigned shift;
+  std::int32_t round;
+  std::int64_t level;  // L + Σt·2^(15−s)
+  bool narrow;         // every sum and prediction fits 32 bits
+};
+
+inline std::uint16_t zigzag16(std::uint16_t value, std::uint16_t prediction) {
+  const auto s = static_cast<std::int16_t>(static_cast<std::uint16_t>(value - prediction));
+  return static_cast<std::uint16_t>((static_cast<std::uint16_t>(s) << 1) ^ static_cast<std::uint16_t>(s >> 15));
+}
+
+inline std::uint16_t unzigzag16(std::uint16_t z, std::uint16_t prediction) {
+  const auto d = static_cast<std::uint16_t>((z >> 1) ^ (0u - (z & 1u)));
+  return static_cast<std::uint16_t>(prediction + d);
+}
+
+template <class Acc>
+inline Acc centred(std::uint16_t u) {
+  return static_cast<std::int16_t>(u ^ 0x8000);
+}
+
+template <class Acc>
+inline Acc clamp16(Acc p) {
+  return p < 0 ? 0 : p > 65535 ? 65535 : p;
+}
+
+// The four rows an interior row is predicted from: the row itself (c), the
+// row before it along y (up), along z (back) and along both (up_back).
+struct RowNeighbours {
+  const std::uint16_t* up;
+  const std::uint16_t* back;
+  const std::uint16_t* up_back;
+};
+
+// Residuals z[1 .. len) of an interior row (y, z > 0) whose values are all
+// known (the encoder): independent voxels, one vectorisable loop.
+template <class Acc>
+void residual_row(const RowPredictor& p, const std::uint16_t* c, const RowNeighbours& n, std::uint32_t len,
+                  std::uint16_t* z) {
+  const Acc t0 = p.t[0], t1 = p.t[1], t2 = p.t[2], t3 = p.t[3], t4 = p.t[4], t5 = p.t[5], t6 = p.t[6];
+  const Acc round = p.round, level = static_cast<Acc>(p.level);
+  const unsigned shift = p.shift;
+  const std::uint16_t *up = n.up, *back = n.back, *ub = n.up_back;
+  for (std::uint32_t x = 1; x < len; ++x) {
+    const Acc s = t0 * centred<Acc>(c[x - 1]) + t1 * centred<Acc>(up[x]) + t2 * centred<Acc>(back[x]) +
+                  t3 * centred<Acc>(up[x - 1]) + t4 * centred<Acc>(back[x - 1]) + t5 * centred<Acc>(ub[x]) +
+                  t6 * centred<Acc>(ub[x - 1]);
+    const Acc q = clamp16<Acc>(((s + round) >> shift) + level);
+    z[x] = zigzag16(c[x], static_cast<std::uint16_t>(q));
+  }
+}
+
+// Σ (U − floor((S + r) / 2^s) − L) over an interior row, unclamped: what the
+// least-squares fit's level is the mean of.
+template <class Acc>
+std::int64_t level_row(const RowPredictor& p, const std::uint16_t* c, const RowNeighbours& n, std::uint32_t len) {
+  const Acc t0 = p.t[0], t1 = p.t[1], t2 = p.t[2], t3 = p.t[3], t4 = p.t[4], t5 = p.t[5], t6 = p.t[6];
+  const Acc round = p.round, level = static_cast<Acc>(p.level);
+  const unsigned shift = p.shift;
+  const std::uint16_t *up = n.up, *back = n.back, *ub = n.up_back;
+  std::int64_t sum = 0;
+  for (std::uint32_t x = 1; x < len; ++x) {
+    const Acc s = t0 * centred<Acc>(c[x - 1]) + t1 * centred<Acc>(up[x]) + t2 * centred<Acc>(back[x]) +
+                  t3 * centred<Acc>(up[x - 1]) + t4 * centred<Acc>(back[x - 1]) + t5 * centred<Acc>(ub[x]) +
+                  t6 * centred<Acc>(ub[x - 1]);
+    sum += std::int64_t{c[x]} - (((s + round) >> shift) + level);
+  }
+  return sum;
+}
+
+// Decodes c[1 .. len) of an interior row from its residuals (low bytes lo[],
+// high bytes hi[]): the six neighbours in earlier rows (and the rounding)
+// are summed and the residuals unzigzagged for the whole row first
+// (vectorised), which leaves the chain along x as short as it can be.
+template <class Acc>
+void decode_row(const RowPredictor& p, std::uint16_t* c, const RowNeighbours& n, std::uint32_t len,
+                const std::uint8_t* lo, const std::uint8_t* hi, Acc* partial, std::uint16_t* delta) {
+  const Acc t0 = p.t[0], t1 = p.t[1], t2 = p.t[2], t3 = p.t[3], t4 = p.t[4], t5 = p.t[5], t6 = p.t[6];
+  const Acc round = p.round, level = static_cast<Acc>(p.level);
+  const unsigned shift = p.shift;
+  const std::uint16_t *up = n.up, *back = n.back, *ub = n.up_back;
+  for (std::uint32_t x = 1; x < len; ++x) {
+    partial[x] = t1 * centred<Acc>(up[x]) + t2 * centred<Acc>(back[x]) + t3 * centred<Acc>(up[x - 1]) +
+                 t4 * centred<Acc>(back[x - 1]) + t5 * centred<Acc>(ub[x]) + t6 * centred<Acc>(ub[x - 1]) + round;
+    delta[x] = unzigzag16(static_cast<std::uint16_t>(lo[x] | hi[x] << 8), 0);
+  }
+  std::uint16_t previous = c[0];
+  for (std::uint32_t x = 1; x < len; ++x) {
+    const Acc q = clamp16<Acc>(((partial[x] + t0 * centred<Acc>(previous)) >> shift) + level);
+    previous = static_cast<std::uint16_t>(q + delta[x]);
+    c[x] = previous;
+  }
+}
+
+}  // namespace ivol::detail
