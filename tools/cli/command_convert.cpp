@@ -29,6 +29,7 @@ struct ConvertSettings {
   std::string codec = "zstd-planes";
   std::string format_version = "1.3";
   std::string structure = "auto";
+  unsigned brick = 32;  // bricked grid: voxels per brick side
   std::uint64_t memory_mib = 0;
   std::string out_type;
   unsigned level = 0;
@@ -153,6 +154,11 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
                    "values, else an octree; octree or bricked to choose")
       ->check(CLI::IsMember({"auto", "octree", "bricked"}))
       ->capture_default_str();
+  into->add_option("--brick", s->brick,
+                   "Bricked grid: voxels per brick side, 4 to 128, a power of two (32: smallest file; 16: a slice of "
+                   "a remote file reads half the bytes, the file about 4 % larger)")
+      ->check(CLI::IsMember({4u, 8u, 16u, 32u, 64u, 128u}))
+      ->capture_default_str();
   into->add_option("--memory", s->memory_mib, "About how many MiB the conversion may hold (default 2048)")
       ->check(whole_number());
   into->add_option("--temp-dir", s->temp_dir,
@@ -207,6 +213,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       if (!s->encoding.empty()) options.encoding = parse_encoding(s->encoding);
       if (!s->keep.empty()) options.keep = parse_keep(s->keep, "--keep");
       options.block_bytes = s->block_bytes;
+      while ((1u << options.brick_log2) > s->brick) --options.brick_log2;  // a power of two, checked above
       options.byte_planes = s->codec == "zstd-planes";
       options.framed_blocks = s->format_version == "1.3";
       options.structure = s->structure == "octree"    ? convert::StructureChoice::Octree
