@@ -1,9 +1,10 @@
 // libFuzzer harness for the converters' input parsers: the first byte picks
 // the format (volumes: raw with a size derived from the input, TIFF, HDF5,
 // OpenVDB; projections: raw, TIFF, HDF5 DXchange, HDF5 NXtomo; RTK geometry
-// XML; a Nikon .xtekct file and its angle files), the rest is the file. Whatever the input, opening and reading it must return
-// or throw (ivol::Error, or std::runtime_error from the projection readers):
-// no crash, no sanitizer report.
+// XML; a Nikon .xtekct file and its angle files), the rest is the file.
+// Whatever the input, opening and reading it must return or throw
+// (ivol::Error, or std::runtime_error from the projection readers): no
+// crash, no sanitizer report.
 //
 // libFuzzer runs it on the in-process HDF5 readers, so that a crash inside
 // libhdf5 is seen (and can be told from one of ivol's). With
@@ -18,8 +19,8 @@
 #include <string>
 
 #include "hdf5_io.hpp"
-#include "itk_image_io.hpp"
 #include "isolated_worker.hpp"
+#include "itk_image_io.hpp"
 #include "ivol/error.hpp"
 #include "ivol/recon/rtk_geometry_xml.hpp"
 #include "projection_io.hpp"
@@ -76,9 +77,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     }
     const bool hdf5_scan = data[0] == 0xEE;
     if (hdf5_scan)
-      projections = (isolated ? open_hdf5_projections(path, {true, 1e-3})
-                              : open_hdf5_projections_in_process(path, {true, 1e-3}))
-                        .projections;
+      projections =
+          (isolated ? open_hdf5_projections(path, {true, 1e-3}) : open_hdf5_projections_in_process(path, {true, 1e-3}))
+              .projections;
     switch (itk || hdf5_scan ? -1 : data[0] % 8) {
       case 4: {
         RawProjectionLayout layout;

@@ -313,8 +313,8 @@ XtekctFiles xtekct_files(const std::string& path, const XtekctKeys& k) {
     try {
       files.projections = resolve_tiff_files(files.source);
     } catch (const Error& e) {
-      bad(path, "no projections: " + std::string(e.what()) + " (Name=" + k.name + ", InputFolderName=" +
-                    k.input_folder + ")");
+      bad(path, "no projections: " + std::string(e.what()) + " (Name=" + k.name +
+                    ", InputFolderName=" + k.input_folder + ")");
     }
   }
   const fs::path ctdata = directory / "_ctdata.txt";
