@@ -1,9 +1,10 @@
 // libFuzzer harness for the converters' input parsers: the first byte picks
 // the format (volumes: raw with a size derived from the input, TIFF, HDF5,
-// OpenVDB; projections: raw, TIFF, HDF5 DXchange; RTK geometry XML), the
-// rest is the file. Whatever the input, opening and reading it must return
-// or throw (ivol::Error, or std::runtime_error from the projection readers):
-// no crash, no sanitizer report.
+// OpenVDB; projections: raw, TIFF, HDF5 DXchange, HDF5 NXtomo; RTK geometry
+// XML; a Nikon .xtekct file and its angle files), the rest is the file.
+// Whatever the input, opening and reading it must return or throw
+// (ivol::Error, or std::runtime_error from the projection readers): no
+// crash, no sanitizer report.
 //
 // libFuzzer runs it on the in-process HDF5 readers, so that a crash inside
 // libhdf5 is seen (and can be told from one of ivol's). With
@@ -18,8 +19,8 @@
 #include <string>
 
 #include "hdf5_io.hpp"
-#include "itk_image_io.hpp"
 #include "isolated_worker.hpp"
+#include "itk_image_io.hpp"
 #include "ivol/error.hpp"
 #include "ivol/recon/rtk_geometry_xml.hpp"
 #include "projection_io.hpp"
@@ -27,6 +28,7 @@
 #include "slab_io.hpp"
 #include "tiff_io.hpp"
 #include "vdb_io.hpp"
+#include "xtekct.hpp"
 
 // libhdf5's child process is this binary started again (isolated_worker.hpp).
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
@@ -36,9 +38,27 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size < 2) return 0;
+  // 0xED: the text of a Nikon .xtekct file, of a _ctdata.txt and of an .ang
+  // file, and the geometry of the keys with the angles read.
+  if (data[0] == 0xED) {
+    const std::string text(reinterpret_cast<const char*>(data + 1), size - 1);
+    try {
+      (void)ivol::convert::parse_ctdata_angles(text, "fuzz", 1 + size % 5);
+      (void)ivol::convert::parse_ang_angles(text, "fuzz", 1 + size % 5);
+    } catch (const std::exception&) {
+    }
+    try {
+      const ivol::convert::XtekctKeys keys = ivol::convert::parse_xtekct(text, "fuzz");
+      if (keys.projections <= (1u << 16))
+        (void)ivol::convert::xtekct_geometry(keys, std::vector<double>(keys.projections, 1.0), "fuzz");
+    } catch (const std::exception&) {
+    }
+    return 0;
+  }
   // First bytes 0xEA..0xEC: ITK images (MetaImage volume, NRRD volume,
-  // MetaImage projections); the others select as below (and as the kept
-  // findings were made).
+  // MetaImage projections); 0xEE an HDF5 scan of either layout (NXtomo,
+  // else DXchange); the others select as below (and as the kept findings
+  // were made).
   const bool itk = data[0] >= 0xEA && data[0] <= 0xEC;
   static const std::string base = "/dev/shm/ivol-fuzz-convert-" + std::to_string(getpid());
   const std::string path = itk ? base + (data[0] == 0xEB ? ".nrrd" : ".mha") : base;
@@ -55,7 +75,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       intensity.incident_intensity = 1000.0;
       projections = open_itk_image_projections(path, StoredQuantity::LineIntegrals, intensity).projections;
     }
-    switch (itk ? -1 : data[0] % 8) {
+    const bool hdf5_scan = data[0] == 0xEE;
+    if (hdf5_scan)
+      projections =
+          (isolated ? open_hdf5_projections(path, {true, 1e-3}) : open_hdf5_projections_in_process(path, {true, 1e-3}))
+              .projections;
+    switch (itk || hdf5_scan ? -1 : data[0] % 8) {
       case 4: {
         RawProjectionLayout layout;
         layout.columns = 1 + static_cast<int>(size % 5);

@@ -55,6 +55,9 @@ seed 234 "$root/tests/data/itk/u16.mha"
 seed 235 "$root/tests/data/itk/u8.nrrd"
 seed 235 "$root/tests/data/itk/i8.nrrd"
 seed 236 "$root/tests/data/itk/rtk/proj.mha"
+# NXtomo written by the nxtomo package (tests/data/nxtomo); a Nikon .xtekct.
+seed 238 "$root/tests/data/nxtomo/shepp_logan.nx"
+seed 237 "$root/tests/data/nikon/part.xtekct"
 # OpenVDB grids (selector 3; the OpenVDB reader has its own harness too,
 # run_vdb.sh), including those at the edges of the index space.
 for g in "$root"/tests/fuzz/regressions/vdb/*.vdb; do seed 3 "$g"; done

@@ -71,6 +71,9 @@ nlohmann::json voxel_json(const recon::VolumeGrid& grid) {
 }
 
 recon::VolumeGrid make_grid(const ReconSettings& s) {
+  if (s.size.empty() || s.voxel.empty())
+    throw UsageError(s.size.empty() ? "--size" : "--voxel",
+                     "--size and --voxel are required (the scan's files do not propose a grid)");
   recon::VolumeGrid grid;
   const std::array<double, 3> size = parse_triple(s.size, "--size", true);
   for (int a = 0; a < 3; ++a) {
@@ -107,6 +110,27 @@ void scan_inputs(const ScanSettings& scan, std::vector<std::string>& inputs, std
   for (const std::string& f : scan.flats) add(f, "flat");
   for (const std::string& f : scan.darks) add(f, "dark");
   if (!scan.geometry_xml.empty()) add(scan.geometry_xml, "geometry");
+  for (const auto& [path, role] : scan_companion_files(scan)) {
+    inputs.push_back(path);
+    roles.push_back(nlohmann::json{{"role", role}});
+  }
+}
+
+// --size and --voxel, else the grid the scan's files propose (a Nikon
+// scan's VoxelsX/Y/Z and VoxelSizeX/Y/Z).
+recon::VolumeGrid grid_of(ReconSettings& s, const OpenedScan& scan) {
+  if (scan.has_grid && s.size.empty() && s.voxel.empty()) {
+    auto text = [](double v) {
+      std::ostringstream out;
+      out.precision(17);
+      out << v;
+      return out.str();
+    };
+    s.size = std::to_string(scan.grid_size[0]) + "," + std::to_string(scan.grid_size[1]) + "," +
+             std::to_string(scan.grid_size[2]);
+    s.voxel = text(scan.grid_voxel[0]) + "," + text(scan.grid_voxel[1]) + "," + text(scan.grid_voxel[2]);
+  }
+  return make_grid(s);
 }
 
 constexpr recon::DetectionRule kDetection{};
@@ -348,9 +372,11 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
   cmd->add_option("-o,--output", s->output, "Output .ivol file")->required();
   cmd->add_flag("-f,--force", s->force, "Replace the output if it exists");
   auto* volume = cmd->add_option_group("volume");
-  volume->add_option("--size", s->size, "N or X,Y,Z voxels")->required()->check(checked(check_size));
-  volume->add_option("--voxel", s->voxel, "Voxel size in mm: S, or SX,SY,SZ (z along the rotation axis)")
-      ->required()
+  volume->add_option("--size", s->size, "N or X,Y,Z voxels (default: the grid a Nikon .xtekct file proposes)")
+      ->check(checked(check_size));
+  volume
+      ->add_option("--voxel", s->voxel,
+                   "Voxel size in mm: S, or SX,SY,SZ (z along the rotation axis; default: as --size)")
       ->check(checked(check_voxel));
   volume->add_option("--origin", s->origin, "X,Y,Z of voxel 0's centre, mm (default: volume centred on the axis)")
       ->check(checked([](const std::string& v) { parse_triple(v, "--origin", false); }));
@@ -441,14 +467,16 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     // Hashed on a thread of its own while the reconstruction runs.
     std::shared_ptr<SourceDigests> digests;
     if (writes) digests = std::make_shared<SourceDigests>(inputs, roles);
-    const recon::VolumeGrid grid = make_grid(*s);
+    if (s->size.empty() != s->voxel.empty())
+      throw UsageError(s->size.empty() ? "--size" : "--voxel", "--size and --voxel go together");
+    OpenedScan scan = open_scan(s->scan);
+    const recon::VolumeGrid grid = grid_of(*s, scan);
     // Before any work (the preview included): the file and, for an octree,
     // the spill file must find room (convert/disk_space.hpp).
     if (writes && !s->no_disk_check)
       convert::require_disk_space(convert::ivol_disk_needs(grid.size, parse_encoding(s->encoding),
                                                            s->structure.empty() || s->structure == "octree", s->output,
                                                            s->temp_dir));
-    OpenedScan scan = open_scan(s->scan);
     recon::FdkOptions options;
     options.window = recon::parse_ramp_window(s->window);
     options.cutoff = s->cutoff;
@@ -464,6 +492,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     recon::FdkOptions reconstructor_options = options;
     if (mpi && s->structure.empty()) reconstructor_options.exchange = nullptr;
     recon::FdkReconstructor reconstructor(*scan.projections, scan.geometry, reconstructor_options);
+    for (const std::string& w : scan.warnings)
+      if (!quiet) std::cerr << "ivol recon: warning: " << w << "\n";
     for (const std::string& w : reconstructor.warnings())
       if (!quiet) std::cerr << "ivol recon: warning: " << w << "\n";
     for (const std::string& n : scan.notes)

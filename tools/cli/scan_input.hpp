@@ -3,9 +3,11 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <array>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "ivol/recon/geometry.hpp"
@@ -15,7 +17,7 @@ namespace ivol::cli {
 
 struct ScanSettings {
   std::string projections;  // file, folder or glob
-  std::string format;       // raw, tiff, hdf5; default by extension
+  std::string format;       // raw, tiff, hdf5, itk, xtekct; default by extension
   // raw
   std::string detector;  // C,R
   std::size_t views = 0;
@@ -41,7 +43,19 @@ struct OpenedScan {
   recon::ScanGeometry geometry;
   nlohmann::json description;      // for the file's provenance
   std::vector<std::string> notes;  // what was done to the projections, for the user
+  // Doubtful but usable geometry, each naming its numbers (recon prints them).
+  std::vector<std::string> warnings;
+  // The grid the scan's own files propose (a Nikon scan's VoxelsX/Y/Z and
+  // VoxelSizeX/Y/Z), for a recon without --size and --voxel.
+  bool has_grid = false;
+  std::array<std::uint32_t, 3> grid_size{0, 0, 0};
+  std::array<double, 3> grid_voxel{0.0, 0.0, 0.0};
+  std::string grid_from;
 };
+
+// The files a scan reads besides PROJECTIONS and the options' files (a Nikon
+// scan's TIFF folder and angle file), with their roles, for provenance.
+std::vector<std::pair<std::string, std::string>> scan_companion_files(const ScanSettings& settings);
 
 // Throws ivol::Error (InvalidArgument) naming the option for bad options,
 // std::runtime_error naming the file for unreadable inputs.

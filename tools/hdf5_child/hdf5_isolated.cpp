@@ -18,6 +18,7 @@ constexpr char kOpen = 'o';
 constexpr char kRead = 'r';
 constexpr const char* kVolumeWorker = "hdf5-volume";
 constexpr const char* kProjectionWorker = "hdf5-dxchange";
+constexpr const char* kScanWorker = "hdf5-scan";
 
 // --- Volumes ----------------------------------------------------------------
 
@@ -118,6 +119,21 @@ std::string projection_parameters(const std::string& path, const DxchangeOptions
   return std::move(out.bytes());
 }
 
+// Reads rows of the reader the child opened, converted to line integrals
+// there: the same requests as the DXchange worker's.
+void serve_rows(ProjectionReader& r, WireReader& in, WorkerReply& out) {
+  const auto view = in.get<std::uint64_t>();
+  const int row_begin = in.get<int>();
+  const int row_end = in.get<int>();
+  const std::uint64_t clamped_before = r.clamped_pixels();
+  const std::size_t count = static_cast<std::size_t>(row_end - row_begin) * static_cast<std::size_t>(r.columns());
+  out.bulk.resize(count * sizeof(float));
+  r.read_rows(static_cast<std::size_t>(view), row_begin, row_end, reinterpret_cast<float*>(out.bulk.data()));
+  WireWriter reply;
+  reply.put<std::uint64_t>(r.clamped_pixels() - clamped_before);
+  out.reply = std::move(reply.bytes());
+}
+
 WorkerHandler projection_handler(std::string_view parameters) {
   WireReader in{std::string(parameters)};
   const std::string path = in.get_string();
@@ -141,17 +157,7 @@ WorkerHandler projection_handler(std::string_view parameters) {
     }
     if (operation != kRead || !*reader)
       throw Error(ErrorClass::InvalidArgument, "isolated HDF5 reader: unexpected request " + std::string(1, operation));
-    const auto view = in.get<std::uint64_t>();
-    const int row_begin = in.get<int>();
-    const int row_end = in.get<int>();
-    ProjectionReader& r = **reader;
-    const std::uint64_t clamped_before = r.clamped_pixels();
-    const std::size_t count = static_cast<std::size_t>(row_end - row_begin) * static_cast<std::size_t>(r.columns());
-    out.bulk.resize(count * sizeof(float));
-    r.read_rows(static_cast<std::size_t>(view), row_begin, row_end, reinterpret_cast<float*>(out.bulk.data()));
-    WireWriter reply;
-    reply.put<std::uint64_t>(r.clamped_pixels() - clamped_before);
-    out.reply = std::move(reply.bytes());
+    serve_rows(**reader, in, out);
   };
 }
 
@@ -167,10 +173,12 @@ struct ScanShape {
 // exact, so the values are those of the in-process reader.
 class IsolatedDxchangeReader final : public ProjectionReader {
  public:
-  IsolatedDxchangeReader(const std::string& path, const ScanShape& shape, std::unique_ptr<IsolatedWorker> worker)
+  IsolatedDxchangeReader(const std::string& path, const ScanShape& shape, std::unique_ptr<IsolatedWorker> worker,
+                         std::string dataset = "/exchange/data")
       : ProjectionReader(path, shape.columns, shape.rows, shape.views),
         quantity_(shape.quantity),
-        worker_(std::move(worker)) {}
+        worker_(std::move(worker)),
+        dataset_(std::move(dataset)) {}
 
   StoredQuantity quantity() const override { return quantity_; }
 
@@ -182,7 +190,7 @@ class IsolatedDxchangeReader final : public ProjectionReader {
     line_integrals_.resize(count);
     WireReader reply(worker_->call(request.bytes(),
                                    "reading view " + std::to_string(view) + " rows " + std::to_string(row_begin) +
-                                       ".." + std::to_string(row_end) + " of dataset /exchange/data",
+                                       ".." + std::to_string(row_end) + " of dataset " + dataset_,
                                    line_integrals_.data(), count * sizeof(float)));
     count_clamped(reply.get<std::uint64_t>());
     for (std::size_t i = 0; i < count; ++i) out[i] = line_integrals_[i];
@@ -191,11 +199,58 @@ class IsolatedDxchangeReader final : public ProjectionReader {
  private:
   StoredQuantity quantity_;
   std::unique_ptr<IsolatedWorker> worker_;
+  std::string dataset_;
   std::vector<float> line_integrals_;
 };
 
+// --- HDF5 scans of either layout (NXtomo or DXchange) ----------------------
+
+void put_length(WireWriter& out, const LengthField& length) {
+  out.put(length.present).put(length.mm).put_string(length.field);
+}
+
+LengthField get_length(WireReader& in) {
+  LengthField length;
+  length.present = in.get<bool>();
+  length.mm = in.get<double>();
+  length.field = in.get_string();
+  return length;
+}
+
+WorkerHandler scan_handler(std::string_view parameters) {
+  WireReader in{std::string(parameters)};
+  const std::string path = in.get_string();
+  DxchangeOptions options;
+  options.assume_line_integrals = in.get<bool>();
+  options.minimum_signal = in.get<double>();
+  auto reader = std::make_shared<std::unique_ptr<ProjectionReader>>();
+  return [path, options, reader](std::string_view request, WorkerReply& out) {
+    WireReader in{std::string(request)};
+    const char operation = in.get<char>();
+    if (operation == kOpen) {
+      Hdf5Scan scan = open_hdf5_projections_in_process(path, options);
+      *reader = std::move(scan.projections);
+      const ProjectionReader& r = **reader;
+      WireWriter reply;
+      reply.put(r.columns()).put(r.rows()).put<std::uint64_t>(r.view_count()).put(r.quantity());
+      reply.put_string(scan.layout).put_string(scan.entry).put_string(scan.angles_field);
+      reply.put<std::uint64_t>(scan.angles_deg.size());
+      for (double angle : scan.angles_deg) reply.put(angle);
+      for (const LengthField* l : {&scan.pitch_u, &scan.pitch_v, &scan.source_sample, &scan.sample_detector})
+        put_length(reply, *l);
+      reply.put(scan.flat_images).put(scan.dark_images).put(scan.skipped_images);
+      out.reply = std::move(reply.bytes());
+      return;
+    }
+    if (operation != kRead || !*reader)
+      throw Error(ErrorClass::InvalidArgument, "isolated HDF5 reader: unexpected request " + std::string(1, operation));
+    serve_rows(**reader, in, out);
+  };
+}
+
 const WorkerKind volume_worker(kVolumeWorker, volume_handler);
 const WorkerKind projection_worker(kProjectionWorker, projection_handler);
+const WorkerKind scan_worker(kScanWorker, scan_handler);
 
 }  // namespace
 
@@ -219,6 +274,33 @@ DxchangeProjections open_dxchange_projections(const std::string& path, const Dxc
   scan.theta_deg.resize(static_cast<std::size_t>(reply.get<std::uint64_t>()));
   for (double& angle : scan.theta_deg) angle = reply.get<double>();
   scan.projections = std::make_unique<IsolatedDxchangeReader>(path, shape, std::move(worker));
+  return scan;
+}
+
+Hdf5Scan open_hdf5_projections(const std::string& path, const DxchangeOptions& options) {
+  auto worker = std::make_unique<IsolatedWorker>(path, kLibrary, kScanWorker, projection_parameters(path, options));
+  WireWriter request;
+  request.put(kOpen);
+  WireReader reply(worker->call(request.bytes(), "opening the projections (NXtomo or DXchange)"));
+  ScanShape shape;
+  shape.columns = reply.get<int>();
+  shape.rows = reply.get<int>();
+  shape.views = static_cast<std::size_t>(reply.get<std::uint64_t>());
+  shape.quantity = reply.get<StoredQuantity>();
+  Hdf5Scan scan;
+  scan.layout = reply.get_string();
+  scan.entry = reply.get_string();
+  scan.angles_field = reply.get_string();
+  scan.angles_deg.resize(static_cast<std::size_t>(reply.get<std::uint64_t>()));
+  for (double& angle : scan.angles_deg) angle = reply.get<double>();
+  for (LengthField* l : {&scan.pitch_u, &scan.pitch_v, &scan.source_sample, &scan.sample_detector})
+    *l = get_length(reply);
+  scan.flat_images = reply.get<std::uint64_t>();
+  scan.dark_images = reply.get<std::uint64_t>();
+  scan.skipped_images = reply.get<std::uint64_t>();
+  const std::string dataset =
+      scan.layout == "NXtomo" ? scan.entry + "/instrument/detector/data" : std::string("/exchange/data");
+  scan.projections = std::make_unique<IsolatedDxchangeReader>(path, shape, std::move(worker), dataset);
   return scan;
 }
 

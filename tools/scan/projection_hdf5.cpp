@@ -8,7 +8,7 @@
 #include <limits>
 #include <utility>
 
-#include "hdf5_support.hpp"
+#include "hdf5_datasets.hpp"
 #include "ivol/error.hpp"
 #include "projection_io.hpp"
 #include "staged_file.hpp"
@@ -21,59 +21,14 @@ constexpr const char* kWhite = "/exchange/data_white";
 constexpr const char* kDark = "/exchange/data_dark";
 constexpr const char* kTheta = "/exchange/theta";
 
+using hdf5::Dataset;
+using hdf5::exists;
 using hdf5::Handle;
+using hdf5::open_dataset;
+using hdf5::read_box;
+using hdf5::shape_text;
 using QuietHdf5Errors = hdf5::QuietErrors;
 std::string hdf5_reason() { return hdf5::reason(); }
-
-// True when every link of an absolute path exists (H5Lexists needs the
-// parents to exist).
-bool exists(hid_t file, const std::string& path) {
-  for (std::size_t slash = path.find('/', 1);; slash = path.find('/', slash + 1)) {
-    const std::string prefix = path.substr(0, slash);
-    if (H5Lexists(file, prefix.c_str(), H5P_DEFAULT) <= 0) return false;
-    if (slash == std::string::npos) return true;
-  }
-}
-
-// An open numeric dataset and its shape.
-struct Dataset {
-  Handle id;
-  Handle space;
-  std::vector<hsize_t> shape;
-};
-
-Dataset open_dataset(hid_t file, const std::string& path, const char* name) {
-  const std::string where = path + ": dataset " + name;
-  Dataset d;
-  const Handle access = hdf5::access_caching_one_image(file, name);
-  d.id = Handle(H5Dopen2(file, name, access.get()), H5Dclose);
-  if (!d.id.valid()) throw Error(ErrorClass::Malformed, where + " cannot be opened" + hdf5_reason());
-  Handle type(H5Dget_type(d.id.get()), H5Tclose);
-  const H5T_class_t type_class = H5Tget_class(type.get());
-  if (type_class != H5T_INTEGER && type_class != H5T_FLOAT)
-    throw Error(ErrorClass::InvalidArgument, where + ": samples are not integers or floating-point numbers");
-  d.space = Handle(H5Dget_space(d.id.get()), H5Sclose);
-  const int rank = H5Sget_simple_extent_ndims(d.space.get());
-  if (rank < 0 || rank > 8) throw Error(ErrorClass::Malformed, where + ": unreadable shape" + hdf5_reason());
-  d.shape.resize(static_cast<std::size_t>(rank));
-  H5Sget_simple_extent_dims(d.space.get(), d.shape.data(), nullptr);
-  return d;
-}
-
-std::string shape_text(const std::vector<hsize_t>& shape) {
-  std::string text = "(";
-  for (std::size_t i = 0; i < shape.size(); ++i) text += (i ? ", " : "") + std::to_string(shape[i]);
-  return text + ")";
-}
-
-// Reads a box of a dataset (start and count per axis) as doubles.
-void read_box(const Dataset& d, const std::vector<hsize_t>& start, const std::vector<hsize_t>& count, double* out,
-              const std::string& where) {
-  H5Sselect_hyperslab(d.space.get(), H5S_SELECT_SET, start.data(), nullptr, count.data(), nullptr);
-  Handle memory(H5Screate_simple(static_cast<int>(count.size()), count.data(), nullptr), H5Sclose);
-  if (H5Dread(d.id.get(), H5T_NATIVE_DOUBLE, memory.get(), d.space.get(), H5P_DEFAULT, out) < 0)
-    throw Error(ErrorClass::Malformed, where + ": cannot read" + hdf5_reason());
-}
 
 // Mean over the first axis of (n, rows, columns), or the one (rows, columns)
 // image.

@@ -191,6 +191,40 @@ DxchangeProjections open_dxchange_projections(const std::string& path, const Dxc
 // which must see the library's crashes to tell them from ivol's.
 DxchangeProjections open_dxchange_projections_in_process(const std::string& path, const DxchangeOptions& options = {});
 
+// --- HDF5 projections of either layout: NeXus NXtomo or DXchange ----------
+
+// A length the file gives, converted to mm, and the field it came from.
+struct LengthField {
+  bool present = false;
+  double mm = 0.0;
+  std::string field;  // dataset path and units, for "which value came from where"
+};
+
+struct Hdf5Scan {
+  std::unique_ptr<ProjectionReader> projections;
+  std::string layout;              // "NXtomo" or "DXchange"
+  std::string entry;               // the NXtomo entry ("/entry0000"); empty for DXchange
+  std::vector<double> angles_deg;  // one per view; empty if the file has none
+  std::string angles_field;        // where they came from
+  LengthField pitch_u, pitch_v;    // NXtomo detector x_pixel_size, y_pixel_size
+  LengthField source_sample;       // NXtomo instrument/source/distance (absolute value)
+  LengthField sample_detector;     // NXtomo instrument/detector/distance
+  std::uint64_t flat_images = 0, dark_images = 0, skipped_images = 0;  // NXtomo image keys 1, 2, 3
+};
+
+// A file with one NXtomo entry (a top-level NXentry whose definition is
+// NXtomo) is read as NXtomo: ENTRY/instrument/detector/data (frames, rows,
+// columns) with image_key per frame, 0 projection, 1 flat, 2 dark, 3
+// invalid (skipped); flats and darks averaged over all their frames, as
+// DXchange's readers do; angles from ENTRY/sample/rotation_angle (degrees,
+// or radians by its units attribute); lengths by their units attributes
+// (metres without one). Without flat frames the data must be line
+// integrals already (options.assume_line_integrals). A file of several
+// NXtomo entries is refused; one without any is read as DXchange.
+// libhdf5 runs in a child process (as for open_dxchange_projections).
+Hdf5Scan open_hdf5_projections(const std::string& path, const DxchangeOptions& options = {});
+Hdf5Scan open_hdf5_projections_in_process(const std::string& path, const DxchangeOptions& options = {});
+
 // Flat and dark images (rows × columns each) for write_dxchange.
 struct FieldImages {
   std::vector<float> flat;  // empty: write line integrals, no data_white
