@@ -44,6 +44,21 @@ FdkReport FdkReconstructor::Impl::new_report() const {
   return report;
 }
 
+void FdkReconstructor::Impl::prepare_filtered_rows(const std::vector<detail::RowBand>& bands, int max_band_rows,
+                                                   FdkReport& report) {
+  if (!filtered_rows) {
+    report.rows_filtered = detail::rows_filtered_per_slab(bands, geometry.view_count());
+    return;
+  }
+  try {
+    report.rows_filtered = detail::fill_filtered_rows(*filtered_rows, device_pointers(), bands, max_band_rows);
+  } catch (const cl::Error& error) {
+    throw std::runtime_error("FDK: filtering: " + detail::describe(error));
+  }
+  report.filtered_rows_host_bytes = filtered_rows->host_bytes();
+  report.filtered_rows_disk_bytes = filtered_rows->disk_bytes();
+}
+
 std::vector<detail::FdkDevice*> FdkReconstructor::Impl::device_pointers() const {
   std::vector<detail::FdkDevice*> pointers;
   for (const auto& d : devices) pointers.push_back(d.get());
@@ -89,6 +104,14 @@ FdkReconstructor::FdkReconstructor(ProjectionSource& projections, const ScanGeom
   m.problem = detail::make_problem(projections, m.geometry, options, m.shape);
   m.problem.projections_mutex = &m.projections_mutex;
   m.handles = detail::choose_devices(options.devices);
+  if (options.cache_filtered_rows) {
+    m.filtered_rows = std::make_unique<detail::FilteredRows>(
+        m.geometry.view_count(), m.geometry.detector.rows, m.geometry.detector.columns,
+        options.filtered_rows_memory_limit > 0 ? options.filtered_rows_memory_limit
+                                               : detail::default_filtered_rows_budget(),
+        options.temp_directory);
+    m.problem.filtered_rows = m.filtered_rows.get();
+  }
   try {
     for (const detail::DeviceHandle& h : m.handles)
       m.devices.push_back(std::make_unique<detail::FdkDevice>(h, m.problem));
@@ -142,6 +165,17 @@ FdkReport FdkReconstructor::reconstruct(const VolumeGrid& grid, const SlabSink& 
     const std::uint32_t first = k_begin + static_cast<std::uint32_t>(s) * plan.slices;
     return SlabRange{first, std::min(k_end, first + plan.slices)};
   };
+  const bool distributed = m.options.exchange && m.options.exchange->size() > 1;
+  try {
+    std::vector<detail::RowBand> bands;  // this process's slabs'
+    for (std::size_t s = 0; s < slab_count; ++s)
+      if (!distributed || m.options.exchange->owner(s, slab_count) == m.options.exchange->rank())
+        bands.push_back(detail::rows_for_slab(m.geometry, grid_copy, slab_bounds(s).first, slab_bounds(s).end));
+    m.prepare_filtered_rows(bands, plan.band_rows, report);
+  } catch (...) {
+    m.problem.grid = nullptr;
+    throw;
+  }
   try {
     detail::for_each_slab(
         m.device_pointers(), slab_count,
@@ -165,7 +199,7 @@ FdkReport FdkReconstructor::reconstruct(const VolumeGrid& grid, const SlabSink& 
   m.add_timings_since(before, report.timings);
   // What this process backprojected: all slices, or its own slabs' when distributed.
   std::uint64_t slices = k_end - k_begin;
-  if (m.options.exchange && m.options.exchange->size() > 1) {
+  if (distributed) {
     slices = 0;
     for (std::size_t s = 0; s < slab_count; ++s)
       if (m.options.exchange->owner(s, slab_count) == m.options.exchange->rank())

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "fdk_device.hpp"
+#include "fdk_filtered_rows.hpp"
 #include "ivol/recon/fdk.hpp"
 
 namespace ivol::recon::detail {
@@ -64,7 +65,11 @@ struct FdkReconstructor::Impl {
   detail::FdkProblem problem;
   std::vector<detail::DeviceHandle> handles;
   std::vector<std::unique_ptr<detail::FdkDevice>> devices;
+  std::unique_ptr<detail::FilteredRows> filtered_rows;  // with FdkOptions::cache_filtered_rows
   std::vector<detail::FdkDevice*> device_pointers() const;
+  // Filters what `bands` (this process's slabs') need: with the cache only
+  // the rows it lacks, into it; into the report, the rows filtered.
+  void prepare_filtered_rows(const std::vector<detail::RowBand>& bands, int max_band_rows, FdkReport& report);
   // A report that already says what the scan and the devices are.
   FdkReport new_report() const;
   // The devices' timings now, and what they added since `before` into a report.

@@ -323,6 +323,17 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
   const double constructor_setup = m.setup_seconds;
   m.setup_seconds = 0;
   report.timings.setup = constructor_setup + detail::seconds_since(start);
+  try {
+    std::vector<detail::RowBand> own_bands;  // this process's slabs'
+    const bool distributed = m.options.exchange && m.options.exchange->size() > 1;
+    for (std::size_t s = 0; s < slab_count; ++s)
+      if (!distributed || m.options.exchange->owner(s, slab_count) == m.options.exchange->rank())
+        own_bands.push_back(bands[s]);
+    m.prepare_filtered_rows(own_bands, widest, report);
+  } catch (...) {
+    m.problem.grid = nullptr;
+    throw;
+  }
 
   // A slab's tasks are made by the thread that computes it and kept until the
   // slab is delivered, so only the slabs in flight hold task lists.

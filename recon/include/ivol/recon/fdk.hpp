@@ -52,6 +52,17 @@ struct FdkOptions {
   // fdk_bench). false keeps the kernel (to compare the two). Filtering and
   // the structure path stay on OpenCL.
   bool native_cpu_backprojection = true;
+  // Filter each detector row of each view once for the reconstructor's
+  // life, however many slabs (or reconstruct() calls) read it: filtered rows
+  // are kept in host memory up to filtered_rows_memory_limit, the rest in a
+  // temporary file. false filters each slab's rows for that slab (to
+  // compare the two; the same bits either way).
+  bool cache_filtered_rows = true;
+  // Bytes of host memory the filtered rows may take; 0 means a quarter of
+  // the physical memory. Rows beyond it go to an unlinked temporary file.
+  std::uint64_t filtered_rows_memory_limit = 0;
+  // Where that file goes; empty means $TMPDIR, else /tmp.
+  std::string temp_directory;
   // With an exchange, this process is one rank of a distributed
   // reconstruction (slab_exchange.hpp): it reconstructs only the slabs it
   // owns, and only rank 0's sink (or structure) receives the volume. Slabs
@@ -86,6 +97,14 @@ struct FdkReport {
   // coarse voxel's eight samples count as eight).
   double gups() const;
   std::uint64_t voxel_updates = 0;
+  // Detector rows through the ramp filter in this call, summed over views:
+  // with cache_filtered_rows at most views × detector rows per reconstructor
+  // (rows filtered by an earlier call are not filtered again).
+  std::uint64_t rows_filtered = 0;
+  // What the filtered rows take after this call, in host memory and in the
+  // temporary file (0 without cache_filtered_rows).
+  std::uint64_t filtered_rows_host_bytes = 0;
+  std::uint64_t filtered_rows_disk_bytes = 0;
 };
 
 // Receives slices [k_begin, k_end) of the volume, nx·ny·(k_end − k_begin)
@@ -123,8 +142,8 @@ class FdkReconstructor {
   // task lists of the slabs in flight (32 bytes per 128 full-resolution
   // voxels, 36 per lone voxel), and 4 to 8 bytes per brick.
   using StructureProgress = std::function<void(std::uint32_t z_complete)>;
-  FdkReport reconstruct_structure(const VolumeGrid& grid, const VoxelStructure& structure,
-                                  StructureValueWindow& values, const StructureProgress& progress);
+  FdkReport reconstruct_structure(const VolumeGrid& grid, const VoxelStructure& structure, StructureValueWindow& values,
+                                  const StructureProgress& progress);
 
   std::vector<std::string> device_names() const;
   // Warnings about the scan (e.g. a short arc), known before reconstructing.
