@@ -66,6 +66,9 @@ TEST(FdkFilteredRows, ThinSlabsFilterEachRowOnce) {
     EXPECT_EQ(report.rows_filtered, once);
     EXPECT_GT(report.filtered_rows_host_bytes, 0U);
     EXPECT_EQ(report.filtered_rows_disk_bytes, 0U);
+    // Rows behind the slabs are released: thin slabs never hold them all.
+    const std::uint64_t all_rows = 2 * ((once / views + 1) / 2) * views * scan.geometry.detector.columns * 4;
+    if (slices == 1) EXPECT_LT(report.filtered_rows_host_bytes, all_rows);
 
     // Without the cache the same slabs filter their overlapping bands again.
     FdkOptions uncached = cached;
@@ -100,8 +103,9 @@ TEST(FdkFilteredRows, RowsBeyondTheBudgetGoToAnUnlinkedFile) {
     EXPECT_TRUE(same_bits(reconstruct_fdk_dense(scan.projections, scan.geometry, scan.grid, options, &report), whole));
     EXPECT_EQ(report.rows_filtered, whole_report.rows_filtered);
     EXPECT_LE(report.filtered_rows_host_bytes, limit);
-    EXPECT_EQ(report.filtered_rows_host_bytes, limit == 1 ? 0 : 5 * pair_bytes);
-    EXPECT_EQ(report.filtered_rows_host_bytes + report.filtered_rows_disk_bytes,
+    if (limit == 1) EXPECT_EQ(report.filtered_rows_host_bytes, 0U);
+    EXPECT_GT(report.filtered_rows_disk_bytes, 0U);
+    EXPECT_LE(report.filtered_rows_host_bytes + report.filtered_rows_disk_bytes,
               (whole_report.rows_filtered / scan.geometry.view_count() + 1) / 2 * pair_bytes);
     EXPECT_TRUE(std::filesystem::is_empty(dir)) << "the temporary file has a name";
   }
@@ -134,7 +138,10 @@ TEST(FdkFilteredRows, LaterCallsReuseTheRows) {
     filtered += reconstructor.reconstruct(scan.grid, sink, k, k + 4).rows_filtered;
   EXPECT_TRUE(same_bits(volume, whole));
   EXPECT_EQ(filtered, whole_report.rows_filtered);
-  EXPECT_EQ(reconstructor.reconstruct(scan.grid, sink).rows_filtered, 0U);
+  // The last call's rows stay; the rows behind it went, and come back filtered again.
+  const std::uint32_t last = scan.grid.size[2] - 4;
+  EXPECT_EQ(reconstructor.reconstruct(scan.grid, sink, last, last + 4).rows_filtered, 0U);
+  EXPECT_GT(reconstructor.reconstruct(scan.grid, sink).rows_filtered, 0U);
   EXPECT_TRUE(same_bits(volume, whole));
 }
 

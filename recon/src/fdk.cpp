@@ -44,19 +44,16 @@ FdkReport FdkReconstructor::Impl::new_report() const {
   return report;
 }
 
-void FdkReconstructor::Impl::prepare_filtered_rows(const std::vector<detail::RowBand>& bands, int max_band_rows,
-                                                   FdkReport& report) {
-  if (!filtered_rows) {
-    report.rows_filtered = detail::rows_filtered_per_slab(bands, geometry.view_count());
-    return;
-  }
-  try {
-    report.rows_filtered = detail::fill_filtered_rows(*filtered_rows, device_pointers(), bands, max_band_rows);
-  } catch (const cl::Error& error) {
-    throw std::runtime_error("FDK: filtering: " + detail::describe(error));
-  }
-  report.filtered_rows_host_bytes = filtered_rows->host_bytes();
-  report.filtered_rows_disk_bytes = filtered_rows->disk_bytes();
+std::uint64_t FdkReconstructor::Impl::filter_rows_for(detail::FdkDevice& device, const detail::RowBand& band,
+                                                      int max_band_rows) {
+  if (!filtered_rows) return static_cast<std::uint64_t>(band.rows()) * geometry.view_count();
+  return filtered_rows->ensure(device, band, max_band_rows);
+}
+
+void FdkReconstructor::Impl::report_filtered_rows(FdkReport& report) const {
+  if (!filtered_rows) return;
+  report.filtered_rows_host_bytes = filtered_rows->peak_host_bytes();
+  report.filtered_rows_disk_bytes = filtered_rows->peak_disk_bytes();
 }
 
 std::vector<detail::FdkDevice*> FdkReconstructor::Impl::device_pointers() const {
@@ -166,22 +163,24 @@ FdkReport FdkReconstructor::reconstruct(const VolumeGrid& grid, const SlabSink& 
     return SlabRange{first, std::min(k_end, first + plan.slices)};
   };
   const bool distributed = m.options.exchange && m.options.exchange->size() > 1;
-  try {
-    std::vector<detail::RowBand> bands;  // this process's slabs'
-    for (std::size_t s = 0; s < slab_count; ++s)
-      if (!distributed || m.options.exchange->owner(s, slab_count) == m.options.exchange->rank())
-        bands.push_back(detail::rows_for_slab(m.geometry, grid_copy, slab_bounds(s).first, slab_bounds(s).end));
-    m.prepare_filtered_rows(bands, plan.band_rows, report);
-  } catch (...) {
-    m.problem.grid = nullptr;
-    throw;
-  }
+  // This process's slabs' bands, in slab order: rows no later slab needs are released.
+  std::vector<std::size_t> position(slab_count, 0);
+  std::vector<detail::RowBand> bands;
+  for (std::size_t s = 0; s < slab_count; ++s)
+    if (!distributed || m.options.exchange->owner(s, slab_count) == m.options.exchange->rank()) {
+      position[s] = bands.size();
+      bands.push_back(detail::rows_for_slab(m.geometry, grid_copy, slab_bounds(s).first, slab_bounds(s).end));
+    }
+  detail::RowRelease release(m.filtered_rows.get(), bands);
+  std::atomic<std::uint64_t> rows_filtered{0};
   try {
     detail::for_each_slab(
         m.device_pointers(), slab_count,
         [&](detail::FdkDevice& device, std::size_t s, std::vector<float>& data) {
           const SlabRange bounds = slab_bounds(s);
+          rows_filtered += m.filter_rows_for(device, bands[position[s]], plan.band_rows);
           device.reconstruct_slab(bounds.first, bounds.end, data);
+          release.done(position[s]);
         },
         [&](std::size_t s, std::vector<float>& data) {
           const auto delivered = std::chrono::steady_clock::now();
@@ -197,6 +196,8 @@ FdkReport FdkReconstructor::reconstruct(const VolumeGrid& grid, const SlabSink& 
   m.problem.grid = nullptr;
 
   m.add_timings_since(before, report.timings);
+  report.rows_filtered = rows_filtered.load();
+  m.report_filtered_rows(report);
   // What this process backprojected: all slices, or its own slabs' when distributed.
   std::uint64_t slices = k_end - k_begin;
   if (distributed) {

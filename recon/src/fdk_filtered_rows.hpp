@@ -12,6 +12,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -28,57 +29,68 @@ class FilteredRows {
   FilteredRows(const FilteredRows&) = delete;
   FilteredRows& operator=(const FilteredRows&) = delete;
 
-  int columns() const { return columns_; }
-  std::size_t views() const { return views_; }
-  bool has_pair(int pair) const { return where_[static_cast<std::size_t>(pair)] != kMissing; }
-  // Finds room for a pair: host memory within the budget, else the file.
-  // From one thread, before any store() or load() of the pair.
-  void reserve(int pair);
-  // Marks a reserved pair missing again (its filtering failed); its room
-  // is not reused.
-  void forget(int pair) { where_.at(static_cast<std::size_t>(pair)) = kMissing; }
-  // Rows [band.first, band.end) of views [first_view, first_view + count),
-  // as `count` images of band.rows() × columns floats. The band's pairs are
-  // reserved. Concurrent calls store different pairs or views.
-  void store(std::size_t first_view, int count, const RowBand& band, const float* images);
-  // The same rows into the filter's output layout: view v's row r at
+  // Filters on `device` (configured for bands of `max_band_rows`) the row
+  // pairs of `band` not kept yet, and keeps them. Returns detector rows
+  // filtered, summed over views. One filtering at a time; load() of other
+  // pairs may run meanwhile.
+  std::uint64_t ensure(FdkDevice& device, const RowBand& band, int max_band_rows);
+  // Forgets the pairs wholly below row `row` (rising) or at or above it
+  // (not rising): slabs to come will not read them.
+  void release_beyond(int row, bool rising);
+  // Rows `band` (kept) of views [first_view, first_view + count) into the
+  // filter's output layout: view v's row r at
   // out[(v·stride_rows + r − band.first + border)·stride_cols + border].
-  // Concurrent calls are safe.
   void load(std::size_t first_view, int count, const RowBand& band, float* out, int stride_cols, int stride_rows) const;
 
-  std::uint64_t host_bytes() const { return host_bytes_; }
-  std::uint64_t disk_bytes() const { return disk_slots_ * pair_bytes(); }
-  std::uint64_t host_budget() const { return host_budget_; }
-  // The directory of the file, once there is one (for messages).
-  const std::string& temp_directory() const { return temp_directory_; }
+  std::uint64_t peak_host_bytes() const { return peak_host_bytes_; }
+  std::uint64_t peak_disk_bytes() const { return peak_disk_slots_ * pair_bytes(); }
 
  private:
   static constexpr std::int64_t kMissing = INT64_MIN;
   std::uint64_t pair_floats() const { return std::uint64_t{views_} * 2 * static_cast<std::uint64_t>(columns_); }
   std::uint64_t pair_bytes() const { return pair_floats() * sizeof(float); }
+  bool has_pair(int pair) const { return where_[static_cast<std::size_t>(pair)] != kMissing; }
+  void reserve(int pair);
+  void forget(int pair);
   void open_file();
-  // A pair's view `view`, rows 2p and 2p + 1, 2 × columns floats.
-  float* host_rows(int pair, std::size_t view) const;
+  void store(std::size_t first_view, int count, const RowBand& band, const float* images);
   std::uint64_t file_offset(int pair, std::size_t view) const;
 
   std::size_t views_;
-  int rows_;
   int columns_;
   std::uint64_t host_budget_;
   std::string temp_directory_;
-  // Per pair: ≥ 0, its index in host_; < 0 and not kMissing, −1 − its slot in the file.
+  std::mutex mutex_;  // ensure() and release_beyond()
+  // Per pair: 0 in host_, < 0 and not kMissing: −1 − its slot in the file.
   std::vector<std::int64_t> where_;
-  std::vector<std::unique_ptr<float[]>> host_;
-  std::uint64_t host_bytes_ = 0;
-  std::uint64_t disk_slots_ = 0;
+  std::vector<std::unique_ptr<float[]>> host_;  // per pair
+  std::vector<std::uint64_t> free_slots_;
+  std::uint64_t host_bytes_ = 0, peak_host_bytes_ = 0;
+  std::uint64_t disk_slots_ = 0, used_slots_ = 0, peak_disk_slots_ = 0;
+  std::vector<float> images_;  // ensure()'s filtered batch
   int fd_ = -1;
 };
 
-// Filters, on every device at once, the row pairs of `bands` that `rows`
-// lacks, each once, and stores them; the devices must be configured for
-// bands of `max_band_rows`. Returns detector rows filtered, summed over views.
-std::uint64_t fill_filtered_rows(FilteredRows& rows, const std::vector<FdkDevice*>& devices,
-                                 const std::vector<RowBand>& bands, int max_band_rows);
+// Releases the filtered rows that no later slab of a reconstruction reads:
+// bands move one way along the detector as slabs go up in z (each view's
+// row is monotonic in z), so once every slab before one is done, the rows
+// behind that slab's and all later bands go. The last slab's band stays for
+// a later call (the CLI's writer slabs call reconstruct() in z order).
+class RowRelease {
+ public:
+  // `bands`: this process's slabs' bands in slab order (empty ones allowed).
+  RowRelease(FilteredRows* rows, const std::vector<RowBand>& bands);
+  // Slab at `position` in `bands` is backprojected. Thread-safe.
+  void done(std::size_t position);
+
+ private:
+  FilteredRows* rows_;
+  bool rising_ = true;
+  std::vector<int> edge_from_;  // per position: the lowest first (rising) or highest end of later bands
+  std::vector<char> done_;
+  std::size_t first_pending_ = 0;
+  std::mutex mutex_;
+};
 
 // Rows × views the ramp filter works on for `bands` without a cache (each
 // slab filters its own band), for reports that compare the two.

@@ -67,9 +67,12 @@ struct FdkReconstructor::Impl {
   std::vector<std::unique_ptr<detail::FdkDevice>> devices;
   std::unique_ptr<detail::FilteredRows> filtered_rows;  // with FdkOptions::cache_filtered_rows
   std::vector<detail::FdkDevice*> device_pointers() const;
-  // Filters what `bands` (this process's slabs') need: with the cache only
-  // the rows it lacks, into it; into the report, the rows filtered.
-  void prepare_filtered_rows(const std::vector<detail::RowBand>& bands, int max_band_rows, FdkReport& report);
+  // Readies the filtered rows of one slab's band on `device`: with the
+  // cache, filters the pairs it lacks; returns rows × views filtered (without
+  // the cache, the band's: the device filters it with the slab).
+  std::uint64_t filter_rows_for(detail::FdkDevice& device, const detail::RowBand& band, int max_band_rows);
+  // The cache's peaks into the report.
+  void report_filtered_rows(FdkReport& report) const;
   // A report that already says what the scan and the devices are.
   FdkReport new_report() const;
   // The devices' timings now, and what they added since `before` into a report.

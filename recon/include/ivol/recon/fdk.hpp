@@ -41,6 +41,10 @@ struct FdkOptions {
   // Bytes of device memory one device may use; 0 takes 80 % of what the
   // device reports. Slabs are cut to fit.
   std::uint64_t device_memory_limit = 0;
+  // On CPU devices, whose memory is the host's: bytes all CPU devices
+  // together may use when device_memory_limit is 0, instead of 80 % of what
+  // each reports (PoCL reports most of the RAM). 0 keeps the 80 %.
+  std::uint64_t cpu_device_memory_limit = 0;
   // Upper bound on a slab's slices; 0 means no bound beyond memory.
   std::uint32_t max_slab_slices = 0;
   // Keep the FFT scratch in global memory even where local memory would do
@@ -52,10 +56,11 @@ struct FdkOptions {
   // fdk_bench). false keeps the kernel (to compare the two). Filtering and
   // the structure path stay on OpenCL.
   bool native_cpu_backprojection = true;
-  // Filter each detector row of each view once for the reconstructor's
-  // life, however many slabs (or reconstruct() calls) read it: filtered rows
-  // are kept in host memory up to filtered_rows_memory_limit, the rest in a
-  // temporary file. false filters each slab's rows for that slab (to
+  // Filter each detector row of each view once, however many slabs read
+  // it: filtered rows are kept, in host memory up to
+  // filtered_rows_memory_limit and the rest in a temporary file, until no
+  // later slab reads them. Calls of reconstruct() in increasing z (the
+  // CLI's writer slabs) share them too. false filters each slab's rows for that slab (to
   // compare the two; the same bits either way).
   bool cache_filtered_rows = true;
   // Bytes of host memory the filtered rows may take; 0 means a quarter of
@@ -101,8 +106,10 @@ struct FdkReport {
   // with cache_filtered_rows at most views × detector rows per reconstructor
   // (rows filtered by an earlier call are not filtered again).
   std::uint64_t rows_filtered = 0;
-  // What the filtered rows take after this call, in host memory and in the
-  // temporary file (0 without cache_filtered_rows).
+  // The most the filtered rows took at once so far (this reconstructor), in
+  // host memory and in the temporary file: about the rows of the slabs in
+  // flight, since rows no later slab reads are released (0 without
+  // cache_filtered_rows).
   std::uint64_t filtered_rows_host_bytes = 0;
   std::uint64_t filtered_rows_disk_bytes = 0;
 };
