@@ -1,6 +1,7 @@
 // ivol recon PROJECTIONS -o OUT.ivol: cone-beam FDK on OpenCL, written
 // straight into an .ivol file slab by slab.
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
@@ -210,8 +211,11 @@ void print_ranks(const std::vector<RankStats>& ranks) {
 // while the slabs finish. Peak host memory: the preview (1/factor³ of the
 // dense volume), the structure's bricks (40 bytes each), the values of the
 // voxels between the writer's slab and the slabs in flight
-// (StructureValueWindow), the writer's slab (--memory / 4) and the task
-// lists of the slabs in flight; never the dense volume nor all the values.
+// (StructureValueWindow), the writer's slab (--memory / 4), the filtered
+// detector rows (--memory / 4, the rest in a temporary file), on CPU devices
+// the device's buffers (--memory / 4) and the task lists of the slabs in
+// flight; never the dense volume nor all the values. The preview is still
+// held whole, outside --memory.
 int run_structure(const ReconSettings& s, const GlobalOptions& global, const recon::VolumeGrid& grid,
                   const recon::FdkOptions& fdk_options, OpenedScan& scan, recon::FdkReconstructor& reconstructor,
                   Metadata metadata, const std::function<void(Metadata&)>& complete_metadata,
@@ -477,7 +481,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     options.devices = s->devices;
     options.device_memory_limit = s->device_memory_mib << 20;
     options.max_slab_slices = s->slab_slices;
-    // One budget, --memory, shared out (docs/distributed.md, "Memory"): a
+    // One budget, --memory, shared out (README, "ivol recon"): a
     // quarter each for the writer's slab, the filtered detector rows (the
     // rest of them go to a temporary file) and, on CPU devices, whose memory
     // is the host's, the device's slabs; the preview and the structure's
