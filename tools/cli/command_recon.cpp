@@ -436,7 +436,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember({2, 4, 8, 16, 32}));
   out->add_option("--memory", s->memory_mib,
                   "About how many MiB of host memory the run may use: a quarter each for the writer's slab, the "
-                  "filtered detector rows (the rest go to a temporary file in $TMPDIR) and, on CPU devices, the "
+                  "filtered detector rows (the rest go to a temporary file, see --temp-dir) and, on CPU devices, the "
                   "device's slabs")
       ->check(whole_number())
       ->capture_default_str();
