@@ -44,6 +44,18 @@ FdkReport FdkReconstructor::Impl::new_report() const {
   return report;
 }
 
+std::uint64_t FdkReconstructor::Impl::filter_rows_for(detail::FdkDevice& device, const detail::RowBand& band,
+                                                      int max_band_rows) {
+  if (!filtered_rows) return static_cast<std::uint64_t>(band.rows()) * geometry.view_count();
+  return filtered_rows->ensure(device, band, max_band_rows);
+}
+
+void FdkReconstructor::Impl::report_filtered_rows(FdkReport& report) const {
+  if (!filtered_rows) return;
+  report.filtered_rows_host_bytes = filtered_rows->peak_host_bytes();
+  report.filtered_rows_disk_bytes = filtered_rows->peak_disk_bytes();
+}
+
 std::vector<detail::FdkDevice*> FdkReconstructor::Impl::device_pointers() const {
   std::vector<detail::FdkDevice*> pointers;
   for (const auto& d : devices) pointers.push_back(d.get());
@@ -89,6 +101,14 @@ FdkReconstructor::FdkReconstructor(ProjectionSource& projections, const ScanGeom
   m.problem = detail::make_problem(projections, m.geometry, options, m.shape);
   m.problem.projections_mutex = &m.projections_mutex;
   m.handles = detail::choose_devices(options.devices);
+  if (options.cache_filtered_rows) {
+    m.filtered_rows = std::make_unique<detail::FilteredRows>(
+        m.geometry.view_count(), m.geometry.detector.rows, m.geometry.detector.columns,
+        options.filtered_rows_memory_limit > 0 ? options.filtered_rows_memory_limit
+                                               : detail::default_filtered_rows_budget(),
+        options.temp_directory);
+    m.problem.filtered_rows = m.filtered_rows.get();
+  }
   try {
     for (const detail::DeviceHandle& h : m.handles)
       m.devices.push_back(std::make_unique<detail::FdkDevice>(h, m.problem));
@@ -142,12 +162,25 @@ FdkReport FdkReconstructor::reconstruct(const VolumeGrid& grid, const SlabSink& 
     const std::uint32_t first = k_begin + static_cast<std::uint32_t>(s) * plan.slices;
     return SlabRange{first, std::min(k_end, first + plan.slices)};
   };
+  const bool distributed = m.options.exchange && m.options.exchange->size() > 1;
+  // This process's slabs' bands, in slab order: rows no later slab needs are released.
+  std::vector<std::size_t> position(slab_count, 0);
+  std::vector<detail::RowBand> bands;
+  for (std::size_t s = 0; s < slab_count; ++s)
+    if (!distributed || m.options.exchange->owner(s, slab_count) == m.options.exchange->rank()) {
+      position[s] = bands.size();
+      bands.push_back(detail::rows_for_slab(m.geometry, grid_copy, slab_bounds(s).first, slab_bounds(s).end));
+    }
+  detail::RowRelease release(m.filtered_rows.get(), bands);
+  std::atomic<std::uint64_t> rows_filtered{0};
   try {
     detail::for_each_slab(
         m.device_pointers(), slab_count,
         [&](detail::FdkDevice& device, std::size_t s, std::vector<float>& data) {
           const SlabRange bounds = slab_bounds(s);
+          rows_filtered += m.filter_rows_for(device, bands[position[s]], plan.band_rows);
           device.reconstruct_slab(bounds.first, bounds.end, data);
+          release.done(position[s]);
         },
         [&](std::size_t s, std::vector<float>& data) {
           const auto delivered = std::chrono::steady_clock::now();
@@ -163,9 +196,11 @@ FdkReport FdkReconstructor::reconstruct(const VolumeGrid& grid, const SlabSink& 
   m.problem.grid = nullptr;
 
   m.add_timings_since(before, report.timings);
+  report.rows_filtered = rows_filtered.load();
+  m.report_filtered_rows(report);
   // What this process backprojected: all slices, or its own slabs' when distributed.
   std::uint64_t slices = k_end - k_begin;
-  if (m.options.exchange && m.options.exchange->size() > 1) {
+  if (distributed) {
     slices = 0;
     for (std::size_t s = 0; s < slab_count; ++s)
       if (m.options.exchange->owner(s, slab_count) == m.options.exchange->rank())

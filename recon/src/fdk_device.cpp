@@ -6,6 +6,8 @@
 #include <stdexcept>
 #include <thread>
 
+#include "fdk_filtered_rows.hpp"
+
 namespace ivol::recon::detail {
 namespace {
 
@@ -158,6 +160,43 @@ void FdkDevice::filter_batch(int parity, std::size_t first_view, int view_count,
   filter_events_.push_back(filtered);
 }
 
+void FdkDevice::filter_to_host(std::size_t first_view, int count, const RowBand& band, std::vector<float>& images) {
+  if (band.rows() > max_band_rows_)
+    throw std::logic_error("FDK: filtering " + std::to_string(band.rows()) + " detector rows, planned for " +
+                           std::to_string(max_band_rows_));
+  const int columns = problem_.geometry->detector.columns;
+  const int stride_rows = band.rows() + kBorder;
+  filter_batch(0, first_view, count, band);
+  images.resize(static_cast<std::size_t>(count) * band.rows() * columns);
+  // The rows without the border around them.
+  const cl::array<cl::size_type, 3> from{IVOL_BAND_BORDER_BEFORE * sizeof(float), IVOL_BAND_BORDER_BEFORE, 0};
+  const cl::array<cl::size_type, 3> to{0, 0, 0};
+  const cl::array<cl::size_type, 3> region{columns * sizeof(float), static_cast<cl::size_type>(band.rows()),
+                                           static_cast<cl::size_type>(count)};
+  cl::Event read;
+  queue_.enqueueReadBufferRect(
+      filtered_[0], CL_TRUE, from, to, region, stride_cols_ * sizeof(float),
+      std::size_t{static_cast<std::size_t>(stride_rows)} * stride_cols_ * sizeof(float), columns * sizeof(float),
+      std::size_t{static_cast<std::size_t>(band.rows())} * columns * sizeof(float), images.data(), nullptr, &read);
+  transfer_events_.push_back(read);
+  finish_timings();
+}
+
+void FdkDevice::load_batch(int parity, std::size_t first_view, int view_count, const RowBand& band) {
+  const int stride_rows = band.rows() + kBorder;
+  const std::size_t floats = static_cast<std::size_t>(kBatch) * stride_rows * stride_cols_;
+  std::vector<float>& host = host_filtered_[parity];
+  const auto start = std::chrono::steady_clock::now();
+  // A parity's first batch of a slab: the border, and the rows of views a
+  // short last batch leaves, must hold zeros in this band's layout.
+  if (first_view < 2 * static_cast<std::size_t>(kBatch)) host.assign(floats, 0.0F);
+  problem_.filtered_rows->load(first_view, view_count, band, host.data(), stride_cols_, stride_rows);
+  timings_.reading += seconds_since(start);
+  cl::Event write;
+  queue_.enqueueWriteBuffer(filtered_[parity], CL_FALSE, 0, floats * sizeof(float), host.data(), nullptr, &write);
+  transfer_events_.push_back(write);
+}
+
 void FdkDevice::run_views(const RowBand& band, const Backprojector& backproject) {
   const float zero = 0.0F;
   const std::size_t filtered_bytes =
@@ -174,7 +213,10 @@ void FdkDevice::run_views(const RowBand& band, const Backprojector& backproject)
     // The host buffer of this parity is free once its last batch is done.
     if (batch_done_[parity]()) batch_done_[parity].wait();
     const int count = static_cast<int>(std::min<std::size_t>(kBatch, views - first));
-    filter_batch(parity, first, count, band);
+    if (problem_.filtered_rows != nullptr)
+      load_batch(parity, first, count, band);
+    else
+      filter_batch(parity, first, count, band);
     batch_done_[parity] = cl::Event();
     backproject(filtered_[parity], band.rows() + kBorder, first, &batch_done_[parity]);
     // The native backprojector leaves no event: it has finished with the batch.

@@ -16,6 +16,8 @@
 namespace ivol::recon::detail {
 
 // What every device shares: the scan, the grid and the per-view parameters.
+class FilteredRows;
+
 struct FdkProblem {
   const ScanGeometry* geometry = nullptr;
   const VolumeGrid* grid = nullptr;
@@ -30,6 +32,9 @@ struct FdkProblem {
   std::vector<float> twiddles;  // n/2 complex values, interleaved
   bool fft_in_global_memory = false;
   bool native_cpu_backprojection = true;  // FdkOptions::native_cpu_backprojection
+  // With FdkOptions::cache_filtered_rows: every band's rows are filtered
+  // into it beforehand (fill_filtered_rows), and slabs read them from it.
+  const FilteredRows* filtered_rows = nullptr;
 };
 
 struct DeviceTimings {
@@ -60,6 +65,9 @@ class FdkDevice {
   // one per lone voxel, sampled at its centre (lone[0]) or octants (lone[1]).
   void reconstruct_tasks(const RowBand& band, const std::vector<FineTask>& blocks,
                          const std::array<const std::vector<CoarseTask>*, 2>& lone, std::vector<float>& out);
+  // Filters rows `band` of views [first_view, first_view + count) into
+  // `images`: count images of band.rows() × columns floats (for FilteredRows).
+  void filter_to_host(std::size_t first_view, int count, const RowBand& band, std::vector<float>& images);
   const DeviceTimings& timings() const { return timings_; }
   const std::string& name() const { return name_; }
   bool fft_in_global() const { return fft_in_global_; }
@@ -69,6 +77,9 @@ class FdkDevice {
  private:
   // Reads, weights and filters one batch of views into filtered_[parity].
   void filter_batch(int parity, std::size_t first_view, int view_count, const RowBand& band);
+  // Copies one batch of views' rows `band` from problem_.filtered_rows
+  // into filtered_[parity], in the filter's layout.
+  void load_batch(int parity, std::size_t first_view, int view_count, const RowBand& band);
   // Enqueues the backprojection of one filtered batch; `done` gets its last event.
   using Backprojector =
       std::function<void(cl::Buffer& filtered, int stride_rows, std::size_t first_view, cl::Event* done)>;
@@ -109,6 +120,7 @@ class FdkDevice {
   cl::Buffer filtered_[2];
   cl::Buffer fft_scratch_;
   std::vector<float> host_raw_[2];
+  std::vector<float> host_filtered_[2];  // load_batch's staging
   cl::Event batch_done_[2];
   std::vector<cl::Event> filter_events_, backproject_events_, transfer_events_;
   DeviceTimings timings_;

@@ -88,8 +88,9 @@ SlabPlan plan_slabs(const FdkProblem& problem, const std::vector<detail::DeviceH
   const int n = 1 << problem.log2n;
   bool any_global_fft = problem.fft_in_global_memory;
   for (const detail::DeviceHandle& d : devices) {
-    const std::uint64_t limit =
-        options.device_memory_limit > 0 ? options.device_memory_limit : d.info.global_memory / 10 * 8;
+    std::uint64_t limit = options.device_memory_limit > 0 ? options.device_memory_limit : d.info.global_memory / 10 * 8;
+    if (options.device_memory_limit == 0 && !d.info.is_gpu && options.cpu_device_memory_limit > 0)
+      limit = options.cpu_device_memory_limit / devices.size();
     budget = std::min(budget, limit);
     max_allocation = std::min(max_allocation, d.info.max_allocation);
     any_global_fft = any_global_fft || d.info.local_memory < static_cast<std::uint64_t>(2 * n) * 8 + 1024;

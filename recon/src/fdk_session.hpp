@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "fdk_device.hpp"
+#include "fdk_filtered_rows.hpp"
 #include "ivol/recon/fdk.hpp"
 
 namespace ivol::recon::detail {
@@ -64,7 +65,14 @@ struct FdkReconstructor::Impl {
   detail::FdkProblem problem;
   std::vector<detail::DeviceHandle> handles;
   std::vector<std::unique_ptr<detail::FdkDevice>> devices;
+  std::unique_ptr<detail::FilteredRows> filtered_rows;  // with FdkOptions::cache_filtered_rows
   std::vector<detail::FdkDevice*> device_pointers() const;
+  // Readies the filtered rows of one slab's band on `device`: with the
+  // cache, filters the pairs it lacks; returns rows × views filtered (without
+  // the cache, the band's: the device filters it with the slab).
+  std::uint64_t filter_rows_for(detail::FdkDevice& device, const detail::RowBand& band, int max_band_rows);
+  // The cache's peaks into the report.
+  void report_filtered_rows(FdkReport& report) const;
   // A report that already says what the scan and the devices are.
   FdkReport new_report() const;
   // The devices' timings now, and what they added since `before` into a report.

@@ -323,6 +323,17 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
   const double constructor_setup = m.setup_seconds;
   m.setup_seconds = 0;
   report.timings.setup = constructor_setup + detail::seconds_since(start);
+  // This process's slabs' bands, in slab order: rows no later slab needs are released.
+  const bool distributed = m.options.exchange && m.options.exchange->size() > 1;
+  std::vector<std::size_t> position(slab_count, 0);
+  std::vector<detail::RowBand> own_bands;
+  for (std::size_t s = 0; s < slab_count; ++s)
+    if (!distributed || m.options.exchange->owner(s, slab_count) == m.options.exchange->rank()) {
+      position[s] = own_bands.size();
+      own_bands.push_back(bands[s]);
+    }
+  detail::RowRelease release(m.filtered_rows.get(), own_bands);
+  std::atomic<std::uint64_t> rows_filtered{0};
 
   // A slab's tasks are made by the thread that computes it and kept until the
   // slab is delivered, so only the slabs in flight hold task lists.
@@ -336,7 +347,9 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
         m.device_pointers(), slab_count,
         [&](detail::FdkDevice& device, std::size_t s, std::vector<float>& sums) {
           auto made = std::make_unique<SlabTasks>(tasks_of_slab(structure, index, slab_of, s));
+          rows_filtered += m.filter_rows_for(device, bands[s], widest);
           device.reconstruct_tasks(bands[s], made->blocks, {&made->centres, &made->octants}, sums);
+          release.done(position[s]);
           own_samples += made->samples();
           // Read by the delivering thread after the slab's hand-over (with an
           // exchange, only rank 0 delivers; the others send the sums).
@@ -358,6 +371,8 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
   }
   m.problem.grid = nullptr;
   m.add_timings_since(before, report.timings);
+  report.rows_filtered = rows_filtered.load();
+  m.report_filtered_rows(report);
   report.timings.delivery += delivering;
   report.voxel_updates = own_samples.load() * m.geometry.view_count();
   report.timings.total = constructor_setup + detail::seconds_since(start);

@@ -145,6 +145,9 @@ case_ recon-provenance   0 '"algorithm": "FDK"'      -- "$IVOL" info --json "$wo
 case_ recon-no-clobber   1 "r.ivol: exists"          -- "$IVOL" recon "$work/p.h5" "${recon_args[@]}" -o "$work/r.ivol"
 case_ recon-octree       0 '"structure": "octree"'   -- "$IVOL" recon "$work/p.h5" "${recon_args[@]}" -o "$work/r-octree.ivol" --structure octree --json
 case_ recon-octree-ok    0 "OK"                      -- "$IVOL" verify "$work/r-octree.ivol"
+# Each detector row of each view filtered once, however thin the slabs: at
+# most views × detector rows (24 × 48), not that times the 12 slabs.
+case_ recon-rows-once    0 "once"                    -- bash -c "rows=\$('$IVOL' recon '$work/p.h5' ${recon_args[*]} -o '$work/r-thin.ivol' --slab-slices 2 --json | sed -n 's/.*\"rows_filtered\": \([0-9]*\).*/\1/p'); test -n \"\$rows\" && test \"\$rows\" -gt 0 && test \"\$rows\" -le 1152 && echo once"
 case_ recon-nested       0 ""                        -- "$IVOL" -q recon "$work/p.h5" "${recon_args[@]}" -o "$work/r-nested.ivol" --structure nested --nested-cell 8
 case_ recon-aniso        0 "than 20x22x12"         -- "$IVOL" recon "$work/p.h5" --geometry "$work/p.xml" --pitch 1.835 --size 20,22,12 --voxel 1.6,1.4,2.5 --origin -14,-15,-12 -o "$work/r-aniso.ivol" --structure octree
 case_ recon-aniso-size   0 "20 x 22 x 12 voxels of 1.6 x 1.4 x 2.5 mm" -- "$IVOL" info "$work/r-aniso.ivol"

@@ -1,6 +1,7 @@
 // ivol recon PROJECTIONS -o OUT.ivol: cone-beam FDK on OpenCL, written
 // straight into an .ivol file slab by slab.
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
@@ -68,6 +69,19 @@ nlohmann::json voxel_json(const recon::VolumeGrid& grid) {
   const recon::Vec3& v = grid.voxel_size;
   if (v[0] == v[1] && v[1] == v[2]) return v[0];
   return nlohmann::json::array({v[0], v[1], v[2]});
+}
+
+// A quarter of --memory: the writer's slab, the filtered rows and (on CPU
+// devices) the device's slabs take one each.
+std::uint64_t memory_share(const ReconSettings& s) { return (s.memory_mib << 20) / 4; }
+
+// Each part's peak host memory (or temporary disk), for the report.
+nlohmann::json memory_json(const ReconSettings& s, const recon::FdkReport& fdk, std::size_t devices) {
+  return {{"budget_bytes", s.memory_mib << 20},
+          {"device_slab_bytes", fdk.device_bytes_per_slab * devices},
+          {"filtered_rows_host_bytes", fdk.filtered_rows_host_bytes},
+          {"filtered_rows_disk_bytes", fdk.filtered_rows_disk_bytes},
+          {"writer_slab_budget_bytes", memory_share(s)}};
 }
 
 recon::VolumeGrid make_grid(const ReconSettings& s) {
@@ -221,8 +235,11 @@ void print_ranks(const std::vector<RankStats>& ranks) {
 // while the slabs finish. Peak host memory: the preview (1/factor³ of the
 // dense volume), the structure's bricks (40 bytes each), the values of the
 // voxels between the writer's slab and the slabs in flight
-// (StructureValueWindow), the writer's slab (--memory / 4) and the task
-// lists of the slabs in flight; never the dense volume nor all the values.
+// (StructureValueWindow), the writer's slab (--memory / 4), the filtered
+// detector rows (--memory / 4, the rest in a temporary file), on CPU devices
+// the device's buffers (--memory / 4) and the task lists of the slabs in
+// flight; never the dense volume nor all the values. The preview is still
+// held whole, outside --memory.
 int run_structure(const ReconSettings& s, const GlobalOptions& global, const recon::VolumeGrid& grid,
                   const recon::FdkOptions& fdk_options, OpenedScan& scan, recon::FdkReconstructor& reconstructor,
                   Metadata metadata, const std::function<void(Metadata&)>& complete_metadata,
@@ -282,7 +299,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   }
   StreamingOptions options;
   options.build.encoding = parse_encoding(s.encoding);
-  options.slab_budget_bytes = (s.memory_mib << 20) / 4;
+  options.slab_budget_bytes = memory_share(s);
   options.spill_directory = s.temp_dir;
   // The other ranks take a share of the compression once their slabs are
   // sent; the writer calls it on this (the MPI) thread.
@@ -336,6 +353,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
       {"file_bytes", written.write.file_bytes},
       {"temp_bytes", written.spill_bytes},
       {"peak_value_bytes", values.peak_bytes()},
+      {"rows_filtered", fdk.rows_filtered},
       {"gups", gups},
       {"voxel_updates", voxel_updates},
       {"seconds",
@@ -347,6 +365,9 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
         {"backprojection", fdk.timings.backprojection},
         {"reconstruction", fdk.timings.total - writing_during_fdk},
         {"writing", writing}}}};
+  report["memory"] = memory_json(s, fdk, reconstructor.device_names().size());
+  report["memory"]["preview_bytes"] = preview.values.size() * sizeof(float);
+  report["memory"]["value_window_bytes"] = values.peak_bytes();
   if (mpi) report["ranks"] = ranks_json(ranks);
   if (s.json) {
     std::cout << report.dump(2) << "\n";
@@ -389,7 +410,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       ->capture_default_str();
   fdk->add_option("--device", s->devices, "OpenCL device index (see ivol devices); repeat for several")
       ->check(whole_number());
-  fdk->add_option("--device-memory", s->device_memory_mib, "MiB of device memory to use (default: 80 % of it)")
+  fdk->add_option("--device-memory", s->device_memory_mib,
+                  "MiB of device memory to use (default: 80 % of it on GPUs, a quarter of --memory on CPU devices)")
       ->check(whole_number());
   fdk->add_option("--slab-slices", s->slab_slices,
                   "Most slices per slab (default: as many as fit the device; under mpirun, at most the volume's "
@@ -438,12 +460,16 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
                   "Edge in voxels of the cells the preview marks (a power of two; default 2 with --refine "
                   "detection, 4 with --refine preview and --keep ...otsu)")
       ->check(CLI::IsMember({2, 4, 8, 16, 32}));
-  out->add_option("--memory", s->memory_mib, "About how many MiB the writer may hold")
+  out->add_option("--memory", s->memory_mib,
+                  "About how many MiB of host memory the run may use: a quarter each for the writer's slab, the "
+                  "filtered detector rows (the rest go to a temporary file, see --temp-dir) and, on CPU devices, the "
+                  "device's slabs")
       ->check(whole_number())
       ->capture_default_str();
   out->add_option(
       "--temp-dir", s->temp_dir,
-      "Directory of the octree writer's temporary spill file (default: $TMPDIR, else the output's directory)");
+      "Directory of the octree writer's temporary spill file and of the filtered detector rows beyond their "
+      "share of --memory (default: $TMPDIR, else the output's directory)");
   out->add_flag("--no-disk-check", s->no_disk_check,
                 "Skip the check that the output's and the spill file's disks have the room the run is estimated to "
                 "need");
@@ -483,6 +509,21 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     options.devices = s->devices;
     options.device_memory_limit = s->device_memory_mib << 20;
     options.max_slab_slices = s->slab_slices;
+    // One budget, --memory, shared out (README, "ivol recon"): a
+    // quarter each for the writer's slab, the filtered detector rows (the
+    // rest of them go to a temporary file) and, on CPU devices, whose memory
+    // is the host's, the device's slabs; the preview and the structure's
+    // value window take the last quarter.
+    options.filtered_rows_memory_limit = memory_share(*s);
+    options.cpu_device_memory_limit = memory_share(*s);
+    // Filtered rows beyond their share go where the writer's spill goes:
+    // --temp-dir, else $TMPDIR, else the output's directory.
+    options.temp_directory = s->temp_dir;
+    const char* tmpdir = std::getenv("TMPDIR");
+    if (options.temp_directory.empty() && (tmpdir == nullptr || *tmpdir == '\0')) {
+      const std::filesystem::path parent = std::filesystem::path(s->output).parent_path();
+      options.temp_directory = parent.empty() ? "." : parent.string();
+    }
     if (mpi) options.exchange = mpi->exchange();
     // Distributed, rank 0 writes the file and reports; the others only reconstruct.
     const bool root = !mpi || mpi->rank() == 0;
@@ -505,7 +546,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     import.structure = convert::StructureChoice::Octree;
     import.encoding = parse_encoding(s->encoding);
     import.framed_blocks = s->format_version == "1.3";
-    import.slab_budget_bytes = (s->memory_mib << 20) / 4;
+    import.slab_budget_bytes = memory_share(*s);
     import.temp_directory = s->temp_dir;
     import.check_disk_space = false;  // checked above
     double preview_seconds = 0.0;
@@ -557,6 +598,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     double writing = 0.0;
     double building = 0.0;  // distributed: rank 0's own slabs' subtrees
     std::vector<RankStats> ranks;
+    recon::FdkReport fdk_totals;  // rows filtered and memory peaks
     if (!mpi) {
       convert::ReconstructionSlabs slabs(reconstructor, grid);
       written = convert::import_to_ivol(slabs, s->output, import);
@@ -564,6 +606,10 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       gups = slabs.gups();
       reconstruction = slabs.read_seconds();
       writing = written.seconds - slabs.read_seconds();
+      fdk_totals.rows_filtered = slabs.rows_filtered();
+      fdk_totals.filtered_rows_host_bytes = slabs.filtered_rows_host_bytes();
+      fdk_totals.filtered_rows_disk_bytes = slabs.filtered_rows_disk_bytes();
+      fdk_totals.device_bytes_per_slab = slabs.device_bytes_per_slab();
     } else {
       // Distributed: each rank reconstructs whole writer slabs, builds their
       // subtrees and sends them to rank 0, which writes them in z order.
@@ -585,6 +631,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       if (!root) return kExitOk;
       written = built.written;
       t = built.fdk.timings;
+      fdk_totals = built.fdk;
       gups = total_gups(ranks);
       reconstruction = built.reconstruction_seconds;
       building = built.build_seconds;
@@ -609,6 +656,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
                                {"transfer", t.transfer},
                                {"reconstruction", reconstruction},
                                {"writing", writing}}}};
+    report["rows_filtered"] = fdk_totals.rows_filtered;
+    report["memory"] = memory_json(*s, fdk_totals, reconstructor.device_names().size());
     if (mpi) report["seconds"]["building"] = building;
     if (import.keep) report["threshold"] = import.keep->threshold;
     if (mpi) report["ranks"] = ranks_json(ranks);

@@ -30,6 +30,9 @@ void add(recon::FdkReport& into, const recon::FdkReport& report) {
   t.total += report.timings.total;
   into.slab_count += report.slab_count;
   into.voxel_updates += report.voxel_updates;
+  into.rows_filtered += report.rows_filtered;
+  into.filtered_rows_host_bytes = std::max(into.filtered_rows_host_bytes, report.filtered_rows_host_bytes);
+  into.filtered_rows_disk_bytes = std::max(into.filtered_rows_disk_bytes, report.filtered_rows_disk_bytes);
 }
 
 // The rank (IVOL_TEST_FAIL_BUILD_RANK, for the tests only) that fails while

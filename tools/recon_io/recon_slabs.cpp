@@ -57,6 +57,10 @@ void ReconstructionSlabs::read(std::uint32_t z0, std::uint32_t count, void* out)
         first, z0 + count);
     add(timings_, report.timings);
     voxel_updates_ += report.voxel_updates;
+    rows_filtered_ += report.rows_filtered;
+    filtered_rows_host_bytes_ = std::max(filtered_rows_host_bytes_, report.filtered_rows_host_bytes);
+    filtered_rows_disk_bytes_ = std::max(filtered_rows_disk_bytes_, report.filtered_rows_disk_bytes);
+    device_bytes_per_slab_ = std::max(device_bytes_per_slab_, report.device_bytes_per_slab);
     slices_reconstructed_ += z0 + count - first;
   }
   cache_first_ = z0;

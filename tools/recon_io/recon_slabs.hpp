@@ -31,6 +31,11 @@ class ReconstructionSlabs final : public SlabReader {
   // Wall-clock seconds spent inside read().
   double read_seconds() const { return read_seconds_; }
   double gups() const;
+  // Detector rows × views filtered, summed; the filtered rows' peaks.
+  std::uint64_t rows_filtered() const { return rows_filtered_; }
+  std::uint64_t filtered_rows_host_bytes() const { return filtered_rows_host_bytes_; }
+  std::uint64_t filtered_rows_disk_bytes() const { return filtered_rows_disk_bytes_; }
+  std::uint64_t device_bytes_per_slab() const { return device_bytes_per_slab_; }
 
  private:
   recon::FdkReconstructor& reconstructor_;
@@ -38,6 +43,10 @@ class ReconstructionSlabs final : public SlabReader {
   recon::FdkTimings timings_;
   std::uint64_t slices_reconstructed_ = 0;
   std::uint64_t voxel_updates_ = 0;
+  std::uint64_t rows_filtered_ = 0;
+  std::uint64_t filtered_rows_host_bytes_ = 0;
+  std::uint64_t filtered_rows_disk_bytes_ = 0;
+  std::uint64_t device_bytes_per_slab_ = 0;
   double read_seconds_ = 0.0;
   std::uint32_t cache_first_ = 0;
   std::vector<float> cache_;  // the last read's slices

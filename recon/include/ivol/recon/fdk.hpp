@@ -41,6 +41,10 @@ struct FdkOptions {
   // Bytes of device memory one device may use; 0 takes 80 % of what the
   // device reports. Slabs are cut to fit.
   std::uint64_t device_memory_limit = 0;
+  // On CPU devices, whose memory is the host's: bytes all CPU devices
+  // together may use when device_memory_limit is 0, instead of 80 % of what
+  // each reports (PoCL reports most of the RAM). 0 keeps the 80 %.
+  std::uint64_t cpu_device_memory_limit = 0;
   // Upper bound on a slab's slices; 0 means no bound beyond memory.
   std::uint32_t max_slab_slices = 0;
   // Keep the FFT scratch in global memory even where local memory would do
@@ -52,6 +56,18 @@ struct FdkOptions {
   // fdk_bench). false keeps the kernel (to compare the two). Filtering and
   // the structure path stay on OpenCL.
   bool native_cpu_backprojection = true;
+  // Filter each detector row of each view once, however many slabs read
+  // it: filtered rows are kept, in host memory up to
+  // filtered_rows_memory_limit and the rest in a temporary file, until no
+  // later slab reads them. Calls of reconstruct() in increasing z (the
+  // CLI's writer slabs) share them too. false filters each slab's rows for that slab (to
+  // compare the two; the same bits either way).
+  bool cache_filtered_rows = true;
+  // Bytes of host memory the filtered rows may take; 0 means a quarter of
+  // the physical memory. Rows beyond it go to an unlinked temporary file.
+  std::uint64_t filtered_rows_memory_limit = 0;
+  // Where that file goes; empty means $TMPDIR, else /tmp.
+  std::string temp_directory;
   // With an exchange, this process is one rank of a distributed
   // reconstruction (slab_exchange.hpp): it reconstructs only the slabs it
   // owns, and only rank 0's sink (or structure) receives the volume. Slabs
@@ -86,6 +102,16 @@ struct FdkReport {
   // coarse voxel's eight samples count as eight).
   double gups() const;
   std::uint64_t voxel_updates = 0;
+  // Detector rows through the ramp filter in this call, summed over views:
+  // with cache_filtered_rows at most views × detector rows per reconstructor
+  // (rows filtered by an earlier call are not filtered again).
+  std::uint64_t rows_filtered = 0;
+  // The most the filtered rows took at once so far (this reconstructor), in
+  // host memory and in the temporary file: about the rows of the slabs in
+  // flight, since rows no later slab reads are released (0 without
+  // cache_filtered_rows).
+  std::uint64_t filtered_rows_host_bytes = 0;
+  std::uint64_t filtered_rows_disk_bytes = 0;
 };
 
 // Receives slices [k_begin, k_end) of the volume, nx·ny·(k_end − k_begin)
@@ -123,8 +149,8 @@ class FdkReconstructor {
   // task lists of the slabs in flight (32 bytes per 128 full-resolution
   // voxels, 36 per lone voxel), and 4 to 8 bytes per brick.
   using StructureProgress = std::function<void(std::uint32_t z_complete)>;
-  FdkReport reconstruct_structure(const VolumeGrid& grid, const VoxelStructure& structure,
-                                  StructureValueWindow& values, const StructureProgress& progress);
+  FdkReport reconstruct_structure(const VolumeGrid& grid, const VoxelStructure& structure, StructureValueWindow& values,
+                                  const StructureProgress& progress);
 
   std::vector<std::string> device_names() const;
   // Warnings about the scan (e.g. a short arc), known before reconstructing.
