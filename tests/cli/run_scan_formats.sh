@@ -90,6 +90,27 @@ check "nxtomo-parallel-beam-refused" bash -c "
   '$IVOL' -q recon '$data/parallel.nx' --sid 300 --sdd 600 --size 24 --voxel 1.2 -o par.ivol &&
   $(declare -f rms_below py); rms_below par.ivol raw.ivol 5e-5"
 
+# --- Any HDF5 dataset ----------------------------------------------------------
+
+# The same line integrals at a path of the user's choosing: --dataset names
+# it (the same bits as raw); without it the error says so; on raw input
+# --dataset is refused.
+py - "$data/scan.raw" <<'PY'
+import sys, h5py, numpy as np
+p = np.fromfile(sys.argv[1], "<f4").reshape(20, 16, 32)
+with h5py.File("moved.h5", "w") as f:
+    f["/scan/line_integrals"] = p
+PY
+check "hdf5-dataset-named" bash -c "
+  '$IVOL' -q recon moved.h5 --dataset /scan/line_integrals --geometry '$data/scan.xml' --pitch 2 --size 24 \
+    --voxel 1.2 -o moved.ivol && $(declare -f rms_below py); rms_below moved.ivol raw.ivol 1e-12"
+check "hdf5-dataset-missing-says-dataset" bash -c "
+  '$IVOL' -q recon moved.h5 --geometry '$data/scan.xml' --pitch 2 --size 24 --voxel 1.2 -o x.ivol 2>err;
+  [ \$? -eq 2 ] && grep -q 'no dataset /exchange/data; --dataset names another' err && [ ! -e x.ivol ]"
+check "hdf5-dataset-on-raw-refused" bash -c "
+  '$IVOL' -q recon '$data/scan.raw' --dataset /x --detector 32,16 --views 20 --pitch 2 --geometry '$data/scan.xml' \
+    --size 24 --voxel 1.2 -o x.ivol 2>err; [ \$? -eq 1 ] && grep -q 'not HDF5: it has no datasets to name' err"
+
 # --- Nikon XT ----------------------------------------------------------------
 
 # A Nikon scan of ivol's phantom as CIL's NikonDataReader describes one

@@ -65,6 +65,9 @@ void add_scan_options(CLI::App* cmd, ScanSettings& s) {
   raw->add_option("--sample", s.sample, "f32 or u16")->check(CLI::IsMember({"f32", "u16"}))->capture_default_str();
   raw->add_option("--header-bytes", s.header_bytes, "Bytes to skip at the start of each raw file")
       ->check(whole_number());
+  cmd->add_option("--dataset", s.dataset,
+                  "HDF5 projections: the (views, rows, columns) dataset, read as DXchange's /exchange/data "
+                  "(default: /exchange/data, or the file's NXtomo entry)");
   auto* intensity = cmd->add_option_group("intensities");
   intensity->add_flag("--intensities", s.intensities, "Values are intensities, not line integrals (u16 always are)");
   intensity->add_option("--flat", s.flats, "Flat (bright) field file(s), averaged");
@@ -136,6 +139,7 @@ void refuse_options_beside(const ScanSettings& s, const std::string& what) {
                                                 {!s.detector.empty(), "--detector"},
                                                 {s.views != 0, "--views"},
                                                 {s.header_bytes != 0, "--header-bytes"},
+                                                {!s.dataset.empty(), "--dataset"},
                                                 {!s.flats.empty(), "--flat"},
                                                 {!s.darks.empty(), "--dark"},
                                                 {s.incident > 0, "--incident"},
@@ -200,6 +204,8 @@ std::vector<std::pair<std::string, std::string>> scan_companion_files(const Scan
 
 OpenedScan open_scan(const ScanSettings& s) {
   const std::string format = detect_format(s);
+  if (!s.dataset.empty() && format != "hdf5")
+    throw UsageError("--dataset", s.projections + " is " + format + ", not HDF5: it has no datasets to name");
   if (format == "xtekct") {
     OpenedScan scan = open_nikon_scan(s);
     weight_displaced_detector(s.projections, scan);
@@ -252,6 +258,7 @@ OpenedScan open_scan(const ScanSettings& s) {
   } else {
     convert::DxchangeOptions options;
     options.assume_line_integrals = !intensities;
+    options.dataset = s.dataset;
     convert::Hdf5Scan h = convert::open_hdf5_projections(s.projections, options);
     scan.projections = std::move(h.projections);
     theta_deg = std::move(h.angles_deg);

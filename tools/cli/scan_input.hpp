@@ -23,6 +23,8 @@ struct ScanSettings {
   std::size_t views = 0;
   std::string sample = "f32";
   std::uint64_t header_bytes = 0;
+  // hdf5
+  std::string dataset;  // empty: /exchange/data or the NXtomo entry
   // intensities
   bool intensities = false;
   std::vector<std::string> flats, darks;

@@ -115,7 +115,7 @@ class IsolatedHdf5SlabReader final : public SlabReader {
 
 std::string projection_parameters(const std::string& path, const DxchangeOptions& options) {
   WireWriter out;
-  out.put_string(path).put(options.assume_line_integrals).put(options.minimum_signal);
+  out.put_string(path).put(options.assume_line_integrals).put(options.minimum_signal).put_string(options.dataset);
   return std::move(out.bytes());
 }
 
@@ -140,6 +140,7 @@ WorkerHandler projection_handler(std::string_view parameters) {
   DxchangeOptions options;
   options.assume_line_integrals = in.get<bool>();
   options.minimum_signal = in.get<double>();
+  options.dataset = in.get_string();
   auto reader = std::make_shared<std::unique_ptr<ProjectionReader>>();
   return [path, options, reader](std::string_view request, WorkerReply& out) {
     WireReader in{std::string(request)};
@@ -223,6 +224,7 @@ WorkerHandler scan_handler(std::string_view parameters) {
   DxchangeOptions options;
   options.assume_line_integrals = in.get<bool>();
   options.minimum_signal = in.get<double>();
+  options.dataset = in.get_string();
   auto reader = std::make_shared<std::unique_ptr<ProjectionReader>>();
   return [path, options, reader](std::string_view request, WorkerReply& out) {
     WireReader in{std::string(request)};
@@ -273,7 +275,8 @@ DxchangeProjections open_dxchange_projections(const std::string& path, const Dxc
   DxchangeProjections scan;
   scan.theta_deg.resize(static_cast<std::size_t>(reply.get<std::uint64_t>()));
   for (double& angle : scan.theta_deg) angle = reply.get<double>();
-  scan.projections = std::make_unique<IsolatedDxchangeReader>(path, shape, std::move(worker));
+  scan.projections = std::make_unique<IsolatedDxchangeReader>(
+      path, shape, std::move(worker), options.dataset.empty() ? std::string("/exchange/data") : options.dataset);
   return scan;
 }
 
@@ -298,8 +301,9 @@ Hdf5Scan open_hdf5_projections(const std::string& path, const DxchangeOptions& o
   scan.flat_images = reply.get<std::uint64_t>();
   scan.dark_images = reply.get<std::uint64_t>();
   scan.skipped_images = reply.get<std::uint64_t>();
-  const std::string dataset =
-      scan.layout == "NXtomo" ? scan.entry + "/instrument/detector/data" : std::string("/exchange/data");
+  const std::string dataset = scan.layout == "NXtomo"   ? scan.entry + "/instrument/detector/data"
+                              : options.dataset.empty() ? std::string("/exchange/data")
+                                                        : options.dataset;
   scan.projections = std::make_unique<IsolatedDxchangeReader>(path, shape, std::move(worker), dataset);
   return scan;
 }

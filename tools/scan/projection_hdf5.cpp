@@ -55,11 +55,12 @@ std::vector<double> read_field(hid_t file, const std::string& path, const char* 
 
 class DxchangeReader final : public ProjectionReader {
  public:
-  DxchangeReader(const std::string& path, Handle file, Dataset data)
+  DxchangeReader(const std::string& path, Handle file, Dataset data, std::string name)
       : ProjectionReader(path, static_cast<int>(data.shape[2]), static_cast<int>(data.shape[1]),
                          static_cast<std::size_t>(data.shape[0])),
         file_(std::move(file)),
-        data_(std::move(data)) {}
+        data_(std::move(data)),
+        name_(std::move(name)) {}
 
   void enable_intensities(std::vector<double> flat, std::vector<double> dark, double minimum_signal) {
     IntensityOptions options;
@@ -72,13 +73,14 @@ class DxchangeReader final : public ProjectionReader {
     QuietHdf5Errors quiet;
     read_box(data_, {view, static_cast<hsize_t>(row_begin), 0},
              {1, static_cast<hsize_t>(row_end - row_begin), static_cast<hsize_t>(columns_)}, out,
-             path_ + ": dataset " + kData + " view " + std::to_string(view) + " rows " + std::to_string(row_begin) +
+             path_ + ": dataset " + name_ + " view " + std::to_string(view) + " rows " + std::to_string(row_begin) +
                  ".." + std::to_string(row_end));
   }
 
  private:
   Handle file_;
   Dataset data_;
+  std::string name_;
 };
 
 }  // namespace
@@ -90,12 +92,15 @@ DxchangeProjections open_dxchange_projections_in_process(const std::string& path
   if (H5Fis_hdf5(path.c_str()) <= 0) throw Error(ErrorClass::Malformed, path + ": not an HDF5 file");
   Handle file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
   if (!file.valid()) throw Error(ErrorClass::Io, path + ": cannot open the HDF5 file" + hdf5_reason());
-  if (!exists(file.get(), kData))
-    throw Error(ErrorClass::InvalidArgument, path + ": dataset " + kData + " is missing (not a DXchange file?)");
-  Dataset data = open_dataset(file.get(), path, kData);
+  const std::string name = options.dataset.empty() ? std::string(kData) : options.dataset;
+  if (!exists(file.get(), name.c_str()))
+    throw Error(ErrorClass::InvalidArgument,
+                path + ": dataset " + name + " is missing" +
+                    (options.dataset.empty() ? " (not a DXchange file? --dataset names another)" : ""));
+  Dataset data = open_dataset(file.get(), path, name.c_str());
   if (data.shape.size() != 3 || data.shape[0] == 0 || data.shape[1] == 0 || data.shape[2] == 0 ||
       data.shape[1] > std::numeric_limits<int>::max() || data.shape[2] > std::numeric_limits<int>::max())
-    throw Error(ErrorClass::InvalidArgument, path + ": dataset " + kData + " has shape " + shape_text(data.shape) +
+    throw Error(ErrorClass::InvalidArgument, path + ": dataset " + name + " has shape " + shape_text(data.shape) +
                                                  "; expected (views, rows, columns), none empty");
   const hsize_t rows = data.shape[1], columns = data.shape[2], views = data.shape[0];
 
@@ -122,7 +127,7 @@ DxchangeProjections open_dxchange_projections_in_process(const std::string& path
       throw Error(ErrorClass::Malformed, path + ": dataset " + kTheta + ": cannot read" + hdf5_reason());
   }
 
-  auto reader = std::make_unique<DxchangeReader>(path, std::move(file), std::move(data));
+  auto reader = std::make_unique<DxchangeReader>(path, std::move(file), std::move(data), name);
   if (has_white) reader->enable_intensities(std::move(flat), std::move(dark), options.minimum_signal);
   result.projections = std::move(reader);
   return result;

@@ -173,6 +173,11 @@ struct DxchangeOptions {
   // are line integrals already.
   bool assume_line_integrals = false;
   double minimum_signal = 1e-3;
+  // The projections' dataset (views, rows, columns); empty: /exchange/data.
+  // Named, the file is read as DXchange whatever else it holds (an NXtomo
+  // entry's data, an ITK image stack's /ITKImage/0/VoxelData, ...); flat and
+  // dark fields still come from /exchange/data_white and data_dark.
+  std::string dataset;
 };
 
 struct DxchangeProjections {

@@ -270,7 +270,7 @@ Hdf5Scan open_hdf5_projections_in_process(const std::string& path, const Dxchang
   if (!std::filesystem::is_regular_file(path, ec)) throw Error(ErrorClass::Io, path + ": cannot open: no such file");
   if (H5Fis_hdf5(path.c_str()) <= 0) throw Error(ErrorClass::Malformed, path + ": not an HDF5 file");
   std::vector<std::string> entries;
-  {
+  if (options.dataset.empty()) {
     Handle file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
     if (!file.valid()) throw Error(ErrorClass::Io, path + ": cannot open the HDF5 file" + hdf5::reason());
     entries = nxtomo_entries(file.get());
@@ -283,12 +283,12 @@ Hdf5Scan open_hdf5_projections_in_process(const std::string& path, const Dxchang
                 path + ": holds " + std::to_string(entries.size()) + " NXtomo entries (" + names +
                     "); ivol reconstructs a file of one (copy one out with h5copy or nxtomo)");
   }
-  {
+  if (options.dataset.empty()) {
     Handle file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
     if (file.valid() && !exists(file.get(), "/exchange/data"))
       throw Error(ErrorClass::InvalidArgument, path +
                                                    ": neither an NXtomo file (no top-level NXentry whose definition "
-                                                   "is NXtomo) nor a DXchange file (no dataset /exchange/data)");
+                                                   "is NXtomo) nor a DXchange file (no dataset /exchange/data; --dataset names another)");
   }
   DxchangeProjections dxchange = open_dxchange_projections_in_process(path, options);
   Hdf5Scan scan;
