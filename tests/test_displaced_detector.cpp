@@ -103,7 +103,27 @@ TEST(DisplacedDetector, DetectorBesideTheAxisIsRefused) {
     FAIL() << "accepted a detector that never sees the axis";
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("does not see the rotation axis"), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find("21"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("the axis projects to column -10.5 of 0 to 99"), std::string::npos)
+        << e.what();
+  }
+}
+
+// With a source offset the ray through the axis does not meet the detector
+// at u = 0: 3 mm of source offset at a magnification of 2 moves the axis 3 mm
+// the other way, off a detector whose last pixel centre is 1 mm past u = 0.
+TEST(DisplacedDetector, AxisSeenFromAnOffsetSourceIsChecked) {
+  ScanGeometry g = scan_with_offset(-100.0);            // pixel centres -199 .. -1 mm: u = 0 just beyond the last
+  for (View& v : g.views) v.detector_offset_u = -98.0;  // -197 .. +1 mm: u = 0 on the detector
+  EXPECT_NO_THROW(analyse_displaced_detector(g));
+  // u_axis = sx + (0 - sx) * SDD/SID = -sx at a magnification of 2.
+  for (View& v : g.views) v.source_offset_u = 3.0;  // u_axis = -3 mm: on the detector
+  EXPECT_NO_THROW(analyse_displaced_detector(g));
+  for (View& v : g.views) v.source_offset_u = -3.0;  // u_axis = +3 mm, past the last pixel centre (+1 mm)
+  try {
+    analyse_displaced_detector(g);
+    FAIL() << "accepted a detector the axis projects beside";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("the axis projects to column 100 of 0 to 99"), std::string::npos) << e.what();
   }
 }
 

@@ -50,6 +50,19 @@ DisplacedDetector analyse_displaced_detector(const ScanGeometry& geometry) {
     result.inferior = std::max(result.inferior, untilted(v, first));
     result.superior = std::min(result.superior, untilted(v, last));
   }
+  // Where the rotation axis itself projects, in every view: with a source
+  // offset that is not u = 0 (the ray through the isocentre comes from the
+  // offset source), so it is checked on its own.
+  for (std::size_t v = 0; v < geometry.view_count(); ++v) {
+    const double column = geometry.project(v, Vec3{0.0, 0.0, 0.0}).column;
+    if (column < 0.0 || column > d.columns - 1) {
+      std::ostringstream text;
+      text << "the detector does not see the rotation axis in view " << v << ": the axis projects to column " << column
+           << " of 0 to " << d.columns - 1
+           << " (check the detector offset, the source offset, --offset or the projection origin)";
+      throw std::invalid_argument(text.str());
+    }
+  }
   if (result.inferior > 0.0 || result.superior < 0.0) {
     std::ostringstream text;
     text << "the detector does not see the rotation axis in every view: the columns every view shares span "

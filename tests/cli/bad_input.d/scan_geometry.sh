@@ -51,7 +51,7 @@ PY
 cp "$work/p.xml" "$work/p_copy.xml"
 
 # A Nikon scan whose ObjectOffsetX puts the axis beside the detector.
-bad geometry-nikon-axis-beside     1 "part.xtekct: the detector does not see the rotation axis in every view" -- "$IVOL" recon "$work/nikon_beside/part.xtekct" --size 8 --voxel 0.1 -o "$out/x.ivol"
+bad geometry-nikon-axis-beside     1 "part.xtekct: the detector does not see the rotation axis in view 0" -- "$IVOL" recon "$work/nikon_beside/part.xtekct" --size 8 --voxel 0.1 -o "$out/x.ivol"
 # Options that contradict each other or the file.
 bad geometry-xml-and-sid           1 "--geometry gives the distances and offsets of every view; leave --sid, --sdd and --offset out" -- "$IVOL" recon "$work/p.raw" "${scan[@]}" --sid 500 --sdd 1000 "${grid[@]}" -o "$out/x.ivol"
 bad geometry-itk-read-as-raw-warns 0 "is an ITK image read as raw samples: its header's spacing and origin are not used" -- bash -c "'$IVOL' recon '$work/stack.mha' --format raw --detector 8,4 --views 2 --header-bytes \$(( \$(stat -c %s '$work/stack.mha') - 256 )) --pitch 1 --sid 100 --sdd 150 --size 4 --voxel 0.5 -o '$work/asraw.ivol'"
