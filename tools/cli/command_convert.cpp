@@ -30,6 +30,7 @@ struct ConvertSettings {
   std::string format_version = "1.3";
   std::string structure = "auto";
   unsigned brick = 32;  // bricked grid: voxels per brick side
+  int zstd_level = 3;
   std::uint64_t memory_mib = 0;
   std::string out_type;
   unsigned level = 0;
@@ -159,6 +160,11 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
                    "a remote file reads half the bytes, the file about 4 % larger)")
       ->check(CLI::IsMember({4u, 8u, 16u, 32u, 64u, 128u}))
       ->capture_default_str();
+  into->add_option("--zstd-level", s->zstd_level,
+                   "zstd level of every block, 1 to 19: higher is smaller and slower to write, never slower to read "
+                   "(19: 0.5 % smaller for a bricked grid, 3 % for an octree, at a twentieth of the speed)")
+      ->check(CLI::Range(1, 19))
+      ->capture_default_str();
   into->add_option("--memory", s->memory_mib, "About how many MiB the conversion may hold (default 2048)")
       ->check(whole_number());
   into->add_option("--temp-dir", s->temp_dir,
@@ -214,6 +220,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       if (!s->keep.empty()) options.keep = parse_keep(s->keep, "--keep");
       options.block_bytes = s->block_bytes;
       while ((1u << options.brick_log2) > s->brick) --options.brick_log2;  // a power of two, checked above
+      options.zstd_level = s->zstd_level;
       options.byte_planes = s->codec == "zstd-planes";
       options.framed_blocks = s->format_version == "1.3";
       options.structure = s->structure == "octree"    ? convert::StructureChoice::Octree

@@ -189,6 +189,7 @@ StreamingOptions import_streaming_options(const DenseVolume& shape, const Import
   report.value_offset = build.value_offset;
   if (options.block_bytes) streaming.write.block_bytes = options.block_bytes;
   streaming.write.byte_planes = options.byte_planes;
+  streaming.write.zstd_level = options.zstd_level;
   streaming.write.framed_blocks = options.framed_blocks;
   streaming.write.encoder = options.encoder;
   if (options.slab_budget_bytes) streaming.slab_budget_bytes = options.slab_budget_bytes;
@@ -276,6 +277,7 @@ void import_bricked(SlabReader& source, const std::string& path, const ImportOpt
   const BuildOptions& build = streaming.build;
   BrickedOptions bricked;
   bricked.brick_log2 = options.brick_log2;
+  bricked.zstd_level = options.zstd_level;
   bricked.encoding = build.encoding;
   bricked.value_scale = build.value_scale;
   bricked.value_offset = build.value_offset;

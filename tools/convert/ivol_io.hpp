@@ -42,6 +42,7 @@ enum class StructureChoice { Auto, Octree, Bricked };
 struct ImportOptions {
   StructureChoice structure = StructureChoice::Auto;
   unsigned brick_log2 = 5;                // bricked grid: bricks of 2^b voxels per side
+  int zstd_level = 3;                     // of every block (readers do not care which)
   std::optional<ValueEncoding> encoding;  // default: lossless for the sample type
   std::optional<KeepRule> keep;           // default: lossless (equal leaves merge)
   std::uint32_t block_bytes = 0;          // 0: the library's default
