@@ -6,11 +6,11 @@
 // (ivol::Error, or std::runtime_error from the projection readers): no
 // crash, no sanitizer report.
 //
-// libFuzzer runs it on the in-process HDF5 readers, so that a crash inside
-// libhdf5 is seen (and can be told from one of ivol's). With
-// IVOL_FUZZ_ISOLATED=1 (replay only) HDF5 goes through the readers users
-// get, libhdf5 in a child process: the library's crashes must then be clean
-// errors.
+// libFuzzer runs it on the in-process HDF5 and OpenVDB readers, so that a
+// crash inside libhdf5 or libopenvdb is seen (and can be told from one of
+// ivol's). With IVOL_FUZZ_ISOLATED=1 (replay only) HDF5 and OpenVDB go
+// through the readers users get, the library in a child process: the
+// library's crashes must then be clean errors.
 #include <unistd.h>
 
 #include <cstdint>
@@ -30,7 +30,7 @@
 #include "vdb_io.hpp"
 #include "xtekct.hpp"
 
-// libhdf5's child process is this binary started again (isolated_worker.hpp).
+// The libraries' child process is this binary started again (isolated_worker.hpp).
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
   ivol::convert::serve_if_worker_process();
   return 0;
@@ -136,8 +136,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       case 3:
         // A budget well inside libFuzzer's 2 GB RSS limit: a grid whose
         // dense box exceeds it must be refused, not allocated.
-        (void)ivol::convert::read_vdb(path, "", std::uint64_t{256} << 20);
-        return 0;
+        reader = isolated ? open_vdb_slabs(path, "", nullptr, std::uint64_t{256} << 20)
+                          : open_vdb_slabs_in_process(path, "", nullptr, std::uint64_t{256} << 20);
+        break;
     }
     const ivol::convert::DenseVolume& shape = reader->shape();
     if (shape.voxel_count() * ivol::convert::sample_size(shape.type) <= (16u << 20)) {

@@ -184,7 +184,7 @@ std::unique_ptr<convert::SlabReader> open_source(const std::string& path, Format
       return source;
     }
     case Format::Vdb:
-      return convert::memory_slabs(convert::read_vdb(path, options.grid, options.memory_bytes).volume);
+      return convert::open_vdb_slabs(path, options.grid, nullptr, options.memory_bytes);
     case Format::MetaImage:
     case Format::Nrrd:
       return convert::open_itk_image_slabs(path);

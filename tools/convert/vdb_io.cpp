@@ -15,6 +15,7 @@
 #include <fstream>
 #include <limits>
 #include <new>
+#include <utility>
 
 #include "ivol/error.hpp"
 #include "sizes.hpp"
@@ -246,6 +247,13 @@ VdbVolume read_vdb(const std::string& path, const std::string& grid_name, std::u
   // The byte buffer comes from operator new, aligned for float.
   copy_values(*grid, box, out);
   return out;
+}
+
+std::unique_ptr<SlabReader> open_vdb_slabs_in_process(const std::string& path, const std::string& grid_name,
+                                                      VdbSourceInfo* source, std::uint64_t memory_bytes) {
+  VdbVolume read = read_vdb(path, grid_name, memory_bytes);
+  if (source) *source = VdbSourceInfo{read.grid_name, read.background, read.was_half};
+  return memory_slabs(std::move(read.volume));
 }
 
 LossTally write_vdb(const DenseVolume& volume, const std::string& path, float background, const std::string& grid_name,

@@ -17,11 +17,13 @@
 
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "dense_volume.hpp"
 #include "exactness.hpp"
+#include "slab_io.hpp"
 
 namespace ivol::convert {
 
@@ -47,6 +49,32 @@ struct VdbVolume {
 // bounding box, held densely at 6 bytes a voxel, exceeds `memory_bytes`;
 // 0: kDefaultMemoryBytes of sizes.hpp).
 VdbVolume read_vdb(const std::string& path, const std::string& grid_name = "", std::uint64_t memory_bytes = 0);
+
+// What open_vdb_slabs tells besides the shape: the grid read, its background,
+// whether its values were stored as 16-bit floats. The per-voxel active and
+// tile flags of VdbVolume stay in the child: the converters do not use them,
+// and they would double what crosses the socket.
+struct VdbSourceInfo {
+  std::string grid_name;
+  float background = 0.0f;
+  bool was_half = false;
+};
+
+// read_vdb's volume, slab by slab, for the converters. libopenvdb runs in a
+// child process of its own (isolated_worker.hpp, worker kind "vdb-volume"):
+// libopenvdb allocates what a damaged file's block headers claim (64 GiB,
+// 1 TiB) and may crash on one, so a crash is ivol::Error(Malformed) naming
+// the file, and an allocation beyond the child's limit is
+// ivol::Error(LimitExceeded), never the parent's memory. The child reads the
+// grid whole (as read_vdb does: the dense box within `memory_bytes`, 0:
+// kDefaultMemoryBytes) and holds the grid beside its dense copy, so it may
+// allocate twice that budget; this process holds one slab at a time.
+std::unique_ptr<SlabReader> open_vdb_slabs(const std::string& path, const std::string& grid_name = "",
+                                           VdbSourceInfo* source = nullptr, std::uint64_t memory_bytes = 0);
+// The same in this process, as the child runs it; for the fuzz harness,
+// which must see the library's crashes to tell them from ivol's.
+std::unique_ptr<SlabReader> open_vdb_slabs_in_process(const std::string& path, const std::string& grid_name = "",
+                                                      VdbSourceInfo* source = nullptr, std::uint64_t memory_bytes = 0);
 
 // Writes a FloatGrid named grid_name: the voxels whose value differs from
 // `background` become active (tolerance 0), uniform 8^3 blocks become tiles
