@@ -21,3 +21,10 @@ else
   bad vdb-child-blosc-64gib 2 "$work/vdb-child-density.vdb" -- \
     timeout 60 "$IVOL" convert "$work/vdb-child-density.vdb" "$out/x.ivol"
 fi
+# A 19 KB grid whose blosc block makes libopenvdb 10 write past its buffer
+# (found by fuzz_converters, 2026-12-02; under valgrind: an invalid write in
+# bloscFromStream; in a release build glibc aborts on the damaged heap). In
+# the child that is an error naming the file, and nothing is written.
+cp "$vdb_child_here/../../fuzz/regressions/libopenvdb/vdb-blosc-heap-overflow" "$work/vdb-child-overflow.vdb"
+bad vdb-child-heap-overflow 2 "$work/vdb-child-overflow.vdb: libopenvdb crashed" -- \
+  timeout 60 "$IVOL" convert "$work/vdb-child-overflow.vdb" "$out/x.raw"
