@@ -94,8 +94,21 @@ TEST(DetectionMask, AllSpilledWithThinSlabsIsTheWholePreviewsMask) {
 
 TEST(DetectionMask, PartlySpilledWithAGivenThreshold) {
   PhantomScan scan;
-  // Three layers of 23×19 cells held, the rest spilled.
-  expect_same_as_whole_preview(scan, 2, 3 * 23 * 19 * sizeof(float), 2, 0.01F, true);
+  // All held: the peak is everything else plus every layer of 23×19 cells.
+  DetectionMaskOptions all;
+  all.margin_voxels = 3;
+  const DetectionMask held = detect_need_mask(scan.projections, scan.geometry, {}, scan.grid, all);
+  const std::uint64_t layer_bytes = 23 * 19 * sizeof(float);
+  const std::uint64_t layers = 22;  // ceil(43 / 2)
+  EXPECT_EQ(held.spilled_bytes, 0U);
+  ASSERT_GT(held.peak_preview_bytes, layers * layer_bytes);
+  // Three layers held, the rest spilled.
+  const std::uint64_t budget = held.peak_preview_bytes - (layers - 3) * layer_bytes;
+  expect_same_as_whole_preview(scan, 2, budget, 2, 0.01F, true);
+  all.preview_memory = budget;
+  const DetectionMask partly = detect_need_mask(scan.projections, scan.geometry, {}, scan.grid, all);
+  EXPECT_EQ(partly.spilled_bytes, (layers - 3) * layer_bytes);
+  EXPECT_EQ(partly.peak_preview_bytes, budget);
 }
 
 }  // namespace

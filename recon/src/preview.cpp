@@ -246,7 +246,13 @@ DetectionMask detect_need_mask(ProjectionSource& projections, const ScanGeometry
   std::vector<float> cells(area);
   std::vector<float> otsu_samples;
   otsu_samples.reserve(((sx + 1) / 2) * ((sy + 1) / 2) * ((sz + 1) / 2));
-  CellLayers layers(area, detection.preview_memory, detection.temp_directory);
+  // The budget covers everything the preview holds; the cell layers take
+  // what the ring, the samples for Otsu and the need mask (a byte per cell)
+  // leave of it.
+  const std::uint64_t fixed_bytes =
+      (ring.size() + along_x.size() + cells.size() + otsu_samples.capacity()) * sizeof(float) + area * cz;
+  CellLayers layers(area, detection.preview_memory > fixed_bytes ? detection.preview_memory - fixed_bytes : 0,
+                    detection.temp_directory);
   std::size_t next_layer = 0;
   auto finish_layers_through = [&](std::size_t k) {
     for (; next_layer < cz; ++next_layer) {
@@ -281,8 +287,7 @@ DetectionMask detect_need_mask(ProjectionSource& projections, const ScanGeometry
   result.otsu_threshold = otsu_threshold(otsu_samples.data(), otsu_samples.size());
   result.threshold =
       detection.threshold ? *detection.threshold : static_cast<float>(rule.otsu_share * result.otsu_threshold);
-  result.peak_preview_bytes =
-      (ring.size() + along_x.size() + cells.size() + otsu_samples.size()) * sizeof(float) + layers.held_bytes();
+  result.peak_preview_bytes = fixed_bytes + layers.held_bytes();
   result.spilled_bytes = layers.spilled_bytes();
   std::vector<float>().swap(otsu_samples);
   // The second pass: each layer of cells against the threshold, as

@@ -57,7 +57,8 @@ Preview reconstruct_detection_preview(ProjectionSource& projections, const ScanG
 // same samples as reconstruct_detection_preview, pooled along z as soon as a
 // cell layer's samples have arrived (a ring of 1 + ratio + 2·reach layers
 // pooled along x and y), and each finished layer of cells kept in host
-// memory while `preview_memory` lasts, the rest in an unlinked temporary
+// memory while `preview_memory` lasts (after the ring, the samples for
+// Otsu's threshold and the need mask), the rest in an unlinked temporary
 // file in `temp_directory` (TMPDIR, else /tmp, when empty). Otsu's threshold
 // needs every sample first, so the layers are thresholded in a second pass
 // over the kept layers, once it is known: the threshold is exactly that of
@@ -69,7 +70,7 @@ struct DetectionMaskOptions {
   DetectionRule rule;
   unsigned margin_voxels = 2;                             // as reconstruct_detection_preview's
   std::optional<float> threshold;                         // given; else rule.otsu_share × Otsu's
-  std::uint64_t preview_memory = std::uint64_t{1} << 30;  // bytes of cell layers held before spilling
+  std::uint64_t preview_memory = std::uint64_t{1} << 30;  // bytes held, the need mask's included
   std::string temp_directory;
 };
 
@@ -79,7 +80,7 @@ struct DetectionMask {
   float otsu_threshold = 0.0F;  // of the samples, before the share
   float threshold = 0.0F;       // applied
   double seconds = 0.0;
-  std::uint64_t peak_preview_bytes = 0;  // preview values held at once: ring, layers, Otsu's samples
+  std::uint64_t peak_preview_bytes = 0;  // held at once: ring, cell layers, Otsu's samples, the need mask
   std::uint64_t spilled_bytes = 0;       // cell layers written to the temporary file
 };
 
