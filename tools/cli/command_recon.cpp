@@ -229,6 +229,59 @@ void print_ranks(const std::vector<RankStats>& ranks) {
   std::cerr << "\n";
 }
 
+// Where the structure needs full resolution: the preview and its need mask.
+struct FoundObject {
+  NeedMask mask;
+  float otsu_threshold = 0.0F;
+  float threshold = 0.0F;
+  double seconds = 0.0;
+  std::uint64_t preview_bytes = 0;  // preview values held at once
+  std::uint64_t preview_spilled_bytes = 0;
+};
+
+// The refinement rule (docs/refinement.md). detection: each preview cell the
+// largest sample of a 1/(factor/2) reconstruction within the margin of it,
+// against a share of Otsu's threshold that covers the preview's blur; the
+// margin is applied while pooling, so the need mask adds none. The preview is
+// pooled and thresholded layer by layer, holding the cell layers within the
+// quarter of --memory left for the preview and the value window, the rest in
+// a temporary file (recon::detect_need_mask). preview (the rule before issue
+// 18): each cell its centre's value on a 1/factor preview, half of Otsu's
+// threshold, the margin in whole cells; that preview (1/64 of the dense
+// volume at the default factor 4) is held whole.
+FoundObject find_object(const ReconSettings& s, const recon::VolumeGrid& grid, const recon::FdkOptions& fdk_options,
+                        OpenedScan& scan, bool detection, unsigned factor, std::optional<float> given_threshold) {
+  FoundObject found;
+  if (detection) {
+    recon::DetectionMaskOptions options;
+    options.rule = kDetection;
+    options.rule.factor = factor;
+    options.margin_voxels = s.margin;
+    options.threshold = given_threshold;
+    options.preview_memory = memory_share(s);
+    options.temp_directory = fdk_options.temp_directory;  // where the filtered rows go
+    recon::DetectionMask detected =
+        recon::detect_need_mask(*scan.projections, scan.geometry, fdk_options, grid, options);
+    found.mask = std::move(detected.mask);
+    found.otsu_threshold = detected.otsu_threshold;
+    found.threshold = detected.threshold;
+    found.seconds = detected.seconds;
+    found.preview_bytes = detected.peak_preview_bytes;
+    found.preview_spilled_bytes = detected.spilled_bytes;
+    return found;
+  }
+  const recon::Preview preview =
+      recon::reconstruct_preview(*scan.projections, scan.geometry, fdk_options, grid, factor);
+  found.otsu_threshold = preview.otsu_threshold;
+  found.threshold = given_threshold ? *given_threshold : 0.5F * preview.otsu_threshold;
+  found.seconds = preview.seconds;
+  found.preview_bytes = preview.values.size() * sizeof(float);
+  const Dims full{grid.size[0], grid.size[1], grid.size[2]};
+  const Dims low{preview.grid.size[0], preview.grid.size[1], preview.grid.size[2]};
+  found.mask = need_mask_from_low_resolution(preview.values.data(), low, factor, full, found.threshold, s.margin);
+  return found;
+}
+
 // The paper's pipeline: a low-resolution preview finds the object, the
 // structure is generated from it, the FDK backprojects into the structure's
 // voxels only, and the structure is written as an .ivol file of its kind
@@ -238,36 +291,23 @@ void print_ranks(const std::vector<RankStats>& ranks) {
 // (StructureValueWindow), the writer's slab (--memory / 4), the filtered
 // detector rows (--memory / 4, the rest in a temporary file), on CPU devices
 // the device's buffers (--memory / 4) and the task lists of the slabs in
-// flight; never the dense volume nor all the values. The preview is still
-// held whole, outside --memory.
+// flight; never the dense volume nor all the values. The detection preview
+// holds its cell layers within --memory / 4 (shared with the value window,
+// unenforced), the rest in a temporary file in --temp-dir.
 int run_structure(const ReconSettings& s, const GlobalOptions& global, const recon::VolumeGrid& grid,
                   const recon::FdkOptions& fdk_options, OpenedScan& scan, recon::FdkReconstructor& reconstructor,
                   Metadata metadata, const std::function<void(Metadata&)>& complete_metadata,
                   std::chrono::steady_clock::time_point start, MpiRun* mpi) {
   StructureKind kind{};
   parse_structure(s.structure, kind);
-  // The refinement rule (docs/refinement.md). detection: each preview cell
-  // the largest sample of a 1/(factor/2) reconstruction within the margin
-  // of it, against a share of Otsu's threshold that covers the preview's
-  // blur; the margin is applied while pooling, so the need mask adds none.
-  // preview (the rule before issue 18): each cell its centre's value on a
-  // 1/factor preview, half of Otsu's threshold, the margin in whole cells.
   const bool detection = s.refine == "detection";
   const unsigned factor = s.preview_factor ? s.preview_factor : detection ? kDetection.factor : 4;
-  const recon::Preview preview =
-      detection ? recon::reconstruct_detection_preview(*scan.projections, scan.geometry, fdk_options, grid, factor,
-                                                       kDetection.thinning, s.margin)
-                : recon::reconstruct_preview(*scan.projections, scan.geometry, fdk_options, grid, factor);
-  const double otsu_share = detection ? kDetection.otsu_share : 0.5;
-  float threshold = static_cast<float>(otsu_share * preview.otsu_threshold);
-  if (s.threshold != "otsu") {
-    threshold = static_cast<float>(parse_number(s.threshold, "--threshold"));
-  }
-  const unsigned mask_margin = detection ? 0 : s.margin;
+  std::optional<float> given_threshold;
+  if (s.threshold != "otsu") given_threshold = static_cast<float>(parse_number(s.threshold, "--threshold"));
+  const FoundObject found = find_object(s, grid, fdk_options, scan, detection, factor, given_threshold);
+  const float threshold = found.threshold;
+  const NeedMask& mask = found.mask;
   auto generation_start = std::chrono::steady_clock::now();
-  const Dims full{grid.size[0], grid.size[1], grid.size[2]};
-  const Dims low{preview.grid.size[0], preview.grid.size[1], preview.grid.size[2]};
-  const NeedMask mask = need_mask_from_low_resolution(preview.values.data(), low, factor, full, threshold, mask_margin);
   GenerationOptions generation;
   generation.nested_cell = s.nested_cell;
   std::unique_ptr<VoxelStructure> structure = generate_structure(kind, mask, generation);
@@ -281,7 +321,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
       {"threshold_method", s.threshold != "otsu" ? "given"
                            : detection           ? share_text(kDetection.otsu_share) + " of Otsu's on the samples"
                                                  : "half of Otsu's on the preview"},
-      {"otsu_threshold", preview.otsu_threshold},
+      {"otsu_threshold", found.otsu_threshold},
       {"margin", s.margin},
       {"preview_factor", factor},
       {"voxels", structure->voxel_count()}};
@@ -358,7 +398,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
       {"voxel_updates", voxel_updates},
       {"seconds",
        {{"total", total},
-        {"preview", preview.seconds},
+        {"preview", found.seconds},
         {"generation", generating},
         {"reading", fdk.timings.reading},
         {"filtering", fdk.timings.filtering},
@@ -366,7 +406,8 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
         {"reconstruction", fdk.timings.total - writing_during_fdk},
         {"writing", writing}}}};
   report["memory"] = memory_json(s, fdk, reconstructor.device_names().size());
-  report["memory"]["preview_bytes"] = preview.values.size() * sizeof(float);
+  report["memory"]["preview_bytes"] = found.preview_bytes;
+  report["memory"]["preview_spilled_bytes"] = found.preview_spilled_bytes;
   report["memory"]["value_window_bytes"] = values.peak_bytes();
   if (mpi) report["ranks"] = ranks_json(ranks);
   if (s.json) {
@@ -376,7 +417,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
               << structure->voxel_count() << " voxels ("
               << static_cast<double>(grid.voxel_count()) / static_cast<double>(structure->voxel_count())
               << "x fewer than " << grid.size[0] << "x" << grid.size[1] << "x" << grid.size[2] << ") in " << total
-              << " s (preview " << preview.seconds << " s, generation " << generating << " s, FDK "
+              << " s (preview " << found.seconds << " s, generation " << generating << " s, FDK "
               << fdk.timings.total - writing_during_fdk << " s, writing " << writing << " s); " << s.output << ": "
               << human_bytes(written.write.file_bytes) << "\n";
     if (mpi) print_ranks(ranks);
@@ -462,14 +503,15 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember({2, 4, 8, 16, 32}));
   out->add_option("--memory", s->memory_mib,
                   "About how many MiB of host memory the run may use: a quarter each for the writer's slab, the "
-                  "filtered detector rows (the rest go to a temporary file, see --temp-dir) and, on CPU devices, the "
-                  "device's slabs")
+                  "filtered detector rows (the rest go to a temporary file, see --temp-dir), on CPU devices the "
+                  "device's slabs and, with --structure, the detection preview's cells (the rest to a temporary "
+                  "file)")
       ->check(whole_number())
       ->capture_default_str();
   out->add_option(
       "--temp-dir", s->temp_dir,
-      "Directory of the octree writer's temporary spill file and of the filtered detector rows beyond their "
-      "share of --memory (default: $TMPDIR, else the output's directory)");
+      "Directory of the octree writer's temporary spill file and of the filtered detector rows and the "
+      "detection preview's cells beyond their share of --memory (default: $TMPDIR, else the output's directory)");
   out->add_flag("--no-disk-check", s->no_disk_check,
                 "Skip the check that the output's and the spill file's disks have the room the run is estimated to "
                 "need");

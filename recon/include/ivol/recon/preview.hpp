@@ -2,9 +2,13 @@
 // reconstruction that finds the object, before the structure is generated.
 #pragma once
 
+#include <cstdint>
+#include <optional>
+#include <string>
 #include <vector>
 
 #include "ivol/recon/fdk.hpp"
+#include "ivol/structures.hpp"
 
 namespace ivol::recon {
 
@@ -48,5 +52,39 @@ struct DetectionRule {
 Preview reconstruct_detection_preview(ProjectionSource& projections, const ScanGeometry& geometry,
                                       const FdkOptions& options, const VolumeGrid& full, unsigned factor,
                                       unsigned thinning, unsigned margin_voxels);
+
+// The detection rule's need mask without the whole preview (issue 23): the
+// same samples as reconstruct_detection_preview, pooled along z as soon as a
+// cell layer's samples have arrived (a ring of 1 + ratio + 2·reach layers
+// pooled along x and y), and each finished layer of cells kept in host
+// memory while `preview_memory` lasts (after the ring, the samples for
+// Otsu's threshold and the need mask), the rest in an unlinked temporary
+// file in `temp_directory` (TMPDIR, else /tmp, when empty). Otsu's threshold
+// needs every sample first, so the layers are thresholded in a second pass
+// over the kept layers, once it is known: the threshold is exactly that of
+// reconstruct_detection_preview (Otsu's over the same one sample in eight),
+// and the mask is need_mask_from_low_resolution(preview, ..., margin 0)'s,
+// cell for cell. Distributed, rank 0 reconstructs and broadcasts the
+// samples for Otsu and then each layer of cells.
+struct DetectionMaskOptions {
+  DetectionRule rule;
+  unsigned margin_voxels = 2;                             // as reconstruct_detection_preview's
+  std::optional<float> threshold;                         // given; else rule.otsu_share × Otsu's
+  std::uint64_t preview_memory = std::uint64_t{1} << 30;  // bytes held, the need mask's included
+  std::string temp_directory;
+};
+
+struct DetectionMask {
+  NeedMask mask;
+  VolumeGrid grid;              // the cells' grid (the preview's)
+  float otsu_threshold = 0.0F;  // of the samples, before the share
+  float threshold = 0.0F;       // applied
+  double seconds = 0.0;
+  std::uint64_t peak_preview_bytes = 0;  // held at once: ring, cell layers, Otsu's samples, the need mask
+  std::uint64_t spilled_bytes = 0;       // cell layers written to the temporary file
+};
+
+DetectionMask detect_need_mask(ProjectionSource& projections, const ScanGeometry& geometry, const FdkOptions& options,
+                               const VolumeGrid& full, const DetectionMaskOptions& detection);
 
 }  // namespace ivol::recon
