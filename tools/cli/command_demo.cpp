@@ -1,7 +1,8 @@
 // ivol demo: the paper's pipeline end to end on a simulated scan. Projects an
 // industrial phantom (exact line integrals, photon noise), reconstructs it
-// densely and straight into an octree (a low-resolution preview finds the
-// object, only the octree's voxels are backprojected), writes both as .ivol,
+// densely and straight into an octree (a half-resolution detection preview
+// finds the object, as ivol recon's default rule does; only the octree's
+// voxels are backprojected), writes both as .ivol,
 // and prints the paper's comparison: time, memory, file size, speedup, error.
 // A slice of each is written as PNG, the octree's with its leaf borders.
 #include <chrono>
@@ -128,13 +129,14 @@ Runner add_demo_command(CLI::App& app, const GlobalOptions& global) {
 
     // Octree: preview, structure, FDK into its voxels only, write.
     start = Clock::now();
-    const recon::Preview preview = recon::reconstruct_preview(projections, geometry, {}, grid, 4);
-    const float threshold = 0.5F * preview.otsu_threshold;
+    // The refinement rule ivol recon uses by default (docs/refinement.md):
+    // cells of 2³ that the largest nearby sample of a half-resolution
+    // detection preview marks.
+    recon::DetectionMaskOptions detection;
+    detection.margin_voxels = s->margin;
+    const recon::DetectionMask found = recon::detect_need_mask(projections, geometry, {}, grid, detection);
     const auto generation_start = Clock::now();
-    const Dims low{preview.grid.size[0], preview.grid.size[1], preview.grid.size[2]};
-    const NeedMask mask =
-        need_mask_from_low_resolution(preview.values.data(), low, 4, Dims{n, n, n}, threshold, s->margin);
-    auto octree = generate_structure(StructureKind::Octree, mask);
+    auto octree = generate_structure(StructureKind::Octree, found.mask);
     const double generating = seconds_since(generation_start);
     reconstructor.reconstruct_structure(grid, *octree);
     Metadata octree_metadata = metadata;
@@ -182,7 +184,7 @@ Runner add_demo_command(CLI::App& app, const GlobalOptions& global) {
         "phantom's material), in 1/mm.\n  octree time: preview %.2f s, structure generation "
         "%.3f s, FDK into the octree and writing the rest.\n  slices: %s/demo-dense-slice.png, "
         "%s/demo-octree-slice.png (octree leaves in red)\n",
-        static_cast<unsigned long long>(octree_errors.object_voxels), preview.seconds, generating,
+        static_cast<unsigned long long>(octree_errors.object_voxels), found.seconds, generating,
         s->output_dir.c_str(), s->output_dir.c_str());
     return kExitOk;
   };
