@@ -98,6 +98,17 @@ double max_abs(const std::vector<double>& v) {
   return m;
 }
 
+// Float round-off of the double-precision reference: within 2e-5 of its
+// largest value everywhere.
+void expect_matches_reference(const std::vector<float>& device, const std::vector<double>& reference) {
+  const double scale = max_abs(reference);
+  ASSERT_GT(scale, 0.01);
+  ASSERT_EQ(device.size(), reference.size());
+  double worst = 0;
+  for (std::size_t i = 0; i < device.size(); ++i) worst = std::max(worst, std::abs(device[i] - reference[i]));
+  EXPECT_LT(worst / scale, 2e-5) << "worst difference " << worst << " of " << scale;
+}
+
 TEST(Fdk, MatchesDoubleReference) {
   for (const bool short_scan : {false, true}) {
     SCOPED_TRACE(short_scan ? "short scan" : "full scan");
@@ -109,11 +120,7 @@ TEST(Fdk, MatchesDoubleReference) {
     options.window = RampWindow::Hann;
     options.cutoff = 0.9;
     const std::vector<float> device = reconstruct_fdk_dense(p, c.geometry, c.grid, options);
-    const double scale = max_abs(reference);
-    ASSERT_GT(scale, 0.01);
-    double worst = 0;
-    for (std::size_t i = 0; i < device.size(); ++i) worst = std::max(worst, std::abs(device[i] - reference[i]));
-    EXPECT_LT(worst / scale, 2e-5) << "worst difference " << worst << " of " << scale;
+    expect_matches_reference(device, reference);
   }
 }
 
@@ -129,11 +136,7 @@ TEST(Fdk, AnisotropicVoxelsMatchDoubleReference) {
   options.window = RampWindow::Hann;
   options.cutoff = 0.9;
   const std::vector<float> device = reconstruct_fdk_dense(p, c.geometry, c.grid, options);
-  const double scale = max_abs(reference);
-  ASSERT_GT(scale, 0.01);
-  double worst = 0;
-  for (std::size_t i = 0; i < device.size(); ++i) worst = std::max(worst, std::abs(device[i] - reference[i]));
-  EXPECT_LT(worst / scale, 2e-5) << "worst difference " << worst << " of " << scale;
+  expect_matches_reference(device, reference);
   // The ball's density is recovered at its centre: the axes are not swapped.
   const auto at = [&](double x, double y, double z) {
     const auto i = static_cast<std::size_t>(std::lround((x - c.grid.origin[0]) / c.grid.voxel_size[0]));

@@ -119,6 +119,15 @@ std::string projection_parameters(const std::string& path, const DxchangeOptions
   return std::move(out.bytes());
 }
 
+// The child's side of projection_parameters (after the path).
+DxchangeOptions read_projection_options(WireReader& in) {
+  DxchangeOptions options;
+  options.assume_line_integrals = in.get<bool>();
+  options.minimum_signal = in.get<double>();
+  options.dataset = in.get_string();
+  return options;
+}
+
 // Reads rows of the reader the child opened, converted to line integrals
 // there: the same requests as the DXchange worker's.
 void serve_rows(ProjectionReader& r, WireReader& in, WorkerReply& out) {
@@ -137,10 +146,7 @@ void serve_rows(ProjectionReader& r, WireReader& in, WorkerReply& out) {
 WorkerHandler projection_handler(std::string_view parameters) {
   WireReader in{std::string(parameters)};
   const std::string path = in.get_string();
-  DxchangeOptions options;
-  options.assume_line_integrals = in.get<bool>();
-  options.minimum_signal = in.get<double>();
-  options.dataset = in.get_string();
+  const DxchangeOptions options = read_projection_options(in);
   auto reader = std::make_shared<std::unique_ptr<ProjectionReader>>();
   return [path, options, reader](std::string_view request, WorkerReply& out) {
     WireReader in{std::string(request)};
@@ -221,10 +227,7 @@ LengthField get_length(WireReader& in) {
 WorkerHandler scan_handler(std::string_view parameters) {
   WireReader in{std::string(parameters)};
   const std::string path = in.get_string();
-  DxchangeOptions options;
-  options.assume_line_integrals = in.get<bool>();
-  options.minimum_signal = in.get<double>();
-  options.dataset = in.get_string();
+  const DxchangeOptions options = read_projection_options(in);
   auto reader = std::make_shared<std::unique_ptr<ProjectionReader>>();
   return [path, options, reader](std::string_view request, WorkerReply& out) {
     WireReader in{std::string(request)};
