@@ -6,21 +6,11 @@
 # manifest through `sha256sum -c`, and raw samples through "-" (standard
 # output and input) against the files themselves. $IVOL is the binary.
 set -u
+cli_dir=$(cd "$(dirname "$0")" && pwd)
 : "${IVOL:?set IVOL to the ivol binary}"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-passed=0
-failed=0
-check() {  # check NAME COMMAND...: the command must succeed
-  local name=$1
-  shift
-  local log
-  if log=$("$@" 2>&1); then
-    echo "ok   $name"; passed=$((passed + 1))
-  else
-    echo "FAIL $name"; echo "$log" | sed 's/^/    /' | head -20; failed=$((failed + 1))
-  fi
-}
+source "$cli_dir/cases.sh"
 expect_exit() {  # expect_exit NAME EXIT TEXT -- COMMAND...
   local name=$1 want=$2 text=$3
   shift 4
@@ -203,5 +193,4 @@ expect_exit stdin-long  2 "more bytes than" -- bash -c "cat '$raw' '$raw' | '$IV
 expect_exit stdin-otsu  2 "give a file" -- bash -c "cat '$work/big.raw' | '$IVOL' convert - '$work/otsu.ivol' ${big[*]} --keep threshold=otsu"
 check stdin-failures-leave-nothing bash -c "! ls -A '$work' | grep -E 'short|long|otsu'"
 
-echo "$passed passed, $failed failed"
-[ "$failed" -eq 0 ]
+finish

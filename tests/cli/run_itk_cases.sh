@@ -6,23 +6,13 @@
 # origin; what cannot be kept is refused. Fixtures: tests/data/itk
 # (make_fixtures.py). $IVOL is the binary under test.
 set -u
+cli_dir=$(cd "$(dirname "$0")" && pwd)
 : "${IVOL:?set IVOL to the ivol binary}"
 data=$(cd "$(dirname "$0")/../data/itk" && pwd)
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 cd "$work" || exit 1
-passed=0
-failed=0
-check() {
-  if "${@:2}" >"$work/log" 2>&1; then
-    echo "ok   $1"
-    passed=$((passed + 1))
-  else
-    echo "FAIL $1"
-    sed 's/^/    /' "$work/log" | head -20
-    failed=$((failed + 1))
-  fi
-}
+source "$cli_dir/cases.sh"
 py() { /usr/bin/python3 -c "$@"; }
 
 # RTK's projections, nothing but the geometry and the grid: the pitch and the
@@ -139,5 +129,4 @@ check "binary16-into-metaimage-refused" bash -c "
   '$IVOL' -q convert h.ivol h.mha && grep -q 'MET_FLOAT' h.mha &&
   '$IVOL' -q convert h.ivol h2.mha --out-type f16 2>err; [ \$? -eq 1 ] && grep -q 'no binary16 type' err && [ ! -e h2.mha ]"
 
-echo "$passed passed, $failed failed"
-[ "$failed" -eq 0 ]
+finish

@@ -6,6 +6,7 @@
 # without ranges refused, a file replaced while open refused. $IVOL is the
 # binary under test.
 set -u
+cli_dir=$(cd "$(dirname "$0")" && pwd)
 : "${IVOL:?set IVOL to the ivol binary}"
 server_script=$(cd "$(dirname "$0")/../support" && pwd)/range_http_server.py
 work=$(mktemp -d)
@@ -13,18 +14,7 @@ server=""
 stop_server() { [ -n "$server" ] && kill "$server" 2>/dev/null && wait "$server" 2>/dev/null; server=""; }
 trap 'stop_server; rm -rf "$work"' EXIT
 cd "$work" || exit 1
-passed=0
-failed=0
-check() {
-  if "${@:2}" >"$work/log" 2>&1; then
-    echo "ok   $1"
-    passed=$((passed + 1))
-  else
-    echo "FAIL $1"
-    sed 's/^/    /' "$work/log" | head -20
-    failed=$((failed + 1))
-  fi
-}
+source "$cli_dir/cases.sh"
 start_server() {
   stop_server
   rm -f port counts.json
@@ -142,5 +132,4 @@ missing() {
 }
 check "a-missing-file-names-the-status" missing
 
-echo "$passed passed, $failed failed"
-[ "$failed" -eq 0 ]
+finish

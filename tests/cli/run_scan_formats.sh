@@ -6,23 +6,13 @@
 # compared with the reconstruction of the same projections given as raw
 # samples with an explicit geometry. $IVOL is the binary under test.
 set -u
+cli_dir=$(cd "$(dirname "$0")" && pwd)
 : "${IVOL:?set IVOL to the ivol binary}"
 data=$(cd "$(dirname "$0")/../data/nxtomo" && pwd)
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 cd "$work" || exit 1
-passed=0
-failed=0
-check() {
-  if "${@:2}" >"$work/log" 2>&1; then
-    echo "ok   $1"
-    passed=$((passed + 1))
-  else
-    echo "FAIL $1"
-    sed 's/^/    /' "$work/log" | head -20
-    failed=$((failed + 1))
-  fi
-}
+source "$cli_dir/cases.sh"
 py() { /usr/bin/python3 "$@"; }
 # rms A.ivol B.ivol BOUND: the volumes' RMS difference is below BOUND.
 rms_below() {
@@ -200,5 +190,4 @@ check "xtekct-angles-matter" rms_above ctdata.ivol nominal.ivol 1e-3
 check "xtekct-provenance-says-where" bash -c "'$IVOL' info --json ctdata.ivol > j && grep -q '_ctdata.txt + InitialAngle' j &&
   grep -q 'SrcToObject' j && grep -q '\"role\": *\"angles\"' j"
 
-echo "$passed passed, $failed failed"
-[ "$failed" -eq 0 ]
+finish

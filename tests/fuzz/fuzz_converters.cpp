@@ -6,9 +6,10 @@
 // (ivol::Error, or std::runtime_error from the projection readers): no
 // crash, no sanitizer report.
 //
-// libFuzzer runs it on the in-process HDF5 and OpenVDB readers, so that a
-// crash inside libhdf5 or libopenvdb is seen (and can be told from one of
-// ivol's). With IVOL_FUZZ_ISOLATED=1 (replay only) HDF5 and OpenVDB go
+// libFuzzer runs it on the in-process HDF5 reader, so that a crash inside
+// libhdf5 is seen (and can be told from one of ivol's); OpenVDB grids are
+// skipped unless IVOL_FUZZ_VDB_IN_PROCESS=1 (fuzz_vdb.cpp is their harness).
+// With IVOL_FUZZ_ISOLATED=1 (replay only) HDF5 and OpenVDB go
 // through the readers users get, the library in a child process: the
 // library's crashes must then be clean errors.
 #include <unistd.h>
@@ -67,6 +68,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   std::fwrite(data + 1, 1, size - 1, f);
   std::fclose(f);
   static const bool isolated = std::getenv("IVOL_FUZZ_ISOLATED") != nullptr;
+  static const bool vdb_in_process = std::getenv("IVOL_FUZZ_VDB_IN_PROCESS") != nullptr;
   try {
     using namespace ivol::convert;
     std::unique_ptr<ProjectionReader> projections;
@@ -134,10 +136,21 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         reader = isolated ? open_hdf5_slabs(path) : open_hdf5_slabs_in_process(path);
         break;
       case 3:
-        // A budget well inside libFuzzer's 2 GB RSS limit: a grid whose
-        // dense box exceeds it must be refused, not allocated.
-        reader = isolated ? open_vdb_slabs(path, "", nullptr, std::uint64_t{256} << 20)
-                          : open_vdb_slabs_in_process(path, "", nullptr, std::uint64_t{256} << 20);
+        // libopenvdb in process allocates what a block header claims and
+        // crashes on damaged grids (regressions/libopenvdb): such findings
+        // drowned every other one here (167 of 167 in the last run). Its
+        // own harness (fuzz_vdb.cpp) fuzzes it; here it is read only
+        // through the child users get, when replaying, or in process on
+        // request (IVOL_FUZZ_VDB_IN_PROCESS=1).
+        if (isolated) {
+          reader = open_vdb_slabs(path, "", nullptr, std::uint64_t{256} << 20);
+        } else if (vdb_in_process) {
+          // A budget well inside libFuzzer's 2 GB RSS limit: a grid whose
+          // dense box exceeds it must be refused, not allocated.
+          reader = open_vdb_slabs_in_process(path, "", nullptr, std::uint64_t{256} << 20);
+        } else {
+          return 0;
+        }
         break;
     }
     const ivol::convert::DenseVolume& shape = reader->shape();
