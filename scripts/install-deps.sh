@@ -11,8 +11,9 @@ packages=(
   libgtest-dev valgrind
   # SHA-256 of inputs and outputs (ivol verify --json, provenance): libcrypto
   libssl-dev
-  # .ivol files read over HTTP(S) by range (libformat)
-  libcurl4-openssl-dev
+  # .ivol files read over HTTP(S) and s3:// by range (libformat); the remote
+  # tests' real server (nginx) and the SigV4 check (botocore's signer)
+  libcurl4-openssl-dev nginx-light python3-botocore
   libhdf5-dev libopenvdb-dev libboost-iostreams-dev
   hdf5-tools python3-h5py libopenvdb-tools libtiff-tools
   python3 python3-numpy python3-zstandard python3-tifffile

@@ -3,6 +3,7 @@
 #include <curl/curl.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdlib>
 #include <cstring>
 #include <deque>
@@ -10,9 +11,11 @@
 #include <list>
 #include <map>
 #include <mutex>
+#include <thread>
 #include <vector>
 
 #include "ivol/error.hpp"
+#include "remote_target.hpp"
 
 namespace ivol::detail {
 namespace {
@@ -25,12 +28,64 @@ std::uint64_t cache_budget() {
   return (mib > 0 ? static_cast<std::uint64_t>(mib) : 64) << 20;
 }
 
+// Attempts of one request before its failure is reported: object stores
+// answer 503 under load and drop connections, and a reader of a large file
+// makes thousands of requests.
+int attempts_allowed() {
+  const char* text = std::getenv("IVOL_HTTP_RETRIES");
+  const long retries = text ? std::strtol(text, nullptr, 10) : 4;
+  return 1 + static_cast<int>(std::clamp<long>(retries, 0, 20));
+}
+
+// Waits before attempt `attempt` (2, 3, ...): 0.25 s, doubling, at most 4 s.
+void back_off(int attempt) {
+  std::this_thread::sleep_for(std::chrono::milliseconds(std::min(4000, 250 << std::min(attempt - 2, 5))));
+}
+
+// Failures of the connection or of an overloaded server, not of the
+// request: worth another attempt.
+bool transient(CURLcode code, long status) {
+  switch (code) {
+    case CURLE_COULDNT_CONNECT:
+    case CURLE_SEND_ERROR:
+    case CURLE_RECV_ERROR:
+    case CURLE_PARTIAL_FILE:
+    case CURLE_GOT_NOTHING:
+    case CURLE_OPERATION_TIMEDOUT:
+    case CURLE_HTTP2:
+    case CURLE_HTTP2_STREAM:
+      return true;
+    case CURLE_OK:
+      return status == 429 || status == 500 || status == 502 || status == 503 || status == 504;
+    default:
+      return false;
+  }
+}
+
+// What a final status other than 206 means, for the error message.
+std::string status_meaning(long status) {
+  switch (status) {
+    case 401:
+    case 403:
+      return " (access denied: a pre-signed URL may have expired, or the object needs credentials: s3:// paths are "
+             "signed with AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY)";
+    case 404:
+      return " (no such file on the server)";
+    case 429:
+    case 503:
+      return " (the server is busy)";
+    default:
+      return "";
+  }
+}
+
 void global_init() {
   static std::once_flag once;
   std::call_once(once, [] { curl_global_init(CURL_GLOBAL_DEFAULT); });
 }
 
 struct Response {
+  long status = 0;  // of the last status line (redirects start anew)
   std::vector<std::uint8_t> body;
   std::string content_range;
   std::string etag;
@@ -53,6 +108,8 @@ std::size_t on_header(char* line, std::size_t size, std::size_t count, void* use
   const std::size_t length = size * count;
   // A redirect starts a new set of headers.
   if (length >= 5 && std::strncmp(line, "HTTP/", 5) == 0) {
+    const char* space = static_cast<const char*>(std::memchr(line, ' ', length));
+    r->status = space ? std::strtol(space + 1, nullptr, 10) : 0;
     r->content_range.clear();
     r->etag.clear();
     r->last_modified.clear();
@@ -66,6 +123,9 @@ std::size_t on_header(char* line, std::size_t size, std::size_t count, void* use
 std::size_t on_body(char* data, std::size_t size, std::size_t count, void* user) {
   auto* r = static_cast<Response*>(user);
   const std::size_t length = size * count;
+  // An error page (a 503's, a 404's) is not the file: not kept, not a reason
+  // to stop the transfer (its status is what counts).
+  if (r->status >= 300) return length;
   if (r->body.size() + length > r->limit) {
     r->overflow = true;
     return 0;  // more than asked for: stop the transfer
@@ -76,10 +136,11 @@ std::size_t on_body(char* data, std::size_t size, std::size_t count, void* user)
 
 class HttpSource final : public ByteSource {
  public:
-  explicit HttpSource(const std::string& url) : url_(url), budget_(cache_budget()) {
+  explicit HttpSource(const std::string& path)
+      : url_(path), target_(resolve_remote_target(path)), budget_(cache_budget()), attempts_(attempts_allowed()) {
     global_init();
     curl_ = curl_easy_init();
-    if (!curl_) throw Error(ErrorClass::LimitExceeded, url + ": cannot start libcurl");
+    if (!curl_) throw Error(ErrorClass::LimitExceeded, path + ": cannot start libcurl");
     // The first page: the header (and with metadata first, the metadata);
     // its Content-Range gives the file's size and its ETag the version.
     try {
@@ -242,7 +303,7 @@ class HttpSource final : public ByteSource {
   // freed by the caller after the transfer.
   void configure(CURL* handle, Response& r, const std::string& range, bool first, curl_slist** headers) const {
     curl_easy_reset(handle);
-    curl_easy_setopt(handle, CURLOPT_URL, url_.c_str());
+    curl_easy_setopt(handle, CURLOPT_URL, target_.url.c_str());
     curl_easy_setopt(handle, CURLOPT_RANGE, range.c_str());
     curl_easy_setopt(handle, CURLOPT_FOLLOWLOCATION, 1L);
     curl_easy_setopt(handle, CURLOPT_MAXREDIRS, 5L);
@@ -257,25 +318,42 @@ class HttpSource final : public ByteSource {
     curl_easy_setopt(handle, CURLOPT_WRITEFUNCTION, on_body);
     curl_easy_setopt(handle, CURLOPT_WRITEDATA, &r);
     *headers = nullptr;
+    if (!target_.aws_sigv4.empty()) {
+      curl_easy_setopt(handle, CURLOPT_AWS_SIGV4, target_.aws_sigv4.c_str());
+      curl_easy_setopt(handle, CURLOPT_USERPWD, target_.credentials.c_str());
+    }
+    for (const std::string& header : target_.headers) *headers = curl_slist_append(*headers, header.c_str());
     if (!first && !version_.empty()) {
       const std::string condition = (etag_.empty() ? "If-Unmodified-Since: " : "If-Match: ") + version_;
       *headers = curl_slist_append(*headers, condition.c_str());
-      curl_easy_setopt(handle, CURLOPT_HTTPHEADER, *headers);
+    }
+    if (*headers) curl_easy_setopt(handle, CURLOPT_HTTPHEADER, *headers);
+  }
+
+  // Bytes [begin, end], attempted up to attempts_ times (after `failed`
+  // attempts already made elsewhere) while the failure is transient.
+  Response fetch(std::uint64_t begin, std::uint64_t end, bool first, int failed = 0) {
+    const std::string range = std::to_string(begin) + "-" + std::to_string(end);
+    for (int attempt = failed + 1;; ++attempt) {
+      if (attempt > 1) back_off(attempt);
+      Response r;
+      r.limit = end - begin + 1;
+      curl_slist* headers = nullptr;
+      configure(curl_, r, range, first, &headers);
+      const CURLcode code = curl_easy_perform(curl_);
+      if (headers) curl_slist_free_all(headers);
+      long status = 0;
+      curl_easy_getinfo(curl_, CURLINFO_RESPONSE_CODE, &status);
+      tally(r);
+      if (attempt < attempts_ && transient(code, status)) continue;
+      check(r, code, status, begin, end, first, attempt);
+      return r;
     }
   }
 
-  Response fetch(std::uint64_t begin, std::uint64_t end, bool first) {
-    Response r;
-    r.limit = end - begin + 1;
-    const std::string range = std::to_string(begin) + "-" + std::to_string(end);
-    curl_slist* headers = nullptr;
-    configure(curl_, r, range, first, &headers);
-    const CURLcode code = curl_easy_perform(curl_);
-    if (headers) curl_slist_free_all(headers);
-    long status = 0;
-    curl_easy_getinfo(curl_, CURLINFO_RESPONSE_CODE, &status);
-    check(r, code, status, begin, end, first);
-    return r;
+  void tally(const Response& r) {
+    ++requests_;
+    fetched_ += r.body.size();
   }
 
   // Runs [begin, end) fetched at the same time, one connection each (the
@@ -316,16 +394,21 @@ class HttpSource final : public ByteSource {
     for (std::size_t i = 0; i < count; ++i) {
       long status = 0;
       curl_easy_getinfo(handles_[i], CURLINFO_RESPONSE_CODE, &status);
-      check(out[i], codes[i], status, runs[i].first, runs[i].second - 1, false);
+      tally(out[i]);
+      // A dropped connection or a busy server: that range again, alone.
+      if (attempts_ > 1 && transient(codes[i], status))
+        out[i] = fetch(runs[i].first, runs[i].second - 1, false, /*failed=*/1);
+      else
+        check(out[i], codes[i], status, runs[i].first, runs[i].second - 1, false, 1);
     }
     return out;
   }
 
   // Counts a response and refuses what is not exactly the asked range.
-  void check(Response& r, CURLcode code, long status, std::uint64_t begin, std::uint64_t end, bool first) {
+  void check(Response& r, CURLcode code, long status, std::uint64_t begin, std::uint64_t end, bool first,
+             int attempts) {
     const std::string range = std::to_string(begin) + "-" + std::to_string(end);
-    ++requests_;
-    fetched_ += r.body.size();
+    const std::string tries = attempts > 1 ? " after " + std::to_string(attempts) + " attempts" : "";
     if (status == 200 || (r.overflow && status != 206))
       fail(ErrorClass::InvalidArgument, "the server does not answer range requests (HTTP " + std::to_string(status) +
                                             " for bytes " + range +
@@ -333,8 +416,9 @@ class HttpSource final : public ByteSource {
     if (status == 412) fail(ErrorClass::Io, "the file changed on the server while it was open (HTTP 412)");
     if (status == 416 && first) fail(ErrorClass::Truncated, "the file is empty (HTTP 416)");
     if (code != CURLE_OK)
-      fail(ErrorClass::Io, std::string("cannot read bytes ") + range + ": " + curl_easy_strerror(code));
-    if (status != 206) fail(ErrorClass::Io, "HTTP " + std::to_string(status) + " for bytes " + range);
+      fail(ErrorClass::Io, std::string("cannot read bytes ") + range + tries + ": " + curl_easy_strerror(code));
+    if (status != 206)
+      fail(ErrorClass::Io, "HTTP " + std::to_string(status) + status_meaning(status) + " for bytes " + range + tries);
     // "bytes BEGIN-END/TOTAL"
     std::uint64_t got_begin = 0, got_end = 0, total = 0;
     if (std::sscanf(r.content_range.c_str(), "bytes %lu-%lu/%lu", &got_begin, &got_end, &total) != 3)
@@ -353,8 +437,10 @@ class HttpSource final : public ByteSource {
                                r.content_range + "'");
   }
 
-  std::string url_;
+  std::string url_;  // as given: what errors name
+  RemoteTarget target_;
   std::uint64_t budget_;
+  int attempts_;
   CURL* curl_ = nullptr;
   std::uint64_t size_ = 0;
   std::string etag_, version_;

@@ -14,7 +14,10 @@
 // server that ignores ranges, or a file replaced under the reader, is an
 // error naming the URL, not a silently mixed read. Only http and https are
 // followed, redirects included; connections time out after 30 s, stalled
-// transfers after 60 s below 1 KiB/s.
+// transfers after 60 s below 1 KiB/s. A dropped connection, a timeout or a
+// 429/500/502/503/504 is tried again (IVOL_HTTP_RETRIES times, default 4,
+// waiting 0.25 s, doubling, at most 4 s) before it is an error naming the
+// attempts. s3:// paths: remote_target.hpp.
 #pragma once
 
 #include <memory>

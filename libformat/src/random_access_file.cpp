@@ -60,7 +60,9 @@ class LocalFile final : public ByteSource {
 
 }  // namespace
 
-bool is_remote(const std::string& path) { return path.rfind("http://", 0) == 0 || path.rfind("https://", 0) == 0; }
+bool is_remote(const std::string& path) {
+  return path.rfind("http://", 0) == 0 || path.rfind("https://", 0) == 0 || path.rfind("s3://", 0) == 0;
+}
 
 RandomAccessFile::RandomAccessFile(const std::string& path) : path_(path) {
   if (is_remote(path))

@@ -28,7 +28,7 @@ class ByteSource {
   virtual void prefetch(const std::vector<std::pair<std::uint64_t, std::uint64_t>>& /*ranges*/) {}
 };
 
-// Whether `path` names a file on an HTTP(S) server.
+// Whether `path` names a remote file: an HTTP(S) URL or an s3:// object.
 bool is_remote(const std::string& path);
 
 class RandomAccessFile {

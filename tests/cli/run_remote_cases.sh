@@ -132,4 +132,68 @@ missing() {
 }
 check "a-missing-file-names-the-status" missing
 
+# A connection lost mid-block, or a busy server, is tried again; a fault
+# that lasts is an error naming the attempts, and nothing is written.
+"$IVOL" -q convert served/truth.ivol local-whole.raw || exit 1
+retried() {
+  start_server "$@"
+  rm -f rt.raw
+  IVOL_HTTP_RETRIES=3 "$IVOL" -q convert "$url/truth.ivol" rt.raw && cmp rt.raw local-whole.raw
+}
+check "a-dropped-connection-is-retried" retried --drop 3
+check "a-busy-server-is-retried" retried --busy 3
+lasting_fault() {
+  start_server --drop 100000
+  IVOL_HTTP_RETRIES=2 "$IVOL" -q convert "$url/truth.ivol" lf.raw 2>err
+  local status=$?
+  cat err
+  [ "$status" -eq 2 ] && grep -q "after 3 attempts: Transferred a partial file" err && [ ! -e lf.raw ]
+}
+check "a-lasting-fault-names-the-attempts" lasting_fault
+forbidden() {
+  start_server --forbid truth.ivol
+  "$IVOL" -q info "$url/truth.ivol" 2>err
+  local status=$?
+  cat err
+  [ "$status" -eq 2 ] && grep -q "truth.ivol: HTTP 403 (access denied" err
+}
+check "a-forbidden-file-names-the-status" forbidden
+
+# s3:// paths signed with AWS Signature Version 4 by libcurl, checked by a
+# server that recomputes each signature with botocore (path-style, on the
+# endpoint AWS_ENDPOINT_URL names); wrong or missing credentials get S3's
+# 403. Needs Debian's python3-botocore.
+if /usr/bin/python3 -c "import botocore" 2>/dev/null; then
+  s3_env=(AWS_ENDPOINT_URL= AWS_REGION=eu-west-1 AWS_ACCESS_KEY_ID=AKIDIVOLTEST AWS_SECRET_ACCESS_KEY=s3cr3t/key+1)
+  signed_reads() {
+    start_server --sigv4 "AKIDIVOLTEST:s3cr3t/key+1:eu-west-1$1"
+    s3_env[0]=AWS_ENDPOINT_URL=$url
+    rm -f s3.raw s3-slice.raw local-slice.raw
+    env "${s3_env[@]}" ${1:+AWS_SESSION_TOKEN=${1#:}} "$IVOL" -q convert s3://archive/truth.ivol s3.raw &&
+      cmp s3.raw local-whole.raw &&
+      env "${s3_env[@]}" ${1:+AWS_SESSION_TOKEN=${1#:}} "$IVOL" -q extract s3://archive/oct.ivol \
+        --box "0,0,$mid,$nx,$ny,$((mid + 1))" -o s3-slice.raw &&
+      "$IVOL" -q extract served/oct.ivol --box "0,0,$mid,$nx,$ny,$((mid + 1))" -o local-slice.raw &&
+      cmp s3-slice.raw local-slice.raw
+  }
+  check "s3-signed-reads-match-the-local-file" signed_reads ""
+  check "s3-signed-reads-with-a-session-token" signed_reads ":FQoGZXIvYXdzEJr//token"
+  unsigned_refused() {
+    start_server --sigv4 "AKIDIVOLTEST:s3cr3t/key+1:eu-west-1"
+    AWS_ENDPOINT_URL=$url AWS_REGION=eu-west-1 AWS_ACCESS_KEY_ID=AKIDIVOLTEST AWS_SECRET_ACCESS_KEY=wrong \
+      "$IVOL" -q info s3://archive/truth.ivol 2>err
+    local wrong=$?
+    env -u AWS_ACCESS_KEY_ID -u AWS_SECRET_ACCESS_KEY AWS_ENDPOINT_URL="$url" "$IVOL" -q info s3://archive/truth.ivol 2>>err
+    local unsigned=$?
+    AWS_ACCESS_KEY_ID=AKIDIVOLTEST "$IVOL" -q info s3://archive/truth.ivol 2>>err
+    local half=$?
+    cat err
+    [ "$wrong" -eq 2 ] && [ "$unsigned" -eq 2 ] && [ "$half" -eq 2 ] && [ "$(grep -c "HTTP 403" err)" -eq 2 ] &&
+      grep -q "AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY must be set together" err
+  }
+  check "s3-wrong-or-missing-credentials-are-refused" unsigned_refused
+else
+  echo "skip s3 cases: python3-botocore is not installed"
+fi
+
 finish

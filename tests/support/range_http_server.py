@@ -5,23 +5,69 @@ byte ranges (206 + Content-Range), an ETag per file version and If-Match
 and bytes sent per file in COUNTS (JSON, rewritten after every request).
 
     range_http_server.py FOLDER PORT_FILE COUNTS [--no-ranges] [--change-after N]
+        [--drop N] [--busy N] [--forbid NAME] [--sigv4 KEY_ID:SECRET:REGION[:TOKEN]]
 
 Writes the port it listens on (127.0.0.1) into PORT_FILE. --no-ranges: a
 server that ignores Range and sends whole files (200). --change-after N:
-from request N+1 on, every file has a new ETag, as if replaced."""
+from request N+1 on, every file has a new ETag, as if replaced. --drop N:
+the first N range responses stop after half their body and close the
+connection. --busy N: the first N requests get 503. --forbid NAME: 403 for
+that file. --sigv4: every request must carry an AWS Signature Version 4
+for these credentials, checked with botocore's signer (an implementation
+independent of libcurl's); otherwise 403, as S3 answers. Paths may be
+path-style S3 (/BUCKET/KEY): the file served is KEY's last part."""
+import hmac
 import http.server
 import json
 import os
 import re
+import socket
 import sys
 import threading
 
+
+def option(name, default=None):
+    return sys.argv[sys.argv.index(name) + 1] if name in sys.argv else default
+
+
 folder, port_file, counts_file = sys.argv[1:4]
 ranges = "--no-ranges" not in sys.argv
-change_after = int(sys.argv[sys.argv.index("--change-after") + 1]) if "--change-after" in sys.argv else None
+change_after = int(option("--change-after")) if "--change-after" in sys.argv else None
+drops_left = [int(option("--drop", 0))]
+busy_left = [int(option("--busy", 0))]
+forbidden = option("--forbid")
+sigv4 = option("--sigv4", "").split(":") if "--sigv4" in sys.argv else None
 served = [0]
 counts = {}
 lock = threading.Lock()
+
+
+def signature_valid(headers, path):
+    """Recomputes the request's SigV4 signature with botocore, over the
+    headers the request says it signed, and compares."""
+    from botocore.auth import S3SigV4Auth
+    from botocore.awsrequest import AWSRequest
+    from botocore.credentials import Credentials
+
+    key_id, secret, region = sigv4[:3]
+    token = sigv4[3] if len(sigv4) > 3 else None
+    found = re.fullmatch(r"AWS4-HMAC-SHA256 Credential=([^/]+)/(\d{8})/([^/]+)/s3/aws4_request,\s*"
+                         r"SignedHeaders=([^,]+),\s*Signature=([0-9a-f]{64})", headers.get("Authorization", ""))
+    if not found or found.group(1) != key_id or found.group(3) != region:
+        return False
+    names = found.group(4).split(";")
+    if "host" not in names or "x-amz-date" not in names or "x-amz-content-sha256" not in names:
+        return False
+    if token is not None and ("x-amz-security-token" not in names or headers.get("x-amz-security-token") != token):
+        return False
+    signed = {name: headers.get(name) for name in names}
+    if None in signed.values() or not headers["x-amz-date"].startswith(found.group(2)):
+        return False
+    request = AWSRequest(method="GET", url="http://" + headers["Host"] + path, headers=signed)
+    request.context["timestamp"] = headers["x-amz-date"]
+    signer = S3SigV4Auth(Credentials(key_id, secret, token), "s3", region)
+    expected = signer.signature(signer.string_to_sign(request, signer.canonical_request(request)), request)
+    return hmac.compare_digest(expected, found.group(5))
 
 
 class Handler(http.server.BaseHTTPRequestHandler):
@@ -29,7 +75,19 @@ class Handler(http.server.BaseHTTPRequestHandler):
         pass
 
     def do_GET(self):
-        path = os.path.join(folder, os.path.basename(self.path.lstrip("/")))
+        path = os.path.join(folder, os.path.basename(self.path.split("?")[0].rstrip("/")))
+        with lock:
+            busy = busy_left[0] > 0
+            busy_left[0] -= busy
+        if busy:
+            self.send_error(503)
+            return
+        if sigv4 is not None and not signature_valid(self.headers, self.path):
+            self.send_error(403, "SignatureDoesNotMatch")
+            return
+        if forbidden is not None and os.path.basename(path) == forbidden:
+            self.send_error(403)
+            return
         if not os.path.isfile(path):
             self.send_error(404)
             return
@@ -65,6 +123,16 @@ class Handler(http.server.BaseHTTPRequestHandler):
         self.send_header("Content-Length", str(len(body)))
         self.send_header("ETag", etag)
         self.end_headers()
+        with lock:
+            drop = ranges and wanted is not None and drops_left[0] > 0
+            drops_left[0] -= drop
+        if drop:
+            # A connection lost mid-block: half the body, then the end.
+            self.wfile.write(body[: len(body) // 2])
+            self.wfile.flush()
+            self.connection.shutdown(socket.SHUT_RDWR)
+            self.close_connection = True
+            return
         self.wfile.write(body)
         with lock:
             c = counts.setdefault(os.path.basename(path), {"requests": 0, "bytes": 0})
