@@ -90,7 +90,8 @@ struct Response {
   std::string content_range;
   std::string etag;
   std::string last_modified;
-  std::uint64_t limit = 0;  // the body may not grow beyond this
+  std::uint64_t limit = 0;        // the body may not grow beyond this
+  std::uint64_t whole_limit = 0;  // nor beyond this, when it is the whole file (200)
   bool overflow = false;
 };
 
@@ -126,7 +127,8 @@ std::size_t on_body(char* data, std::size_t size, std::size_t count, void* user)
   // An error page (a 503's, a 404's) is not the file: not kept, not a reason
   // to stop the transfer (its status is what counts).
   if (r->status >= 300) return length;
-  if (r->body.size() + length > r->limit) {
+  const std::uint64_t limit = r->status == 200 && r->whole_limit > 0 ? r->whole_limit : r->limit;
+  if (r->body.size() + length > limit) {
     r->overflow = true;
     return 0;  // more than asked for: stop the transfer
   }
@@ -161,6 +163,7 @@ class HttpSource final : public ByteSource {
   std::uint64_t size() const override { return size_; }
   std::uint64_t requests() const override { return requests_; }
   std::uint64_t bytes_fetched() const override { return fetched_; }
+  bool fetched_whole() const override { return whole_; }
 
   void read(std::uint64_t offset, void* out, std::size_t size) override {
     auto* p = static_cast<std::uint8_t*>(out);
@@ -338,6 +341,9 @@ class HttpSource final : public ByteSource {
       if (attempt > 1) back_off(attempt);
       Response r;
       r.limit = end - begin + 1;
+      // A server that ignores ranges may send the whole file, once, up to
+      // the cache's size; never again after the open.
+      if (first) r.whole_limit = budget_;
       curl_slist* headers = nullptr;
       configure(curl_, r, range, first, &headers);
       const CURLcode code = curl_easy_perform(curl_);
@@ -409,6 +415,18 @@ class HttpSource final : public ByteSource {
              int attempts) {
     const std::string range = std::to_string(begin) + "-" + std::to_string(end);
     const std::string tries = attempts > 1 ? " after " + std::to_string(attempts) + " attempts" : "";
+    if (first && status == 200 && code == CURLE_OK && !r.overflow) {
+      size_ = r.body.size();
+      whole_ = true;
+      etag_ = r.etag;
+      version_ = r.etag.empty() ? r.last_modified : r.etag;
+      return;
+    }
+    if (first && status == 200 && r.overflow)
+      fail(ErrorClass::LimitExceeded,
+           "the server does not answer range requests (HTTP 200), and the file is larger "
+           "than the " +
+               std::to_string(budget_ >> 20) + " MiB a whole download may hold (IVOL_HTTP_CACHE_MIB)");
     if (status == 200 || (r.overflow && status != 206))
       fail(ErrorClass::InvalidArgument, "the server does not answer range requests (HTTP " + std::to_string(status) +
                                             " for bytes " + range +
@@ -444,6 +462,7 @@ class HttpSource final : public ByteSource {
   CURL* curl_ = nullptr;
   std::uint64_t size_ = 0;
   std::string etag_, version_;
+  bool whole_ = false;  // the server ignored ranges; every page is held
   std::map<std::uint64_t, Page> pages_;
   std::list<std::uint64_t> lru_;
   std::uint64_t held_ = 0;

@@ -26,6 +26,9 @@ class ByteSource {
   // The ranges (offset, size) a read is about to need: a remote source
   // fetches them in few requests. A local file does nothing.
   virtual void prefetch(const std::vector<std::pair<std::uint64_t, std::uint64_t>>& /*ranges*/) {}
+  // Whether the server ignored ranges and the whole file came in one
+  // response (held in memory; a remote source only).
+  virtual bool fetched_whole() const { return false; }
 };
 
 // Whether `path` names a remote file: an HTTP(S) URL or an s3:// object.
@@ -45,6 +48,7 @@ class RandomAccessFile {
   std::vector<std::uint8_t> read(std::uint64_t offset, std::size_t size);
   std::uint64_t requests() const { return source_->requests(); }
   std::uint64_t bytes_fetched() const { return source_->bytes_fetched(); }
+  bool fetched_whole() const { return source_->fetched_whole(); }
   void prefetch(const std::vector<std::pair<std::uint64_t, std::uint64_t>>& ranges) { source_->prefetch(ranges); }
   std::uint64_t bytes_read = 0;
 

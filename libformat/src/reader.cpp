@@ -219,6 +219,7 @@ const IoStats& Reader::io_stats() const {
   impl_->stats.bytes_read = impl_->file.bytes_read - impl_->bytes_baseline;
   impl_->stats.requests = impl_->file.requests() - impl_->requests_baseline;
   impl_->stats.bytes_fetched = impl_->file.bytes_fetched() - impl_->fetched_baseline;
+  impl_->stats.fetched_whole = impl_->file.fetched_whole();
   return impl_->stats;
 }
 

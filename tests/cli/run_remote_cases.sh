@@ -105,14 +105,28 @@ check "octree-z-slice-requests-and-bytes" costs oct.ivol 0,0,80,160,160,81 26 24
 check "octree-x-slice-requests-and-bytes" costs oct.ivol 80,0,0,81,160,160 28 40
 check "octree-box-requests-and-bytes" costs oct.ivol 47,51,60,111,115,124 22 39
 
-refused_without_ranges() {
+# A server that ignores ranges: the whole file in one response is used,
+# once, with a warning, when it fits the HTTP cache; a larger one is refused
+# (limit-exceeded) rather than downloaded whole again and again.
+whole_once() {
   start_server --no-ranges
-  "$IVOL" -q extract "$url/truth.ivol" --box 0,0,0,4,4,4 -o nr.raw 2>err
+  "$IVOL" -q extract "$url/truth.ivol" --box "0,0,$mid,$nx,$ny,$((mid + 1))" -o nr.raw 2>err
   local status=$?
   cat err
-  [ "$status" -eq 2 ] && grep -q "does not answer range requests" err && [ ! -e nr.raw ]
+  "$IVOL" -q extract served/truth.ivol --box "0,0,$mid,$nx,$ny,$((mid + 1))" -o nr-local.raw &&
+    [ "$status" -eq 0 ] && cmp nr.raw nr-local.raw && grep -q "the server ignores range requests, so the whole file" err &&
+    [ "$(counted truth.ivol requests)" -eq 1 ] && [ "$(counted truth.ivol bytes)" -eq "$size" ]
 }
-check "a-server-without-ranges-is-refused" refused_without_ranges
+check "a-server-without-ranges-is-used-once-with-a-warning" whole_once
+refused_without_ranges() {
+  start_server --no-ranges
+  IVOL_HTTP_CACHE_MIB=1 "$IVOL" -q extract "$url/truth.ivol" --box 0,0,0,4,4,4 -o nr1.raw 2>err
+  local status=$?
+  cat err
+  [ "$status" -eq 2 ] && grep -q "(limit-exceeded).*does not answer range requests (HTTP 200), and the file is larger than the 1 MiB" err &&
+    [ ! -e nr1.raw ]
+}
+check "a-server-without-ranges-is-refused-beyond-the-cache" refused_without_ranges
 
 refused_when_replaced() {
   start_server --change-after 1

@@ -336,6 +336,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     }
 
     Reader reader(s->input);
+    warn_if_fetched_whole(reader, "ivol convert");
     const convert::SampleType natural = natural_export_type(to, reader);
     const convert::SampleType type = s->out_type.empty() ? natural : parse_sample_type(s->out_type, "--out-type");
     check_export_type(to, type, "--out-type");

@@ -9,6 +9,7 @@
 #include "ivol_io.hpp"
 #include "option_parsing.hpp"
 #include "output_rules.hpp"
+#include "report.hpp"
 #include "salvage_report.hpp"
 
 namespace ivol::cli {
@@ -62,12 +63,12 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
     ReaderOptions reader_options;
     reader_options.salvage = s->salvage;
     Reader reader(s->file, reader_options);
+    warn_if_fetched_whole(reader, "ivol extract");
     if (reader.info().salvage) {
       std::cerr << "ivol extract: " << reader.info().salvage->reason << "\n";
       print_salvage(std::cerr, "  ", *reader.info().salvage, reader.layout());
     }
-    const convert::SampleType natural =
-        natural_export_type(to, reader);
+    const convert::SampleType natural = natural_export_type(to, reader);
     const convert::SampleType type = s->type.empty() ? natural : parse_sample_type(s->type, "--type");
     check_export_type(to, type, "--type");
     const Box box = parse_box(s->box, "--box");

@@ -28,6 +28,7 @@ Runner add_info_command(CLI::App& app, const GlobalOptions& /*global*/) {
       throw;
     }
     Reader& reader = *opened;
+    warn_if_fetched_whole(reader, "ivol info");
     const nlohmann::json d = describe_file(reader);
     if (*json) {
       std::cout << d.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";

@@ -11,6 +11,7 @@
 #include "option_parsing.hpp"
 #include "output_rules.hpp"
 #include "png_image.hpp"
+#include "report.hpp"
 #include "slice_image.hpp"
 
 namespace ivol::cli {
@@ -41,6 +42,7 @@ Runner add_slice_command(CLI::App& app, const GlobalOptions& global) {
     if (lower_extension(s->output) != ".png") throw UsageError("-o", "'" + s->output + "' is not a .png name");
     check_output(s->output, "-o", {s->file}, s->force);
     Reader reader(s->file);
+    warn_if_fetched_whole(reader, "ivol slice");
     const int axis = s->axis[0] - 'x';
     std::optional<std::array<double, 2>> window;
     if (!s->window.empty()) window = parse_window(s->window, "--window");

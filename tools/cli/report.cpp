@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <cstdio>
+#include <iostream>
 
 #include "ivol/structures.hpp"
 
@@ -31,6 +32,13 @@ convert::Progress progress_bar(const std::string& label, bool quiet) {
     if (done >= total) std::fputs("\n", stderr);
     std::fflush(stderr);
   };
+}
+
+void warn_if_fetched_whole(const Reader& reader, const std::string& command) {
+  if (reader.io_stats().fetched_whole)
+    std::cerr << command << ": warning: " << reader.path() << ": the server ignores range requests, so the whole file ("
+              << human_bytes(reader.info().file_size)
+              << ") was downloaded, and will be at every open; serve it with byte ranges to read only what is needed\n";
 }
 
 nlohmann::json describe_file(Reader& reader) {

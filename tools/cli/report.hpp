@@ -16,6 +16,10 @@ std::string human_bytes(double bytes);         // beyond 2^64 too: "32768.0 YiB"
 // terminal and not --quiet; otherwise nothing.
 convert::Progress progress_bar(const std::string& label, bool quiet);
 
+// On stderr, when the server of a remote file ignored range requests and
+// sent it whole: every open downloads it whole again.
+void warn_if_fetched_whole(const Reader& reader, const std::string& command);
+
 // Everything `ivol info` reports, as JSON.
 nlohmann::json describe_file(Reader& reader);
 

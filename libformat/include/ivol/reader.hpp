@@ -122,7 +122,7 @@ struct DamagedRegion {
 };
 
 struct IoStats {
-  std::uint64_t bytes_read = 0;      // bytes read from the file, all parts
+  std::uint64_t bytes_read = 0;  // bytes read from the file, all parts
   // Round trips to the storage and the bytes they brought: for a local file
   // the reads and bytes_read; over HTTP(S) the range requests and the whole
   // pages they fetched (a path starting http:// or https:// opens a remote
@@ -131,6 +131,11 @@ struct IoStats {
   std::uint64_t bytes_fetched = 0;
   std::uint64_t blocks_decoded = 0;  // blocks read, checked and decompressed
   std::uint64_t cache_hits = 0;
+  // The server ignored range requests: the whole file came in one response
+  // and is held in memory (allowed up to the HTTP cache's size,
+  // IVOL_HTTP_CACHE_MIB; a larger file is refused). Worth a warning: every
+  // open of the file downloads it whole.
+  bool fetched_whole = false;
 };
 
 struct CheckReport;
