@@ -5,7 +5,7 @@ byte ranges (206 + Content-Range), an ETag per file version and If-Match
 and bytes sent per file in COUNTS (JSON, rewritten after every request).
 
     range_http_server.py FOLDER PORT_FILE COUNTS [--no-ranges] [--change-after N]
-        [--drop N] [--busy N] [--forbid NAME] [--sigv4 KEY_ID:SECRET:REGION[:TOKEN]]
+        [--drop N] [--busy N] [--forbid NAME] [--sigv4 KEY_ID:SECRET:REGION[:TOKEN]] [--delay-ms MS]
 
 Writes the port it listens on (127.0.0.1) into PORT_FILE. --no-ranges: a
 server that ignores Range and sends whole files (200). --change-after N:
@@ -15,7 +15,10 @@ connection. --busy N: the first N requests get 503. --forbid NAME: 403 for
 that file. --sigv4: every request must carry an AWS Signature Version 4
 for these credentials, checked with botocore's signer (an implementation
 independent of libcurl's); otherwise 403, as S3 answers. Paths may be
-path-style S3 (/BUCKET/KEY): the file served is KEY's last part."""
+path-style S3 (/BUCKET/KEY): the file served is KEY's last part. --delay-ms:
+every response waits MS milliseconds first, a round trip to a distant
+store (bench/remote_reads.sh). HEAD is answered too (HDF5's ROS3 driver
+asks for the size with it)."""
 import hmac
 import http.server
 import json
@@ -24,6 +27,7 @@ import re
 import socket
 import sys
 import threading
+import time
 
 
 def option(name, default=None):
@@ -37,6 +41,7 @@ drops_left = [int(option("--drop", 0))]
 busy_left = [int(option("--busy", 0))]
 forbidden = option("--forbid")
 sigv4 = option("--sigv4", "").split(":") if "--sigv4" in sys.argv else None
+delay = float(option("--delay-ms", 0)) / 1000
 served = [0]
 counts = {}
 lock = threading.Lock()
@@ -74,7 +79,12 @@ class Handler(http.server.BaseHTTPRequestHandler):
     def log_message(self, *args):
         pass
 
-    def do_GET(self):
+    def do_HEAD(self):
+        self.do_GET(head=True)
+
+    def do_GET(self, head=False):
+        if delay:
+            time.sleep(delay)
         path = os.path.join(folder, os.path.basename(self.path.split("?")[0].rstrip("/")))
         with lock:
             busy = busy_left[0] > 0
@@ -102,6 +112,13 @@ class Handler(http.server.BaseHTTPRequestHandler):
             return
         size = stat.st_size
         wanted = re.fullmatch(r"bytes=(\d+)-(\d*)", self.headers.get("Range", ""))
+        if head:
+            self.send_response(200)
+            self.send_header("Content-Length", str(size))
+            self.send_header("ETag", etag)
+            self.send_header("Accept-Ranges", "bytes")
+            self.end_headers()
+            return
         if ranges and wanted:
             begin = int(wanted.group(1))
             end = min(int(wanted.group(2)) if wanted.group(2) else size - 1, size - 1)
