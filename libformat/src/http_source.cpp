@@ -14,6 +14,7 @@
 #include <thread>
 #include <vector>
 
+#include "byteranges.hpp"
 #include "ivol/error.hpp"
 #include "remote_target.hpp"
 
@@ -35,6 +36,20 @@ int attempts_allowed() {
   const char* text = std::getenv("IVOL_HTTP_RETRIES");
   const long retries = text ? std::strtol(text, nullptr, 10) : 4;
   return 1 + static_cast<int>(std::clamp<long>(retries, 0, 20));
+}
+
+// Whether to ask for several ranges in one request. Object stores (S3,
+// GCS, MinIO) answer such a request with the whole object, so only servers
+// known to answer it with multipart/byteranges are asked, by the Server
+// header of their first response: nginx, Apache httpd, lighttpd.
+// IVOL_HTTP_MULTIRANGE=1 asks any server, =0 none.
+bool several_ranges_expected(const std::string& server) {
+  const char* text = std::getenv("IVOL_HTTP_MULTIRANGE");
+  if (text && std::strcmp(text, "0") == 0) return false;
+  if (text && std::strcmp(text, "1") == 0) return true;
+  for (const char* known : {"nginx", "Apache", "lighttpd"})
+    if (server.rfind(known, 0) == 0) return true;
+  return false;
 }
 
 // Waits before attempt `attempt` (2, 3, ...): 0.25 s, doubling, at most 4 s.
@@ -88,10 +103,13 @@ struct Response {
   long status = 0;  // of the last status line (redirects start anew)
   std::vector<std::uint8_t> body;
   std::string content_range;
+  std::string content_type;
+  std::string server;
   std::string etag;
   std::string last_modified;
   std::uint64_t limit = 0;        // the body may not grow beyond this
   std::uint64_t whole_limit = 0;  // nor beyond this, when it is the whole file (200)
+  bool several = false;           // asked for several ranges
   bool overflow = false;
 };
 
@@ -112,10 +130,13 @@ std::size_t on_header(char* line, std::size_t size, std::size_t count, void* use
     const char* space = static_cast<const char*>(std::memchr(line, ' ', length));
     r->status = space ? std::strtol(space + 1, nullptr, 10) : 0;
     r->content_range.clear();
+    r->content_type.clear();
     r->etag.clear();
     r->last_modified.clear();
   }
   if (auto v = header_value(line, length, "Content-Range"); !v.empty()) r->content_range = v;
+  if (auto v = header_value(line, length, "Content-Type"); !v.empty()) r->content_type = v;
+  if (auto v = header_value(line, length, "Server"); !v.empty()) r->server = v;
   if (auto v = header_value(line, length, "ETag"); !v.empty()) r->etag = v;
   if (auto v = header_value(line, length, "Last-Modified"); !v.empty()) r->last_modified = v;
   return length;
@@ -127,6 +148,9 @@ std::size_t on_body(char* data, std::size_t size, std::size_t count, void* user)
   // An error page (a 503's, a 404's) is not the file: not kept, not a reason
   // to stop the transfer (its status is what counts).
   if (r->status >= 300) return length;
+  // A server that does not answer several ranges at once sends the whole
+  // file instead: stopped at its first bytes.
+  if (r->status == 200 && r->several) return 0;
   const std::uint64_t limit = r->status == 200 && r->whole_limit > 0 ? r->whole_limit : r->limit;
   if (r->body.size() + length > limit) {
     r->overflow = true;
@@ -147,6 +171,7 @@ class HttpSource final : public ByteSource {
     // its Content-Range gives the file's size and its ETag the version.
     try {
       Response first = fetch(0, kPage - 1, /*first=*/true);
+      several_ranges_ = several_ranges_expected(first.server) ? Support::Unknown : Support::No;
       store(0, first.body);
     } catch (...) {
       curl_easy_cleanup(curl_);  // the destructor does not run for a constructor that throws
@@ -213,6 +238,7 @@ class HttpSource final : public ByteSource {
       else
         runs.emplace_back(begin, end);
     }
+    if (runs.size() > 1 && several_ranges_ != Support::No) runs = fetch_several_per_request(runs);
     for (std::size_t at = 0; at < runs.size(); at += kParallel) {
       const std::size_t count = std::min(kParallel, runs.size() - at);
       std::vector<Response> got = fetch_parallel(runs.data() + at, count);
@@ -225,6 +251,87 @@ class HttpSource final : public ByteSource {
   // trip, a few KiB more of a response almost nothing.
   static constexpr std::uint64_t kMergeGap = 4 * 1024;
   static constexpr std::size_t kParallel = 8;
+  // Ranges in one request when the server answers several at once
+  // (multipart/byteranges, as nginx and Apache do; S3 does not): a slice
+  // across bricks then costs a few requests instead of one per brick.
+  static constexpr std::size_t kRangesPerRequest = 64;
+  static constexpr std::uint64_t kRequestBytes = 1u << 20;
+
+  using Run = std::pair<std::uint64_t, std::uint64_t>;  // [begin, end)
+  enum class Support { Unknown, Yes, No };
+  struct Transfer {
+    Response response;
+    CURLcode code = CURLE_OK;
+    long status = 0;
+  };
+
+  // The runs fetched several to a request, kParallel requests at a time;
+  // returns those still missing (the server answered otherwise, or a
+  // transfer failed), for the one-range path, which retries and reports.
+  // A request gathers runs up to kRequestBytes, or an eighth of the whole
+  // when that is more, and kRangesPerRequest: a small read is one request,
+  // a large one still spreads over parallel connections. The first request
+  // goes alone: a server that does not answer several ranges at once sends
+  // the whole file (200), which is cut off at its first bytes, and the
+  // runs then go one to a request.
+  std::vector<Run> fetch_several_per_request(const std::vector<Run>& runs) {
+    std::uint64_t total = 0;
+    for (const Run& run : runs) total += run.second - run.first;
+    const std::uint64_t target = std::max<std::uint64_t>(kRequestBytes, total / kParallel);
+    std::vector<std::vector<Run>> groups(1);
+    std::uint64_t bytes = 0;
+    for (const Run& run : runs) {
+      if (!groups.back().empty() && (bytes >= target || groups.back().size() == kRangesPerRequest)) {
+        groups.emplace_back();
+        bytes = 0;
+      }
+      groups.back().push_back(run);
+      bytes += run.second - run.first;
+    }
+    std::size_t g = 0;
+    if (several_ranges_ == Support::Unknown && groups[0].size() > 1) {
+      std::vector<Transfer> probe = transfer_parallel({groups[0]});
+      several_ranges_ = accept_parts(probe[0]) ? Support::Yes : Support::No;
+      g = 1;
+    }
+    for (; g < groups.size() && several_ranges_ == Support::Yes; g += kParallel) {
+      const std::vector<std::vector<Run>> batch(
+          groups.begin() + static_cast<std::ptrdiff_t>(g),
+          groups.begin() + static_cast<std::ptrdiff_t>(std::min(g + kParallel, groups.size())));
+      for (Transfer& t : transfer_parallel(batch)) accept_parts(t);
+    }
+    std::vector<Run> missing;
+    for (const Run& run : runs)
+      if (!covered(run.first, run.second - run.first)) missing.push_back(run);
+    return missing;
+  }
+
+  // Keeps the parts of a response to a request for several ranges; false
+  // when it is not a usable 206 (the runs are then fetched one by one).
+  bool accept_parts(Transfer& t) {
+    tally(t.response);
+    if (t.status == 412) fail(ErrorClass::Io, "the file changed on the server while it was open (HTTP 412)");
+    if (t.code != CURLE_OK || t.status != 206 || t.response.overflow) return false;
+    std::vector<BytePart> parts;
+    const std::vector<std::uint8_t>& body = t.response.body;
+    const std::string boundary = byteranges_boundary(t.response.content_type);
+    if (boundary.empty()) {  // the server merged the ranges into one
+      unsigned long long first = 0, last = 0, total = 0;
+      if (std::sscanf(t.response.content_range.c_str(), "bytes %llu-%llu/%llu", &first, &last, &total) != 3 ||
+          last < first || body.size() != last - first + 1)
+        return false;
+      parts.push_back({first, total, body.data(), body.size()});
+    } else if (!parse_byteranges(body.data(), body.size(), boundary, parts)) {
+      return false;
+    }
+    for (const BytePart& part : parts) {
+      if (part.total != size_)
+        fail(ErrorClass::Io, "the file's size changed on the server from " + std::to_string(size_) + " to " +
+                                 std::to_string(part.total) + " bytes while it was open");
+      keep_span(part.begin, std::vector<std::uint8_t>(part.data, part.data + part.size));
+    }
+    return true;
+  }
 
   bool covered(std::uint64_t offset, std::uint64_t size) const {
     auto it = spans_.upper_bound(offset);
@@ -362,10 +469,11 @@ class HttpSource final : public ByteSource {
     fetched_ += r.body.size();
   }
 
-  // Runs [begin, end) fetched at the same time, one connection each (the
-  // handles and their connections are kept for the next batch).
-  std::vector<Response> fetch_parallel(const std::pair<std::uint64_t, std::uint64_t>* runs, std::size_t count) {
-    if (count == 1) return {fetch(runs[0].first, runs[0].second - 1, false)};
+  // Requests sent at the same time, one connection each (the handles and
+  // their connections are kept for the next batch); request i asks for the
+  // runs of requests[i], as one range or several.
+  std::vector<Transfer> transfer_parallel(const std::vector<std::vector<Run>>& requests) {
+    const std::size_t count = requests.size();
     if (!multi_) multi_ = curl_multi_init();
     if (!multi_) throw Error(ErrorClass::LimitExceeded, url_ + ": cannot start libcurl");
     while (handles_.size() < count) {
@@ -373,13 +481,19 @@ class HttpSource final : public ByteSource {
       if (!h) throw Error(ErrorClass::LimitExceeded, url_ + ": cannot start libcurl");
       handles_.push_back(h);
     }
-    std::vector<Response> out(count);
+    std::vector<Transfer> out(count);
     std::vector<std::string> range(count);
     std::vector<curl_slist*> headers(count, nullptr);
     for (std::size_t i = 0; i < count; ++i) {
-      out[i].limit = runs[i].second - runs[i].first;
-      range[i] = std::to_string(runs[i].first) + "-" + std::to_string(runs[i].second - 1);
-      configure(handles_[i], out[i], range[i], false, &headers[i]);
+      std::uint64_t bytes = 0;
+      for (const Run& run : requests[i]) {
+        range[i] += (range[i].empty() ? "" : ",") + std::to_string(run.first) + "-" + std::to_string(run.second - 1);
+        bytes += run.second - run.first;
+      }
+      // Several ranges come as parts, each with a few lines of headers.
+      out[i].response.limit = requests[i].size() == 1 ? bytes : bytes + 256 * requests[i].size() + 1024;
+      out[i].response.several = requests[i].size() > 1;
+      configure(handles_[i], out[i].response, range[i], false, &headers[i]);
       curl_multi_add_handle(multi_, handles_[i]);
     }
     int running = 0;
@@ -387,25 +501,36 @@ class HttpSource final : public ByteSource {
       if (curl_multi_perform(multi_, &running) != CURLM_OK) break;
       if (running) curl_multi_poll(multi_, nullptr, 0, 1000, nullptr);
     } while (running);
-    std::vector<CURLcode> codes(count, CURLE_OK);
     int left = 0;
     while (CURLMsg* m = curl_multi_info_read(multi_, &left))
       if (m->msg == CURLMSG_DONE)
         for (std::size_t i = 0; i < count; ++i)
-          if (m->easy_handle == handles_[i]) codes[i] = m->data.result;
+          if (m->easy_handle == handles_[i]) out[i].code = m->data.result;
     for (std::size_t i = 0; i < count; ++i) {
       curl_multi_remove_handle(multi_, handles_[i]);
       if (headers[i]) curl_slist_free_all(headers[i]);
+      curl_easy_getinfo(handles_[i], CURLINFO_RESPONSE_CODE, &out[i].status);
     }
+    return out;
+  }
+
+  // Runs [begin, end) fetched at the same time, a range to a request.
+  std::vector<Response> fetch_parallel(const Run* runs, std::size_t count) {
+    if (count == 1) return {fetch(runs[0].first, runs[0].second - 1, false)};
+    std::vector<std::vector<Run>> requests;
+    for (std::size_t i = 0; i < count; ++i) requests.push_back({runs[i]});
+    std::vector<Transfer> done = transfer_parallel(requests);
+    std::vector<Response> out(count);
     for (std::size_t i = 0; i < count; ++i) {
-      long status = 0;
-      curl_easy_getinfo(handles_[i], CURLINFO_RESPONSE_CODE, &status);
-      tally(out[i]);
+      Transfer& t = done[i];
+      tally(t.response);
       // A dropped connection or a busy server: that range again, alone.
-      if (attempts_ > 1 && transient(codes[i], status))
+      if (attempts_ > 1 && transient(t.code, t.status)) {
         out[i] = fetch(runs[i].first, runs[i].second - 1, false, /*failed=*/1);
-      else
-        check(out[i], codes[i], status, runs[i].first, runs[i].second - 1, false, 1);
+      } else {
+        check(t.response, t.code, t.status, runs[i].first, runs[i].second - 1, false, 1);
+        out[i] = std::move(t.response);
+      }
     }
     return out;
   }
@@ -463,6 +588,7 @@ class HttpSource final : public ByteSource {
   std::uint64_t size_ = 0;
   std::string etag_, version_;
   bool whole_ = false;  // the server ignored ranges; every page is held
+  Support several_ranges_ = Support::No;
   std::map<std::uint64_t, Page> pages_;
   std::list<std::uint64_t> lru_;
   std::uint64_t held_ = 0;

@@ -139,6 +139,9 @@ sys.exit(0 if 0 < n <= int(sys.argv[3]) and 0 < b <= float(sys.argv[4]) / 100 * 
 }
 check "nginx-log-bricked-z-slice" within x bricked.ivol 4 50 extract "$url/bricked.ivol" --box 0,0,48,96,96,49 -o s.raw -f
 check "nginx-log-bricked16-z-slice" within x bricked16.ivol 4 35 extract "$url/bricked16.ivol" --box 0,0,48,96,96,49 -o s.raw -f
+# An x slice meets 6 separate bricks in each of 6 layers: nginx answers a
+# layer's bricks in one multipart/byteranges response.
+check "nginx-log-bricked16-x-slice-several-ranges" within x bricked16.ivol 8 35 extract "$url/bricked16.ivol" --box 48,0,0,49,96,96 -o s.raw -f
 check "nginx-log-octree-z-slice" within x octree.ivol 10 60 extract "$url/octree.ivol" --box 0,0,48,96,96,49 -o s.raw -f
 check "nginx-log-octree-box" within x octree.ivol 10 65 extract "$url/octree.ivol" --box 30,30,30,62,62,62 -o b.raw -f
 check "nginx-log-octree-preview" within x octree.ivol 8 25 convert "$url/octree.ivol" p.raw --level 2 -f

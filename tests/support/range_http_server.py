@@ -6,6 +6,7 @@ and bytes sent per file in COUNTS (JSON, rewritten after every request).
 
     range_http_server.py FOLDER PORT_FILE COUNTS [--no-ranges] [--change-after N]
         [--drop N] [--busy N] [--forbid NAME] [--sigv4 KEY_ID:SECRET:REGION[:TOKEN]] [--delay-ms MS]
+        [--single-range]
 
 Writes the port it listens on (127.0.0.1) into PORT_FILE. --no-ranges: a
 server that ignores Range and sends whole files (200). --change-after N:
@@ -18,7 +19,10 @@ independent of libcurl's); otherwise 403, as S3 answers. Paths may be
 path-style S3 (/BUCKET/KEY): the file served is KEY's last part. --delay-ms:
 every response waits MS milliseconds first, a round trip to a distant
 store (bench/remote_reads.sh). HEAD is answered too (HDF5's ROS3 driver
-asks for the size with it)."""
+asks for the size with it). A request for several ranges gets them as
+multipart/byteranges, as from nginx (and the Server header starts with
+"nginx", which is how ivol knows to ask); --single-range: the whole file
+(200) instead, as S3 answers (Server: AmazonS3)."""
 import hmac
 import http.server
 import json
@@ -42,6 +46,7 @@ busy_left = [int(option("--busy", 0))]
 forbidden = option("--forbid")
 sigv4 = option("--sigv4", "").split(":") if "--sigv4" in sys.argv else None
 delay = float(option("--delay-ms", 0)) / 1000
+several = "--single-range" not in sys.argv
 served = [0]
 counts = {}
 lock = threading.Lock()
@@ -76,6 +81,9 @@ def signature_valid(headers, path):
 
 
 class Handler(http.server.BaseHTTPRequestHandler):
+    server_version = ("nginx" if several else "AmazonS3") + " (ivol test server)"
+    sys_version = ""
+
     def log_message(self, *args):
         pass
 
@@ -111,7 +119,9 @@ class Handler(http.server.BaseHTTPRequestHandler):
             self.send_error(412)
             return
         size = stat.st_size
-        wanted = re.fullmatch(r"bytes=(\d+)-(\d*)", self.headers.get("Range", ""))
+        asked = self.headers.get("Range", "")
+        wanted = re.fullmatch(r"bytes=(\d+)-(\d*)", asked)
+        many = re.fullmatch(r"bytes=\d+-\d+(,\d+-\d+)+", asked) if several else None
         if head:
             self.send_response(200)
             self.send_header("Content-Length", str(size))
@@ -119,7 +129,20 @@ class Handler(http.server.BaseHTTPRequestHandler):
             self.send_header("Accept-Ranges", "bytes")
             self.end_headers()
             return
-        if ranges and wanted:
+        if ranges and many:
+            boundary = "ivol-test-boundary-%d" % served[0]
+            body = b""
+            with open(path, "rb") as f:
+                for first, last in (map(int, r.split("-")) for r in asked[6:].split(",")):
+                    last = min(last, size - 1)
+                    f.seek(first)
+                    body += ("\r\n--%s\r\nContent-Type: application/octet-stream\r\n"
+                             "Content-Range: bytes %d-%d/%d\r\n\r\n" % (boundary, first, last, size)).encode()
+                    body += f.read(last + 1 - first)
+            body += ("\r\n--%s--\r\n" % boundary).encode()
+            self.send_response(206)
+            self.send_header("Content-Type", "multipart/byteranges; boundary=" + boundary)
+        elif ranges and wanted:
             begin = int(wanted.group(1))
             end = min(int(wanted.group(2)) if wanted.group(2) else size - 1, size - 1)
             if begin >= size:
