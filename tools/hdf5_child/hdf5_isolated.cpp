@@ -265,8 +265,8 @@ std::unique_ptr<SlabReader> open_hdf5_slabs(const std::string& path, const std::
 }
 
 DxchangeProjections open_dxchange_projections(const std::string& path, const DxchangeOptions& options) {
-  auto worker =
-      std::make_unique<IsolatedWorker>(path, kLibrary, kProjectionWorker, projection_parameters(path, options));
+  auto worker = std::make_unique<IsolatedWorker>(path, kLibrary, kProjectionWorker,
+                                                 projection_parameters(path, options), options.memory_bytes);
   WireWriter request;
   request.put(kOpen);
   WireReader reply(worker->call(request.bytes(), "opening the DXchange datasets"));
@@ -284,7 +284,8 @@ DxchangeProjections open_dxchange_projections(const std::string& path, const Dxc
 }
 
 Hdf5Scan open_hdf5_projections(const std::string& path, const DxchangeOptions& options) {
-  auto worker = std::make_unique<IsolatedWorker>(path, kLibrary, kScanWorker, projection_parameters(path, options));
+  auto worker = std::make_unique<IsolatedWorker>(path, kLibrary, kScanWorker, projection_parameters(path, options),
+                                                 options.memory_bytes);
   WireWriter request;
   request.put(kOpen);
   WireReader reply(worker->call(request.bytes(), "opening the projections (NXtomo or DXchange)"));
