@@ -25,6 +25,7 @@
 #include "ivol/reader.hpp"
 #include "ivol/writer.hpp"
 #include "ivol_io.hpp"
+#include "projection_io.hpp"
 #include "raw_io.hpp"
 #include "sizes.hpp"
 #include "slab_io.hpp"
@@ -295,6 +296,39 @@ TEST(HostileConverters, Hdf5ChunkBeyondTheChildsLimitIsALimitNotACrash) {
   rusage children{};
   getrusage(RUSAGE_CHILDREN, &children);
   EXPECT_LT(static_cast<std::uint64_t>(children.ru_maxrss) * 1024, std::uint64_t{3} << 29);
+}
+
+// recon's HDF5 projections: the child that reads them may allocate what it
+// is given (recon's --memory), not a fixed 1 GiB. 4 views of 4x4 in one
+// 256 MiB gzip chunk: a limit naming the file under 64 MiB, zeros under
+// 1 GiB.
+TEST(HostileConverters, ProjectionChunkBeyondTheChildsLimitFollowsTheMemoryGiven) {
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "the child's address-space limit is not set under AddressSanitizer (its shadow would count)";
+#endif
+  const std::string h5 = temp_path("scan-chunk.h5");
+  const auto made = run_command(std::string(IVOL_PYTHON) + " " + IVOL_SOURCE_DIR +
+                                "/tests/cli/bad_input.d/make_huge_chunk_scan_h5.py " + h5 + " 256");
+  ASSERT_EQ(made.exit_code, 0) << made.output;
+  DxchangeOptions options;
+  options.assume_line_integrals = true;
+  options.memory_bytes = std::uint64_t{64} << 20;
+  std::vector<float> rows(4 * 4, -1.0f);
+  std::string message;
+  EXPECT_EQ(error_class_of(
+                [&] {
+                  Hdf5Scan scan = open_hdf5_projections(h5, options);
+                  scan.projections->read_rows(0, 0, 4, rows.data());
+                },
+                &message),
+            ErrorClass::LimitExceeded);
+  EXPECT_NE(message.find("scan-chunk.h5"), std::string::npos) << message;
+  EXPECT_NE(message.find("64 MiB"), std::string::npos) << message;
+  options.memory_bytes = std::uint64_t{1} << 30;
+  Hdf5Scan scan = open_hdf5_projections(h5, options);
+  ASSERT_EQ(scan.projections->view_count(), 4u);
+  scan.projections->read_rows(3, 0, 4, rows.data());
+  EXPECT_TRUE(std::all_of(rows.begin(), rows.end(), [](float v) { return v == 0.0f; }));
 }
 
 // 100 000 pages of 2x2 (tifffile squeezes 1x1 pages into one image):

@@ -77,20 +77,23 @@ void print_geometry(const convert::DenseVolume& shape, const ConvertSettings& s,
 // Slices larger than the memory budget, a band of rows at a time (each
 // within the budget, at most 64 MiB): source and sink both work by rows.
 void convert_in_bands(convert::SlabReader& source, const convert::DenseVolume& shape, const std::string& output,
-                      Format to, const ForeignOptions& foreign, std::uint64_t budget, bool quiet) {
+                      Format to, ForeignOptions foreign, std::uint64_t budget, bool quiet) {
   const std::uint64_t row = convert::slab_bytes(Dims{shape.dims[0], 1, 1}, 1, shape.type, output);
   convert::require_within_budget(row, budget, output + ": one row of " + describe(shape));
-  const auto band = static_cast<std::uint32_t>(
+  auto band = static_cast<std::uint32_t>(
       std::clamp<std::uint64_t>(std::min<std::uint64_t>(64ull << 20, budget) / row, 1, shape.dims[1]));
+  // Whole multiples of 64 rows, the height of the HDF5 writer's chunks.
+  if (band > 64) band -= band % 64;
+  foreign.band_rows = band;
   std::vector<std::uint8_t> buffer;
   convert::checked_resize(buffer, std::uint64_t{band} * row, output + ": a band of " + std::to_string(band) + " rows");
   const auto sink = create_sink(output, to, shape, foreign);
   if (!sink->writes_rows()) throw Error(ErrorClass::LimitExceeded, output + ": this output cannot be written by rows");
   const auto progress = progress_bar("ivol convert", quiet);
   for (std::uint32_t z = 0; z < shape.dims[2]; ++z) {
-    for (std::uint32_t y = 0; y < shape.dims[1]; y += band) {
-      const std::uint32_t n = std::min(band, shape.dims[1] - y);
-      source.read_rows(z, y, n, buffer.data());
+    for (std::uint64_t y = 0; y < shape.dims[1]; y += band) {  // 64-bit: a height near 2^32 must not wrap
+      const auto n = static_cast<std::uint32_t>(std::min<std::uint64_t>(band, shape.dims[1] - y));
+      source.read_rows(z, static_cast<std::uint32_t>(y), n, buffer.data());
       sink->write_rows(buffer.data(), n);
     }
     if (progress) progress(z + 1, shape.dims[2]);
@@ -308,8 +311,9 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       const std::uint64_t slice = convert::slab_bytes(shape.dims, 1, shape.type, s->input);
       const std::uint64_t budget = convert::memory_budget(foreign.memory_bytes);
       // A slice beyond the budget goes a band of rows at a time where both
-      // ends can (TIFF pages by strip or tile into raw output).
-      if (slice > budget && source->reads_rows() && to == Format::Raw && !is_stdio(s->output)) {
+      // ends can: raw, TIFF, MetaImage and NRRD input; raw (a file or
+      // standard output), TIFF, HDF5, MetaImage and NRRD output.
+      if (slice > budget && source->reads_rows() && writes_rows(to)) {
         convert_in_bands(*source, shape, s->output, to, foreign, budget, global.quiet);
         if (!global.quiet) say << s->input << " -> " << s->output << " (" << describe(shape) << ", in bands of rows)\n";
         print_geometry(shape, *s, to, say, global.quiet);

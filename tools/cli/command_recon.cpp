@@ -537,6 +537,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     if (writes) digests = std::make_shared<SourceDigests>(inputs, roles);
     if (s->size.empty() != s->voxel.empty())
       throw UsageError(s->size.empty() ? "--size" : "--voxel", "--size and --voxel go together");
+    // libhdf5's child process (HDF5 projections) may allocate --memory too.
+    s->scan.memory_bytes = s->memory_mib << 20;
     OpenedScan scan = open_scan(s->scan);
     const recon::VolumeGrid grid = grid_of(*s, scan);
     // Before any work (the preview included): the file and, for an octree,

@@ -194,6 +194,8 @@ std::unique_ptr<convert::SlabReader> open_source(const std::string& path, Format
   throw Error(ErrorClass::InvalidArgument, path + ": .ivol is not a dense format");
 }
 
+bool writes_rows(Format format) { return format != Format::Vdb && format != Format::Ivol; }
+
 std::unique_ptr<convert::SlabWriter> create_sink(const std::string& path, Format format,
                                                  const convert::DenseVolume& shape, const ForeignOptions& options) {
   if (is_stdio(path)) {
@@ -206,7 +208,7 @@ std::unique_ptr<convert::SlabWriter> create_sink(const std::string& path, Format
     case Format::Tiff:
       return convert::create_tiff_slabs(path, shape);
     case Format::Hdf5:
-      return convert::create_hdf5_slabs(path, shape, options.dataset);
+      return convert::create_hdf5_slabs(path, shape, options.dataset, 4, options.band_rows);
     case Format::Vdb:
       return std::make_unique<VdbSink>(path, shape, options.background, options.memory_bytes, options.allow_lossy);
     case Format::MetaImage:
@@ -228,8 +230,8 @@ convert::SampleType natural_export_type(Format to, const Reader& reader) {
 
 void check_export_type(Format to, convert::SampleType type, const char* option) {
   if ((to == Format::MetaImage || to == Format::Nrrd) && type == convert::SampleType::Float16)
-    throw UsageError(option, std::string("MetaImage and NRRD have no binary16 type; ") + option +
-                                 " f32 holds every value exactly");
+    throw UsageError(
+        option, std::string("MetaImage and NRRD have no binary16 type; ") + option + " f32 holds every value exactly");
   if (to == Format::Vdb && type != convert::SampleType::Float32 && type != convert::SampleType::Float16)
     throw UsageError(option, std::string("OpenVDB grids hold float32 (") + option + " f32) or half-float (" + option +
                                  " f16) values, not " + convert::sample_type_name(type));

@@ -33,8 +33,15 @@ struct ForeignOptions {
   // False: refuse an OpenVDB grid that would not hold every value, and an
   // HDF5 float64 input (read as float32).
   bool allow_lossy = true;
-  bool allow_gaps = false;                 // TIFF folder with missing slice numbers
+  bool allow_gaps = false;  // TIFF folder with missing slice numbers
+  // Output written by write_rows in bands of this many rows (0: by slices);
+  // the HDF5 writer fits its chunks to them.
+  std::uint32_t band_rows = 0;
 };
+
+// Whether the output format can be written a band of rows at a time (every
+// dense format but OpenVDB, whose grids are written whole).
+bool writes_rows(Format format);
 
 // The format written to `path`: `name` (--to) or the extension, which must
 // agree: a known extension of another format is refused ("b.ivol --to raw"),

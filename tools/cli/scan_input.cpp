@@ -259,6 +259,7 @@ OpenedScan open_scan(const ScanSettings& s) {
     convert::DxchangeOptions options;
     options.assume_line_integrals = !intensities;
     options.dataset = s.dataset;
+    options.memory_bytes = s.memory_bytes;
     convert::Hdf5Scan h = convert::open_hdf5_projections(s.projections, options);
     scan.projections = std::move(h.projections);
     theta_deg = std::move(h.angles_deg);

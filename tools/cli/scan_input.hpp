@@ -36,6 +36,9 @@ struct ScanSettings {
   double sid = 0.0, sdd = 0.0;
   double arc_deg = 360.0, first_angle_deg = 0.0;
   std::string offset;  // U,V detector offset in mm
+  // What the child process reading HDF5 projections may allocate (recon's
+  // --memory); 0: its default.
+  std::uint64_t memory_bytes = 0;
 };
 
 void add_scan_options(CLI::App* command, ScanSettings& settings);

@@ -69,18 +69,36 @@ class StdinRawReader final : public convert::SlabReader {
                                                      " bytes into the volume; " + dims_text() + " needs " +
                                                      std::to_string(total_bytes()));
       next_ = z0 + count;
-      if (next_ == layout_.dims[2]) {
-        std::uint8_t extra = 0;
-        if (take(&extra, 1) != 0)
-          throw Error(ErrorClass::InvalidArgument,
-                      "standard input: more bytes than " + dims_text() + " (" + std::to_string(total_bytes()) + ")");
-        finished_digest = {bytes_, sha_.hex()};
-      }
+      if (next_ == layout_.dims[2]) expect_end();
     }
     held_.assign(dst, dst + count * slice_);
     held_first_ = z0;
     held_count_ = count;
     if (layout_.big_endian) swap_bytes(dst, count * slice_, convert::sample_size(layout_.type));
+  }
+
+  // Rows in order, each once (a slice beyond the memory budget goes in
+  // bands of rows); not mixed with read().
+  bool reads_rows() const override { return true; }
+  void read_rows(std::uint32_t z, std::uint32_t y0, std::uint32_t rows, void* out) override {
+    if (z != next_ || y0 != next_row_ || rows > layout_.dims[1] - y0)
+      throw Error(ErrorClass::InvalidArgument, "standard input: rows " + std::to_string(y0) + " of slice " +
+                                                   std::to_string(z) +
+                                                   " asked for out of order; a stream is read once");
+    auto* dst = static_cast<std::uint8_t*>(out);
+    const std::uint64_t row = slice_ / layout_.dims[1];
+    const std::uint64_t want = std::uint64_t{rows} * row;
+    const std::size_t got = take(dst, want);
+    if (got != want)
+      throw Error(ErrorClass::InvalidArgument, "standard input: ended " + std::to_string(z * slice_ + y0 * row + got) +
+                                                   " bytes into the volume; " + dims_text() + " needs " +
+                                                   std::to_string(total_bytes()));
+    next_row_ += rows;
+    if (next_row_ == layout_.dims[1]) {
+      next_row_ = 0;
+      if (++next_ == layout_.dims[2]) expect_end();
+    }
+    if (layout_.big_endian) swap_bytes(dst, want, convert::sample_size(layout_.type));
   }
 
  private:
@@ -89,6 +107,14 @@ class StdinRawReader final : public convert::SlabReader {
     for (; next_ < z; ++next_)
       if (take(sink.data(), slice_) != slice_)
         throw Error(ErrorClass::InvalidArgument, "standard input: ended before slice " + std::to_string(z));
+  }
+  // After the volume's last byte: the end of input, and the digest is known.
+  void expect_end() {
+    std::uint8_t extra = 0;
+    if (take(&extra, 1) != 0)
+      throw Error(ErrorClass::InvalidArgument,
+                  "standard input: more bytes than " + dims_text() + " (" + std::to_string(total_bytes()) + ")");
+    finished_digest = {bytes_, sha_.hex()};
   }
   // Every byte of standard input goes through here, into the digest.
   std::size_t take(std::uint8_t* p, std::size_t size) {
@@ -106,6 +132,7 @@ class StdinRawReader final : public convert::SlabReader {
   convert::RawLayout layout_;
   std::uint64_t slice_ = 0;
   std::uint32_t next_ = 0;          // the next slice standard input gives
+  std::uint32_t next_row_ = 0;      // and its next row (read_rows)
   std::vector<std::uint8_t> held_;  // the last slab, as read (before any byte swap)
   std::uint32_t held_first_ = 0, held_count_ = 0;
   Sha256 sha_;
@@ -116,8 +143,23 @@ class StdoutRawWriter final : public convert::SlabWriter {
  public:
   StdoutRawWriter(const convert::DenseVolume& shape, bool big_endian) : shape_(shape), big_endian_(big_endian) {}
   void write(const void* samples, std::uint32_t count) override {
+    put(samples, std::size_t{count} * shape_.dims[0] * shape_.dims[1] * convert::sample_size(shape_.type));
+    at_.slices += count;
+  }
+  bool writes_rows() const override { return true; }
+  void write_rows(const void* samples, std::uint32_t rows) override {
+    put(samples, std::size_t{rows} * shape_.dims[0] * convert::sample_size(shape_.type));
+    at_.advance(rows, shape_.dims[1]);
+  }
+  void finish() override {
+    if (at_.slices != shape_.dims[2] || at_.rows != 0)
+      throw Error(ErrorClass::Io, "standard output: " + std::to_string(at_.slices) + " of " +
+                                      std::to_string(shape_.dims[2]) + " slices written");
+  }
+
+ private:
+  void put(const void* samples, std::size_t bytes) {
     const std::size_t width = convert::sample_size(shape_.type);
-    const std::size_t bytes = std::size_t{count} * shape_.dims[0] * shape_.dims[1] * width;
     const auto* p = static_cast<const std::uint8_t*>(samples);
     std::vector<std::uint8_t> swapped;
     if (big_endian_) {
@@ -131,18 +173,11 @@ class StdoutRawWriter final : public convert::SlabWriter {
       if (n <= 0) throw Error(ErrorClass::Io, std::string("standard output: write failed: ") + std::strerror(errno));
       done += static_cast<std::size_t>(n);
     }
-    slices_ += count;
-  }
-  void finish() override {
-    if (slices_ != shape_.dims[2])
-      throw Error(ErrorClass::Io, "standard output: " + std::to_string(slices_) + " of " +
-                                      std::to_string(shape_.dims[2]) + " slices written");
   }
 
- private:
   convert::DenseVolume shape_;
   bool big_endian_;
-  std::uint32_t slices_ = 0;
+  convert::RowPosition at_;
 };
 
 }  // namespace

@@ -496,7 +496,8 @@ void write_string(hid_t object, const char* name, const std::string& value, cons
 // Writes a dataset slab by slab (hyperslab writes) into a staged file.
 class Hdf5SlabWriter final : public SlabWriter {
  public:
-  Hdf5SlabWriter(const std::string& path, const DenseVolume& shape, const std::string& dataset_name, int deflate_level)
+  Hdf5SlabWriter(const std::string& path, const DenseVolume& shape, const std::string& dataset_name, int deflate_level,
+                 std::uint32_t band_rows)
       : path_(path), context_(where(path, dataset_name)), shape_(shape), staged_(path) {
     if (dataset_name.empty() || dataset_name.back() == '/')
       throw Error(ErrorClass::InvalidArgument, context_ + ": the dataset needs a name");
@@ -517,7 +518,8 @@ class Hdf5SlabWriter final : public SlabWriter {
     Handle link_plist(H5Pcreate(H5P_LINK_CREATE), H5Pclose);
     H5Pset_create_intermediate_group(link_plist.get(), 1);
     Handle create_plist(H5Pcreate(H5P_DATASET_CREATE), H5Pclose);
-    const hsize_t chunk[3] = {std::min<hsize_t>(64, extent[0]), std::min<hsize_t>(64, extent[1]),
+    const hsize_t chunk[3] = {band_rows ? 1 : std::min<hsize_t>(64, extent[0]),
+                              std::min<hsize_t>(band_rows ? std::min<hsize_t>(64, band_rows) : 64, extent[1]),
                               std::min<hsize_t>(64, extent[2])};
     H5Pset_chunk(create_plist.get(), 3, chunk);
     if (deflate_level > 0) {
@@ -538,19 +540,41 @@ class Hdf5SlabWriter final : public SlabWriter {
 
   void write(const void* samples, std::uint32_t count) override {
     QuietHdf5Errors quiet;
-    const hsize_t start[3] = {z_, 0, 0};
+    const hsize_t start[3] = {at_.slices, 0, 0};
     const hsize_t extent[3] = {count, shape_.dims[1], shape_.dims[0]};
     H5Sselect_hyperslab(space_.get(), H5S_SELECT_SET, start, nullptr, extent, nullptr);
     Handle memory(H5Screate_simple(3, extent, nullptr), H5Sclose);
     if (H5Dwrite(dataset_.get(), memory_type_.get(), memory.get(), space_.get(), H5P_DEFAULT, samples) < 0)
       throw Error(ErrorClass::Io, context_ + ": cannot write the samples" + hdf5_reason());
-    z_ += count;
+    at_.slices += count;
+  }
+
+  // Each band a hyperslab of rows, split where a slice ends.
+  bool writes_rows() const override { return true; }
+  void write_rows(const void* samples, std::uint32_t rows) override {
+    QuietHdf5Errors quiet;
+    const auto* p = static_cast<const std::uint8_t*>(samples);
+    const std::size_t row_bytes = std::size_t{shape_.dims[0]} * sample_size(shape_.type);
+    while (rows > 0) {
+      if (at_.slices >= shape_.dims[2])
+        throw Error(ErrorClass::InvalidArgument, context_ + ": more rows than the dataset holds");
+      const std::uint32_t n = std::min(rows, shape_.dims[1] - at_.rows);
+      const hsize_t start[3] = {at_.slices, at_.rows, 0};
+      const hsize_t extent[3] = {1, n, shape_.dims[0]};
+      H5Sselect_hyperslab(space_.get(), H5S_SELECT_SET, start, nullptr, extent, nullptr);
+      Handle memory(H5Screate_simple(3, extent, nullptr), H5Sclose);
+      if (H5Dwrite(dataset_.get(), memory_type_.get(), memory.get(), space_.get(), H5P_DEFAULT, p) < 0)
+        throw Error(ErrorClass::Io, context_ + ": cannot write the samples" + hdf5_reason());
+      p += n * row_bytes;
+      rows -= n;
+      at_.advance(n, shape_.dims[1]);
+    }
   }
 
   void finish() override {
-    if (z_ != shape_.dims[2])
-      throw Error(ErrorClass::InvalidArgument,
-                  context_ + ": " + std::to_string(z_) + " of " + std::to_string(shape_.dims[2]) + " slices written");
+    if (at_.slices != shape_.dims[2] || at_.rows != 0)
+      throw Error(ErrorClass::InvalidArgument, context_ + ": " + std::to_string(at_.slices) + " of " +
+                                                   std::to_string(shape_.dims[2]) + " slices written");
     QuietHdf5Errors quiet;
     if (shape_.has_geometry) {
       const auto& s = shape_.voxel_size;
@@ -584,14 +608,14 @@ class Hdf5SlabWriter final : public SlabWriter {
   Handle space_;
   Handle dataset_;
   Handle memory_type_;
-  std::uint32_t z_ = 0;
+  RowPosition at_;
 };
 
 }  // namespace
 
 std::unique_ptr<SlabWriter> create_hdf5_slabs(const std::string& path, const DenseVolume& shape,
-                                              const std::string& dataset, int deflate_level) {
-  return std::make_unique<Hdf5SlabWriter>(path, shape_of(shape), dataset, deflate_level);
+                                              const std::string& dataset, int deflate_level, std::uint32_t band_rows) {
+  return std::make_unique<Hdf5SlabWriter>(path, shape_of(shape), dataset, deflate_level, band_rows);
 }
 
 void write_hdf5(const DenseVolume& volume, const std::string& path, const std::string& dataset_name,

@@ -85,8 +85,13 @@ std::unique_ptr<SlabReader> open_hdf5_slabs_in_process(const std::string& path,
 void write_hdf5(const DenseVolume& volume, const std::string& path, const std::string& dataset = "/exchange/data",
                 int deflate_level = 4);
 
-// The same, slab by slab.
+// The same, slab by slab. band_rows > 0: the samples come by write_rows in
+// bands of that many rows (the last of a slice may be shorter); chunks are
+// then one slice deep and min(band_rows, 64) rows high (band_rows above 64
+// must be a multiple of 64), so that every band writes whole chunks and
+// none is read back, decompressed and written again.
 std::unique_ptr<SlabWriter> create_hdf5_slabs(const std::string& path, const DenseVolume& shape,
-                                              const std::string& dataset = "/exchange/data", int deflate_level = 4);
+                                              const std::string& dataset = "/exchange/data", int deflate_level = 4,
+                                              std::uint32_t band_rows = 0);
 
 }  // namespace ivol::convert

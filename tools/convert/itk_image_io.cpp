@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <unistd.h>
+#include <zlib.h>
 
 #include <cerrno>
 #include <charconv>
@@ -10,8 +11,6 @@
 #include <cstring>
 #include <filesystem>
 #include <vector>
-
-#include <zlib.h>
 
 #include "itk_image_header.hpp"
 #include "itk_image_samples.hpp"
@@ -73,20 +72,26 @@ class ItkImageSlabReader final : public SlabReader {
 
   void read(std::uint32_t z0, std::uint32_t count, void* out) override {
     const std::uint64_t slice = std::uint64_t{shape_.dims[0]} * shape_.dims[1];
-    const std::uint64_t n = slice * count;
-    if (!widen_) {
-      samples_.read(slice * z0, n, out);
-      return;
-    }
+    read_samples(slice * z0, slice * count, out);
+  }
+
+  bool reads_rows() const override { return true; }
+  void read_rows(std::uint32_t z, std::uint32_t y0, std::uint32_t rows, void* out) override {
+    const std::uint64_t first = (std::uint64_t{z} * shape_.dims[1] + y0) * shape_.dims[0];
+    read_samples(first, std::uint64_t{rows} * shape_.dims[0], out);
+  }
+
+ private:
+  void read_samples(std::uint64_t first, std::uint64_t n, void* out) {
+    samples_.read(first, n, out);
+    if (!widen_) return;
     // int8 → int16 in place, from the end, so that no sample is overwritten
     // before it is read.
-    auto* bytes = static_cast<std::int8_t*>(out);
-    samples_.read(slice * z0, n, out);
+    const auto* bytes = static_cast<const std::int8_t*>(out);
     auto* wide = static_cast<std::int16_t*>(out);
     for (std::uint64_t i = n; i-- > 0;) wide[i] = bytes[i];
   }
 
- private:
   ImageSamples samples_;
   bool widen_ = false;
 };
@@ -129,13 +134,22 @@ class ItkImageSlabWriter final : public SlabWriter {
       deflate_some(samples, bytes, Z_NO_FLUSH);
     else
       put(samples, bytes);
-    slices_ += count;
+    at_.slices += count;
+  }
+  bool writes_rows() const override { return true; }
+  void write_rows(const void* samples, std::uint32_t rows) override {
+    const std::uint64_t bytes = slab_bytes(Dims{shape_.dims[0], rows, 1}, 1, shape_.type, path_);
+    if (nrrd_)
+      deflate_some(samples, bytes, Z_NO_FLUSH);
+    else
+      put(samples, bytes);
+    at_.advance(rows, shape_.dims[1]);
   }
 
   void finish() override {
-    if (slices_ != shape_.dims[2])
-      throw Error(ErrorClass::InvalidArgument,
-                  path_ + ": " + std::to_string(slices_) + " of " + std::to_string(shape_.dims[2]) + " slices written");
+    if (at_.slices != shape_.dims[2] || at_.rows != 0)
+      throw Error(ErrorClass::InvalidArgument, path_ + ": " + std::to_string(at_.slices) + " of " +
+                                                   std::to_string(shape_.dims[2]) + " slices written");
     if (nrrd_) deflate_some(nullptr, 0, Z_FINISH);
     const int fd = fd_;
     fd_ = -1;
@@ -150,9 +164,10 @@ class ItkImageSlabWriter final : public SlabWriter {
   double in_mm(double value) const {
     static const std::pair<const char*, int> kExponents[] = {{"m", 3}, {"cm", 1}, {"mm", 0}, {"um", -3}, {"nm", -6}};
     for (const auto& [unit, exponent] : kExponents)
-      if (shape_.unit == unit) return exponent >= 0 ? value * std::pow(10.0, exponent) : value / std::pow(10.0, -exponent);
-    throw Error(ErrorClass::InvalidArgument, path_ + ": the volume's unit '" + shape_.unit +
-                                                 "' is not a length MetaImage's millimetres can state");
+      if (shape_.unit == unit)
+        return exponent >= 0 ? value * std::pow(10.0, exponent) : value / std::pow(10.0, -exponent);
+    throw Error(ErrorClass::InvalidArgument,
+                path_ + ": the volume's unit '" + shape_.unit + "' is not a length MetaImage's millimetres can state");
   }
 
   std::string element() const {
@@ -175,10 +190,10 @@ class ItkImageSlabWriter final : public SlabWriter {
     return std::string("ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = ") +
            (big ? "True" : "False") +
            "\nCompressedData = False\nTransformMatrix = 1 0 0 0 1 0 0 0 1\nOffset = " + exact(in_mm(o[0])) + " " +
-           exact(in_mm(o[1])) + " " + exact(in_mm(o[2])) + "\nCenterOfRotation = 0 0 0\nElementSpacing = " +
-           exact(in_mm(s[0])) + " " + exact(in_mm(s[1])) + " " + exact(in_mm(s[2])) +
-           "\nDimSize = " + std::to_string(shape_.dims[0]) + " " + std::to_string(shape_.dims[1]) + " " +
-           std::to_string(shape_.dims[2]) + "\nElementType = " + element() + "\nElementDataFile = LOCAL\n";
+           exact(in_mm(o[1])) + " " + exact(in_mm(o[2])) +
+           "\nCenterOfRotation = 0 0 0\nElementSpacing = " + exact(in_mm(s[0])) + " " + exact(in_mm(s[1])) + " " +
+           exact(in_mm(s[2])) + "\nDimSize = " + std::to_string(shape_.dims[0]) + " " + std::to_string(shape_.dims[1]) +
+           " " + std::to_string(shape_.dims[2]) + "\nElementType = " + element() + "\nElementDataFile = LOCAL\n";
   }
 
   std::string nrrd_header() const {
@@ -186,12 +201,13 @@ class ItkImageSlabWriter final : public SlabWriter {
     const auto& o = shape_.origin;
     constexpr bool big = __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__;
     const std::string unit = "\"" + shape_.unit + "\"";
-    return "NRRD0004\n# written by ivol\ntype: " + element() + "\ndimension: 3\nspace dimension: 3\nsizes: " +
-           std::to_string(shape_.dims[0]) + " " + std::to_string(shape_.dims[1]) + " " +
-           std::to_string(shape_.dims[2]) + "\nspace directions: (" + exact(s[0]) + ",0,0) (0," + exact(s[1]) +
-           ",0) (0,0," + exact(s[2]) + ")\nkinds: domain domain domain\nendian: " + (big ? "big" : "little") +
-           "\nencoding: gzip\nspace origin: (" + exact(o[0]) + "," + exact(o[1]) + "," + exact(o[2]) +
-           ")\nspace units: " + unit + " " + unit + " " + unit + "\n\n";
+    return "NRRD0004\n# written by ivol\ntype: " + element() +
+           "\ndimension: 3\nspace dimension: 3\nsizes: " + std::to_string(shape_.dims[0]) + " " +
+           std::to_string(shape_.dims[1]) + " " + std::to_string(shape_.dims[2]) + "\nspace directions: (" +
+           exact(s[0]) + ",0,0) (0," + exact(s[1]) + ",0) (0,0," + exact(s[2]) +
+           ")\nkinds: domain domain domain\nendian: " + (big ? "big" : "little") + "\nencoding: gzip\nspace origin: (" +
+           exact(o[0]) + "," + exact(o[1]) + "," + exact(o[2]) + ")\nspace units: " + unit + " " + unit + " " + unit +
+           "\n\n";
   }
 
   void put(const void* data, std::uint64_t size) {
@@ -233,7 +249,7 @@ class ItkImageSlabWriter final : public SlabWriter {
   int fd_ = -1;
   z_stream stream_{};
   bool deflating_ = false;
-  std::uint32_t slices_ = 0;
+  RowPosition at_;
 };
 
 }  // namespace

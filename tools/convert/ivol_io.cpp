@@ -4,12 +4,14 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 
 #include "disk_space.hpp"
 #include "ivol/binary16.hpp"
 #include "ivol/bricked_writer.hpp"
 #include "ivol/build.hpp"
 #include "ivol/error.hpp"
+#include "ivol/geometry.hpp"
 #include "ivol/keep_mask.hpp"
 #include "ivol/streaming_writer.hpp"
 #include "ivol/writer.hpp"
@@ -239,6 +241,30 @@ void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, cons
 
 namespace {
 
+// The smallest --memory under which the octree import's slabs fit. Where the
+// slab budget is a quarter of --memory (the CLI's rule), more memory may
+// choose thicker slabs, which need more: iterate to the fixed point, with
+// the writer's rule for the thickness (slab_subtrees.hpp, choose_slab_slices).
+std::uint64_t memory_that_would_do(const Dims& dims, const ImportOptions& options, std::uint64_t needed,
+                                   const std::function<std::uint64_t(std::uint32_t)>& needed_for) {
+  if (options.slab_budget_bytes == 0 || options.slab_budget_bytes != memory_budget(options.memory_bytes) / 4)
+    return needed;
+  const std::uint32_t side = 1u << depth_for(dims);
+  std::uint64_t slice_bytes = 0, bytes = 0;
+  if (__builtin_mul_overflow(std::uint64_t{dims[0]} * dims[1], 4u, &slice_bytes)) return needed;
+  std::uint64_t memory = needed;
+  for (int step = 0; step < 64; ++step) {
+    std::uint32_t slices = 8;
+    while (slices < side && !__builtin_mul_overflow(std::uint64_t{2} * slices, slice_bytes, &bytes) &&
+           bytes <= memory / 4)
+      slices *= 2;
+    const std::uint64_t more = needed_for(std::min(slices, side));
+    if (more <= memory) break;
+    memory = more;
+  }
+  return memory;
+}
+
 // StructureChoice::Auto's rule, and whether a bricked grid can hold the file.
 // `layer_bytes`: what import_bricked holds for one layer of bricks.
 bool choose_bricked(const ImportOptions& options, ValueEncoding encoding, std::uint64_t layer_bytes,
@@ -383,14 +409,27 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
                            std::to_string(shape.dims[0]) + "x" + std::to_string(shape.dims[1]) + " " +
                            sample_type_name(shape.type);
   const std::uint64_t slice = slice_voxels(shape.dims, what);
+  const bool need_values = !codes || options.keep;
+  // What slabs of `slices` hold: samples (and floats, and the keep mask)
+  // with their margins, the codes and the writer's own share.
+  const auto needed_for = [&](std::uint32_t slices) {
+    const std::uint64_t most =
+        checked_mul(std::min<std::uint64_t>(std::uint64_t{slices} + 2ull * margin, shape.dims[2]), slice, what);
+    const std::uint64_t slab_voxels = checked_mul(std::min(slices, shape.dims[2]), slice, what);
+    const std::uint64_t held =
+        checked_mul(most, sample_size(shape.type) + (need_values ? 4 : 0) + (options.keep ? 1 : 0), what);
+    return checked_add(held, checked_mul(slab_voxels, (codes ? 2 : 0) + kWriterBytesPerVoxel, what), what);
+  };
   const std::uint64_t most =
       checked_mul(std::min<std::uint64_t>(std::uint64_t{slab} + 2ull * margin, shape.dims[2]), slice, what);
   const std::uint64_t slab_voxels = checked_mul(std::min(slab, shape.dims[2]), slice, what);
-  const bool need_values = !codes || options.keep;
-  std::uint64_t needed =
-      checked_mul(most, sample_size(shape.type) + (need_values ? 4 : 0) + (options.keep ? 1 : 0), what);
-  needed = checked_add(needed, checked_mul(slab_voxels, (codes ? 2 : 0) + kWriterBytesPerVoxel, what), what);
-  require_within_budget(needed, memory_budget(options.memory_bytes), what);
+  const std::uint64_t needed = needed_for(slab);
+  if (needed > memory_budget(options.memory_bytes))
+    throw Error(ErrorClass::LimitExceeded,
+                what + " needs " + mib_text(needed) + ", more than the " +
+                    mib_text(memory_budget(options.memory_bytes)) +
+                    " this conversion may hold: the .ivol writer takes whole slices, 8 or more at a time (" +
+                    memory_option_for(memory_that_would_do(shape.dims, options, needed, needed_for)) + " allows it)");
   if (options.keep) report.threshold = options.keep->otsu ? streamed_otsu(source, slab) : options.keep->threshold;
   std::vector<std::uint8_t> samples;
   checked_resize(samples, most * sample_size(shape.type), what + " (samples)");

@@ -57,6 +57,18 @@ class RawSlabReader final : public SlabReader {
     if (layout_.big_endian) swap_bytes(static_cast<std::uint8_t*>(out), count * slice, sample_size(layout_.type));
   }
 
+  bool reads_rows() const override { return true; }
+  void read_rows(std::uint32_t z, std::uint32_t y0, std::uint32_t rows, void* out) override {
+    // The sizes were checked against the file's in the constructor.
+    const std::uint64_t row = slab_bytes(Dims{layout_.dims[0], 1, 1}, 1, layout_.type, path_);
+    const std::uint64_t at = layout_.header_bytes + (std::uint64_t{z} * layout_.dims[1] + y0) * row;
+    in_.seekg(static_cast<std::streamoff>(at));
+    in_.read(static_cast<char*>(out), static_cast<std::streamsize>(rows * row));
+    if (!in_)
+      throw Error(ErrorClass::Io, path_ + ": read failed at slice " + std::to_string(z) + " row " + std::to_string(y0));
+    if (layout_.big_endian) swap_bytes(static_cast<std::uint8_t*>(out), rows * row, sample_size(layout_.type));
+  }
+
  private:
   std::string path_;
   RawLayout layout_;
@@ -75,19 +87,17 @@ class RawSlabWriter final : public SlabWriter {
   }
   void write(const void* samples, std::uint32_t count) override {
     write_bytes(samples, slab_bytes(shape_.dims, count, shape_.type, path_));
-    slices_ += count;
+    at_.slices += count;
   }
   bool writes_rows() const override { return true; }
   void write_rows(const void* samples, std::uint32_t rows) override {
     write_bytes(samples, slab_bytes(Dims{shape_.dims[0], rows, 1}, 1, shape_.type, path_));
-    rows_ += rows;
-    slices_ += rows_ / shape_.dims[1];
-    rows_ %= shape_.dims[1];
+    at_.advance(rows, shape_.dims[1]);
   }
   void finish() override {
-    if (slices_ != shape_.dims[2] || rows_ != 0)
-      throw Error(ErrorClass::InvalidArgument,
-                  path_ + ": " + std::to_string(slices_) + " of " + std::to_string(shape_.dims[2]) + " slices written");
+    if (at_.slices != shape_.dims[2] || at_.rows != 0)
+      throw Error(ErrorClass::InvalidArgument, path_ + ": " + std::to_string(at_.slices) + " of " +
+                                                   std::to_string(shape_.dims[2]) + " slices written");
     const int fd = fd_;
     fd_ = -1;
     if (::close(fd) != 0) throw Error(ErrorClass::Io, path_ + ": cannot close the file: " + std::strerror(errno));
@@ -100,8 +110,7 @@ class RawSlabWriter final : public SlabWriter {
   bool big_endian_;
   StagedFile staged_;
   int fd_ = -1;
-  std::uint32_t slices_ = 0;
-  std::uint32_t rows_ = 0;  // of the slice being written by write_rows
+  RowPosition at_;
 
   void write_bytes(const void* samples, std::uint64_t bytes) {
     std::vector<std::uint8_t> swapped;

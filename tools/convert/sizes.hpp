@@ -72,20 +72,30 @@ inline std::uint64_t slab_bytes(const Dims& dims, std::uint64_t slices, SampleTy
   return checked_mul(voxels, sample_size(type), what + " (bytes of " + sample_type_name(type) + " samples)");
 }
 
+// The --memory option (in MiB) under which `bytes` fit.
+inline std::string memory_option_for(std::uint64_t bytes) {
+  return "--memory " + std::to_string((bytes + (std::uint64_t{1} << 20) - 1) >> 20);
+}
+
 // Refuses `bytes` above `budget` before anything is allocated; `what` says
-// what needs them ("one slice of 16384x16384 u8 as float32").
+// what needs them ("one slice of 16384x16384 u8 as float32"). Every caller's
+// need is independent of the budget, so the --memory named allows it.
 inline void require_within_budget(std::uint64_t bytes, std::uint64_t budget, const std::string& what) {
   if (bytes > budget)
     throw Error(ErrorClass::LimitExceeded, what + " needs " + mib_text(bytes) + ", more than the " + mib_text(budget) +
-                                               " this conversion may hold (--memory MiB raises it)");
+                                               " this conversion may hold (" + memory_option_for(bytes) +
+                                               " allows it)");
 }
 
 // The same for a size computed in floating point, for products that may
 // pass 2^64: refused with the true figure rather than "exceeds 2^64".
 inline void require_within_budget(double bytes, std::uint64_t budget, const std::string& what) {
   if (bytes > static_cast<double>(budget))
-    throw Error(ErrorClass::LimitExceeded, what + " needs " + mib_text(bytes) + ", more than the " + mib_text(budget) +
-                                               " this conversion may hold (--memory MiB raises it)");
+    throw Error(ErrorClass::LimitExceeded,
+                what + " needs " + mib_text(bytes) + ", more than the " + mib_text(budget) +
+                    " this conversion may hold" +
+                    (bytes < 1.8e19 ? " (" + memory_option_for(static_cast<std::uint64_t>(bytes)) + " allows it)"
+                                    : std::string(" (more than any memory holds)")));
 }
 
 // v.resize(count), turning an allocation failure (or a size past the address

@@ -23,7 +23,8 @@ class SlabReader {
   // budget (a TIFF page of 16384^2 from a few hundred KB of deflate) reads
   // it a band of rows at a time.
   virtual bool reads_rows() const { return false; }
-  // Reads rows y0 .. y0 + rows of slice z into `out` ([y][x]).
+  // Reads rows y0 .. y0 + rows of slice z into `out` ([y][x]); y0 + rows is
+  // at most the slice's height.
   virtual void read_rows(std::uint32_t /*z*/, std::uint32_t /*y0*/, std::uint32_t /*rows*/, void* /*out*/) {}
 
  protected:
@@ -42,6 +43,18 @@ class SlabWriter {
   virtual void write_rows(const void* /*samples*/, std::uint32_t /*rows*/) {}
   // After the last slice: the file appears at its path.
   virtual void finish() = 0;
+};
+
+// Where a writer fed by write_rows stands: the slices complete and the rows
+// written of the next one.
+struct RowPosition {
+  std::uint32_t slices = 0;
+  std::uint32_t rows = 0;
+  void advance(std::uint32_t count, std::uint32_t height) {
+    const std::uint64_t at = std::uint64_t{rows} + count;  // 64-bit: two heights near 2^32 must not wrap
+    slices += static_cast<std::uint32_t>(at / height);
+    rows = static_cast<std::uint32_t>(at % height);
+  }
 };
 
 std::unique_ptr<SlabReader> open_raw_slabs(const std::string& path, const RawLayout& layout);

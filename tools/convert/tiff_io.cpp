@@ -5,9 +5,11 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <memory>
+#include <vector>
 
 #include "ivol/error.hpp"
 #include "sizes.hpp"
@@ -327,55 +329,53 @@ class TiffSlabWriter final : public SlabWriter {
     const bool big = slab_bytes(dims_, dims_[2], type_, path) > (3ull << 30);
     tif_.reset(TIFFOpen(staged_.temp_path().c_str(), big ? "w8" : "w"));
     if (!tif_) fail(path, "cannot write: " + last_tiff_message);
+    // Strips of about 64 KiB (one row where a row is longer).
+    rows_per_strip_ = static_cast<std::uint32_t>(
+        std::clamp<std::uint64_t>((64u << 10) / (std::uint64_t{dims_[0]} * sample_size(type_)), 1, UINT32_MAX));
   }
 
   void write(const void* samples, std::uint32_t count) override {
-    const std::size_t sample = sample_size(type_);
-    const std::uint16_t bits = static_cast<std::uint16_t>(8 * sample);
-    std::uint16_t format = SAMPLEFORMAT_UINT;
-    if (type_ == SampleType::Int16) format = SAMPLEFORMAT_INT;
-    if (type_ == SampleType::Float16 || type_ == SampleType::Float32) format = SAMPLEFORMAT_IEEEFP;
-    const auto rows_per_strip =
-        static_cast<std::uint32_t>(std::max<std::uint64_t>(1, (64u << 10) / (std::uint64_t{dims_[0]} * sample)));
-    for (std::uint32_t n = 0; n < count; ++n, ++z_) {
-      TIFF* tif = tif_.get();
-      TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, dims_[0]);
-      TIFFSetField(tif, TIFFTAG_IMAGELENGTH, dims_[1]);
-      TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, bits);
-      TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, 1);
-      TIFFSetField(tif, TIFFTAG_SAMPLEFORMAT, format);
-      TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_MINISBLACK);
-      TIFFSetField(tif, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
-      TIFFSetField(tif, TIFFTAG_ROWSPERSTRIP, rows_per_strip);
-      TIFFSetField(tif, TIFFTAG_SUBFILETYPE, FILETYPE_PAGE);
-      TIFFSetField(tif, TIFFTAG_PAGENUMBER, z_, dims_[2]);
-      write_tiff_metadata(tif, shape_, z_, dims_[2]);
-      if (compress_) {
-        TIFFSetField(tif, TIFFTAG_COMPRESSION, COMPRESSION_ADOBE_DEFLATE);
-        // Horizontal differencing helps integer slices; the floating-point
-        // predictor would help floats but many readers lack it, so floats go
-        // without one.
-        if (format != SAMPLEFORMAT_IEEEFP) TIFFSetField(tif, TIFFTAG_PREDICTOR, PREDICTOR_HORIZONTAL);
-      } else {
-        TIFFSetField(tif, TIFFTAG_COMPRESSION, COMPRESSION_NONE);
-      }
-      const auto* page = static_cast<const std::uint8_t*>(samples) + std::size_t{n} * dims_[0] * dims_[1] * sample;
-      for (std::uint32_t y0 = 0, s = 0; y0 < dims_[1]; y0 += rows_per_strip, ++s) {
-        const std::uint32_t rows = std::min(rows_per_strip, dims_[1] - y0);
-        // libtiff's predictor works in place; give it a copy.
-        std::vector<std::uint8_t> strip(page + std::size_t{y0} * dims_[0] * sample,
-                                        page + (std::size_t{y0} + rows) * dims_[0] * sample);
+    const auto* page = static_cast<const std::uint8_t*>(samples);
+    const std::size_t page_bytes = std::size_t{dims_[0]} * dims_[1] * sample_size(type_);
+    for (std::uint32_t n = 0; n < count; ++n) write_rows(page + n * page_bytes, dims_[1]);
+  }
+
+  // Rows gather into a strip (about 64 KiB), which is encoded when full or
+  // when its page ends; a page ends with its directory.
+  bool writes_rows() const override { return true; }
+  void write_rows(const void* samples, std::uint32_t rows) override {
+    const std::size_t row_bytes = std::size_t{dims_[0]} * sample_size(type_);
+    const auto* p = static_cast<const std::uint8_t*>(samples);
+    while (rows > 0) {
+      if (z_ >= dims_[2]) fail(path_, "more rows than " + std::to_string(dims_[2]) + " pages hold");
+      if (row_ == 0 && strip_.empty()) begin_page();
+      const std::uint32_t strip_rows = std::min(rows_per_strip_, dims_[1] - strip_first_row());
+      const std::uint32_t take =
+          std::min<std::uint32_t>(rows, strip_rows - static_cast<std::uint32_t>(strip_.size() / row_bytes));
+      strip_.insert(strip_.end(), p, p + std::size_t{take} * row_bytes);
+      p += std::size_t{take} * row_bytes;
+      rows -= take;
+      row_ += take;
+      if (strip_.size() == std::size_t{strip_rows} * row_bytes) {
+        // libtiff's predictor works in place: the strip is our copy.
         errno = 0;
-        if (TIFFWriteEncodedStrip(tif, s, strip.data(), static_cast<tmsize_t>(strip.size())) < 0)
+        if (TIFFWriteEncodedStrip(tif_.get(), strip_first_row() / rows_per_strip_, strip_.data(),
+                                  static_cast<tmsize_t>(strip_.size())) < 0)
           write_failed("cannot write slice " + std::to_string(z_));
+        strip_.clear();
       }
-      errno = 0;
-      if (!TIFFWriteDirectory(tif)) write_failed("cannot write slice " + std::to_string(z_));
+      if (row_ == dims_[1]) {
+        errno = 0;
+        if (!TIFFWriteDirectory(tif_.get())) write_failed("cannot write slice " + std::to_string(z_));
+        row_ = 0;
+        ++z_;
+      }
     }
   }
 
   void finish() override {
-    if (z_ != dims_[2]) fail(path_, std::to_string(z_) + " of " + std::to_string(dims_[2]) + " slices written");
+    if (z_ != dims_[2] || row_ != 0)
+      fail(path_, std::to_string(z_) + " of " + std::to_string(dims_[2]) + " slices written");
     // TIFFClose reports nothing; whatever is still buffered is written here,
     // where a failure can still be seen.
     errno = 0;
@@ -387,6 +387,40 @@ class TiffSlabWriter final : public SlabWriter {
  private:
   // A failed write is an I/O error (a full disk, a quota), with the system's
   // reason when libtiff's write(2) left one.
+  // The first row of the strip being gathered.
+  std::uint32_t strip_first_row() const {
+    const std::size_t row_bytes = std::size_t{dims_[0]} * sample_size(type_);
+    return row_ - static_cast<std::uint32_t>(strip_.size() / row_bytes);
+  }
+
+  void begin_page() {
+    const std::uint16_t bits = static_cast<std::uint16_t>(8 * sample_size(type_));
+    std::uint16_t format = SAMPLEFORMAT_UINT;
+    if (type_ == SampleType::Int16) format = SAMPLEFORMAT_INT;
+    if (type_ == SampleType::Float16 || type_ == SampleType::Float32) format = SAMPLEFORMAT_IEEEFP;
+    TIFF* tif = tif_.get();
+    TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, dims_[0]);
+    TIFFSetField(tif, TIFFTAG_IMAGELENGTH, dims_[1]);
+    TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, bits);
+    TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, 1);
+    TIFFSetField(tif, TIFFTAG_SAMPLEFORMAT, format);
+    TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_MINISBLACK);
+    TIFFSetField(tif, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
+    TIFFSetField(tif, TIFFTAG_ROWSPERSTRIP, rows_per_strip_);
+    TIFFSetField(tif, TIFFTAG_SUBFILETYPE, FILETYPE_PAGE);
+    TIFFSetField(tif, TIFFTAG_PAGENUMBER, z_, dims_[2]);
+    write_tiff_metadata(tif, shape_, z_, dims_[2]);
+    if (compress_) {
+      TIFFSetField(tif, TIFFTAG_COMPRESSION, COMPRESSION_ADOBE_DEFLATE);
+      // Horizontal differencing helps integer slices; the floating-point
+      // predictor would help floats but many readers lack it, so floats go
+      // without one.
+      if (format != SAMPLEFORMAT_IEEEFP) TIFFSetField(tif, TIFFTAG_PREDICTOR, PREDICTOR_HORIZONTAL);
+    } else {
+      TIFFSetField(tif, TIFFTAG_COMPRESSION, COMPRESSION_NONE);
+    }
+  }
+
   [[noreturn]] void write_failed(const std::string& what) const {
     const int e = errno;
     throw Error(ErrorClass::Io, path_ + ": " + what + ": " + last_tiff_message +
@@ -400,7 +434,10 @@ class TiffSlabWriter final : public SlabWriter {
   bool compress_;
   StagedFile staged_;  // declared before tif_: the file closes before it is removed
   TiffHandle tif_;
-  std::uint32_t z_ = 0;
+  std::uint32_t rows_per_strip_ = 1;
+  std::uint32_t z_ = 0;              // the page being written
+  std::uint32_t row_ = 0;            // rows of it given so far
+  std::vector<std::uint8_t> strip_;  // rows of the strip not yet encoded
 };
 
 }  // namespace

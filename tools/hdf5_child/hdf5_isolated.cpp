@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "hdf5_io.hpp"
+#include "isolated_slabs.hpp"
 #include "isolated_worker.hpp"
 #include "ivol/error.hpp"
 #include "projection_io.hpp"
@@ -22,94 +23,20 @@ constexpr const char* kScanWorker = "hdf5-scan";
 
 // --- Volumes ----------------------------------------------------------------
 
-// The parameters of a volume worker: the file, the dataset, the memory
-// budget its reader checks sizes against.
-std::string volume_parameters(const std::string& path, const std::string& dataset, std::uint64_t memory_bytes) {
-  WireWriter out;
-  out.put_string(path).put_string(dataset).put(memory_bytes);
-  return std::move(out.bytes());
+// The child's side: the in-process reader, and what the parent's side
+// reports of the source.
+std::unique_ptr<SlabReader> open_volume_in_child(const std::string& path, const std::string& dataset,
+                                                 std::uint64_t memory_bytes, WireWriter& info) {
+  Hdf5SourceInfo source;
+  auto reader = open_hdf5_slabs_in_process(path, dataset, &source, memory_bytes);
+  info.put_string(source.stored_type).put(source.narrowed_to_f32).put(source.chunked).put(source.chunk);
+  info.put_string(source.filters).put_string(source.dataset);
+  return reader;
 }
 
 WorkerHandler volume_handler(std::string_view parameters) {
-  WireReader in{std::string(parameters)};
-  const std::string path = in.get_string();
-  const std::string dataset = in.get_string();
-  const auto memory_bytes = in.get<std::uint64_t>();
-  auto reader = std::make_shared<std::unique_ptr<SlabReader>>();
-  return [path, dataset, memory_bytes, reader](std::string_view request, WorkerReply& out) {
-    WireReader in{std::string(request)};
-    const char operation = in.get<char>();
-    if (operation == kOpen) {
-      Hdf5SourceInfo source;
-      *reader = open_hdf5_slabs_in_process(path, dataset, &source, memory_bytes);
-      const DenseVolume& shape = (*reader)->shape();
-      WireWriter reply;
-      reply.put(shape.dims).put(shape.type).put(shape.voxel_size).put(shape.origin).put_string(shape.unit);
-      reply.put(shape.has_geometry).put_string(source.stored_type).put(source.narrowed_to_f32).put(source.chunked);
-      reply.put(source.chunk).put_string(source.filters);
-      reply.put_string(shape.quantity).put_string(shape.value_unit).put_string(shape.provenance);
-      reply.put_string(shape.voxel_size_from).put_string(shape.origin_from).put_string(shape.unit_from);
-      reply.put_string(shape.quantity_from).put_string(source.dataset);
-      out.reply = std::move(reply.bytes());
-      return;
-    }
-    if (operation != kRead || !*reader)
-      throw Error(ErrorClass::InvalidArgument, "isolated HDF5 reader: unexpected request " + std::string(1, operation));
-    const auto z0 = in.get<std::uint32_t>();
-    const auto count = in.get<std::uint32_t>();
-    const DenseVolume& shape = (*reader)->shape();
-    out.bulk.resize(std::size_t{count} * shape.dims[0] * shape.dims[1] * sample_size(shape.type));
-    (*reader)->read(z0, count, out.bulk.data());
-  };
+  return slab_worker_handler(parameters, open_volume_in_child, "isolated HDF5 reader");
 }
-
-class IsolatedHdf5SlabReader final : public SlabReader {
- public:
-  IsolatedHdf5SlabReader(const std::string& path, const std::string& dataset, Hdf5SourceInfo* source,
-                         std::uint64_t memory_bytes)
-      : dataset_(dataset),
-        worker_(path, kLibrary, kVolumeWorker,
-                volume_parameters(path, dataset, memory_bytes ? memory_bytes : kDefaultChildMemory), memory_bytes) {
-    WireWriter request;
-    request.put(kOpen);
-    WireReader reply(worker_.call(request.bytes(), "opening dataset " + dataset));
-    shape_.dims = reply.get<Dims>();
-    shape_.type = reply.get<SampleType>();
-    shape_.voxel_size = reply.get<std::array<double, 3>>();
-    shape_.origin = reply.get<std::array<double, 3>>();
-    shape_.unit = reply.get_string();
-    shape_.has_geometry = reply.get<bool>();
-    Hdf5SourceInfo info;
-    info.stored_type = reply.get_string();
-    info.narrowed_to_f32 = reply.get<bool>();
-    info.chunked = reply.get<bool>();
-    info.chunk = reply.get<std::array<unsigned long long, 3>>();
-    info.filters = reply.get_string();
-    shape_.quantity = reply.get_string();
-    shape_.value_unit = reply.get_string();
-    shape_.provenance = reply.get_string();
-    shape_.voxel_size_from = reply.get_string();
-    shape_.origin_from = reply.get_string();
-    shape_.unit_from = reply.get_string();
-    shape_.quantity_from = reply.get_string();
-    info.dataset = reply.get_string();
-    if (source) *source = std::move(info);
-  }
-
-  void read(std::uint32_t z0, std::uint32_t count, void* out) override {
-    WireWriter request;
-    request.put(kRead).put(z0).put(count);
-    const std::size_t bytes = std::size_t{count} * shape_.dims[0] * shape_.dims[1] * sample_size(shape_.type);
-    worker_.call(
-        request.bytes(),
-        "reading slices " + std::to_string(z0) + " .. " + std::to_string(z0 + count) + " of dataset " + dataset_, out,
-        bytes);
-  }
-
- private:
-  std::string dataset_;
-  IsolatedWorker worker_;
-};
 
 // --- DXchange projections ---------------------------------------------------
 
@@ -143,22 +70,27 @@ void serve_rows(ProjectionReader& r, WireReader& in, WorkerReply& out) {
   out.reply = std::move(reply.bytes());
 }
 
-WorkerHandler projection_handler(std::string_view parameters) {
+// Opens the projections in the child and writes the reply to kOpen: the
+// shape (put_scan_shape), then what the layout adds.
+using ProjectionOpener = std::unique_ptr<ProjectionReader> (*)(const std::string& path, const DxchangeOptions& options,
+                                                               WireWriter& reply);
+
+void put_scan_shape(WireWriter& reply, const ProjectionReader& r) {
+  reply.put(r.columns()).put(r.rows()).put<std::uint64_t>(r.view_count()).put(r.quantity());
+}
+
+// The child's handler of either projection worker: open, then rows.
+WorkerHandler projection_worker_handler(std::string_view parameters, ProjectionOpener open) {
   WireReader in{std::string(parameters)};
   const std::string path = in.get_string();
   const DxchangeOptions options = read_projection_options(in);
   auto reader = std::make_shared<std::unique_ptr<ProjectionReader>>();
-  return [path, options, reader](std::string_view request, WorkerReply& out) {
+  return [path, options, open, reader](std::string_view request, WorkerReply& out) {
     WireReader in{std::string(request)};
     const char operation = in.get<char>();
     if (operation == kOpen) {
-      DxchangeProjections scan = open_dxchange_projections_in_process(path, options);
-      *reader = std::move(scan.projections);
-      const ProjectionReader& r = **reader;
       WireWriter reply;
-      reply.put(r.columns()).put(r.rows()).put<std::uint64_t>(r.view_count()).put(r.quantity());
-      reply.put<std::uint64_t>(scan.theta_deg.size());
-      for (double angle : scan.theta_deg) reply.put(angle);
+      *reader = open(path, options, reply);
       out.reply = std::move(reply.bytes());
       return;
     }
@@ -166,6 +98,19 @@ WorkerHandler projection_handler(std::string_view parameters) {
       throw Error(ErrorClass::InvalidArgument, "isolated HDF5 reader: unexpected request " + std::string(1, operation));
     serve_rows(**reader, in, out);
   };
+}
+
+std::unique_ptr<ProjectionReader> open_dxchange_in_child(const std::string& path, const DxchangeOptions& options,
+                                                         WireWriter& reply) {
+  DxchangeProjections scan = open_dxchange_projections_in_process(path, options);
+  put_scan_shape(reply, *scan.projections);
+  reply.put<std::uint64_t>(scan.theta_deg.size());
+  for (double angle : scan.theta_deg) reply.put(angle);
+  return std::move(scan.projections);
+}
+
+WorkerHandler projection_handler(std::string_view parameters) {
+  return projection_worker_handler(parameters, open_dxchange_in_child);
 }
 
 struct ScanShape {
@@ -224,33 +169,44 @@ LengthField get_length(WireReader& in) {
   return length;
 }
 
+std::unique_ptr<ProjectionReader> open_scan_in_child(const std::string& path, const DxchangeOptions& options,
+                                                     WireWriter& reply) {
+  Hdf5Scan scan = open_hdf5_projections_in_process(path, options);
+  put_scan_shape(reply, *scan.projections);
+  reply.put_string(scan.layout).put_string(scan.entry).put_string(scan.angles_field);
+  reply.put<std::uint64_t>(scan.angles_deg.size());
+  for (double angle : scan.angles_deg) reply.put(angle);
+  for (const LengthField* l : {&scan.pitch_u, &scan.pitch_v, &scan.source_sample, &scan.sample_detector})
+    put_length(reply, *l);
+  reply.put(scan.flat_images).put(scan.dark_images).put(scan.skipped_images);
+  return std::move(scan.projections);
+}
+
 WorkerHandler scan_handler(std::string_view parameters) {
-  WireReader in{std::string(parameters)};
-  const std::string path = in.get_string();
-  const DxchangeOptions options = read_projection_options(in);
-  auto reader = std::make_shared<std::unique_ptr<ProjectionReader>>();
-  return [path, options, reader](std::string_view request, WorkerReply& out) {
-    WireReader in{std::string(request)};
-    const char operation = in.get<char>();
-    if (operation == kOpen) {
-      Hdf5Scan scan = open_hdf5_projections_in_process(path, options);
-      *reader = std::move(scan.projections);
-      const ProjectionReader& r = **reader;
-      WireWriter reply;
-      reply.put(r.columns()).put(r.rows()).put<std::uint64_t>(r.view_count()).put(r.quantity());
-      reply.put_string(scan.layout).put_string(scan.entry).put_string(scan.angles_field);
-      reply.put<std::uint64_t>(scan.angles_deg.size());
-      for (double angle : scan.angles_deg) reply.put(angle);
-      for (const LengthField* l : {&scan.pitch_u, &scan.pitch_v, &scan.source_sample, &scan.sample_detector})
-        put_length(reply, *l);
-      reply.put(scan.flat_images).put(scan.dark_images).put(scan.skipped_images);
-      out.reply = std::move(reply.bytes());
-      return;
-    }
-    if (operation != kRead || !*reader)
-      throw Error(ErrorClass::InvalidArgument, "isolated HDF5 reader: unexpected request " + std::string(1, operation));
-    serve_rows(**reader, in, out);
-  };
+  return projection_worker_handler(parameters, open_scan_in_child);
+}
+
+// The parent's side of either projection worker: the child may allocate
+// options.memory_bytes (recon's --memory; 0: kDefaultChildMemory).
+std::unique_ptr<IsolatedWorker> start_projection_worker(const std::string& path, const DxchangeOptions& options,
+                                                        const char* kind) {
+  return std::make_unique<IsolatedWorker>(path, kLibrary, kind, projection_parameters(path, options),
+                                          options.memory_bytes);
+}
+
+WireReader open_projections(IsolatedWorker& worker, const std::string& doing) {
+  WireWriter request;
+  request.put(kOpen);
+  return WireReader(worker.call(request.bytes(), doing));
+}
+
+ScanShape get_scan_shape(WireReader& reply) {
+  ScanShape shape;
+  shape.columns = reply.get<int>();
+  shape.rows = reply.get<int>();
+  shape.views = static_cast<std::size_t>(reply.get<std::uint64_t>());
+  shape.quantity = reply.get<StoredQuantity>();
+  return shape;
 }
 
 const WorkerKind volume_worker(kVolumeWorker, volume_handler);
@@ -261,20 +217,32 @@ const WorkerKind scan_worker(kScanWorker, scan_handler);
 
 std::unique_ptr<SlabReader> open_hdf5_slabs(const std::string& path, const std::string& dataset, Hdf5SourceInfo* source,
                                             std::uint64_t memory_bytes) {
-  return std::make_unique<IsolatedHdf5SlabReader>(path, dataset, source, memory_bytes);
+  SlabWorkerSpec spec;
+  spec.path = path;
+  spec.name = dataset;
+  spec.reader_memory = memory_bytes ? memory_bytes : kDefaultChildMemory;
+  spec.child_memory = memory_bytes;
+  spec.library = kLibrary;
+  spec.kind = kVolumeWorker;
+  spec.opening = "opening dataset " + dataset;
+  spec.volume = "dataset " + dataset;
+  return std::make_unique<IsolatedSlabReader>(spec, [source](WireReader& reply) {
+    Hdf5SourceInfo info;
+    info.stored_type = reply.get_string();
+    info.narrowed_to_f32 = reply.get<bool>();
+    info.chunked = reply.get<bool>();
+    info.chunk = reply.get<std::array<unsigned long long, 3>>();
+    info.filters = reply.get_string();
+    info.dataset = reply.get_string();
+    if (source) *source = std::move(info);
+    return std::string();
+  });
 }
 
 DxchangeProjections open_dxchange_projections(const std::string& path, const DxchangeOptions& options) {
-  auto worker =
-      std::make_unique<IsolatedWorker>(path, kLibrary, kProjectionWorker, projection_parameters(path, options));
-  WireWriter request;
-  request.put(kOpen);
-  WireReader reply(worker->call(request.bytes(), "opening the DXchange datasets"));
-  ScanShape shape;
-  shape.columns = reply.get<int>();
-  shape.rows = reply.get<int>();
-  shape.views = static_cast<std::size_t>(reply.get<std::uint64_t>());
-  shape.quantity = reply.get<StoredQuantity>();
+  auto worker = start_projection_worker(path, options, kProjectionWorker);
+  WireReader reply = open_projections(*worker, "opening the DXchange datasets");
+  const ScanShape shape = get_scan_shape(reply);
   DxchangeProjections scan;
   scan.theta_deg.resize(static_cast<std::size_t>(reply.get<std::uint64_t>()));
   for (double& angle : scan.theta_deg) angle = reply.get<double>();
@@ -284,15 +252,9 @@ DxchangeProjections open_dxchange_projections(const std::string& path, const Dxc
 }
 
 Hdf5Scan open_hdf5_projections(const std::string& path, const DxchangeOptions& options) {
-  auto worker = std::make_unique<IsolatedWorker>(path, kLibrary, kScanWorker, projection_parameters(path, options));
-  WireWriter request;
-  request.put(kOpen);
-  WireReader reply(worker->call(request.bytes(), "opening the projections (NXtomo or DXchange)"));
-  ScanShape shape;
-  shape.columns = reply.get<int>();
-  shape.rows = reply.get<int>();
-  shape.views = static_cast<std::size_t>(reply.get<std::uint64_t>());
-  shape.quantity = reply.get<StoredQuantity>();
+  auto worker = start_projection_worker(path, options, kScanWorker);
+  WireReader reply = open_projections(*worker, "opening the projections (NXtomo or DXchange)");
+  const ScanShape shape = get_scan_shape(reply);
   Hdf5Scan scan;
   scan.layout = reply.get_string();
   scan.entry = reply.get_string();

@@ -55,13 +55,19 @@ inline std::string shape_text(const std::vector<hsize_t>& shape) {
   return text + ")";
 }
 
+// A failed read: a refused allocation (a small dataset in one huge
+// compressed chunk, beyond the child's address-space limit) is a limit, not
+// a damaged file.
+[[noreturn]] inline void read_failed(const std::string& where) {
+  throw Error(out_of_memory() ? ErrorClass::LimitExceeded : ErrorClass::Malformed, where + ": cannot read" + reason());
+}
+
 // Reads a box of a dataset (start and count per axis) as doubles.
 inline void read_box(const Dataset& d, const std::vector<hsize_t>& start, const std::vector<hsize_t>& count,
                      double* out, const std::string& where) {
   H5Sselect_hyperslab(d.space.get(), H5S_SELECT_SET, start.data(), nullptr, count.data(), nullptr);
   Handle memory(H5Screate_simple(static_cast<int>(count.size()), count.data(), nullptr), H5Sclose);
-  if (H5Dread(d.id.get(), H5T_NATIVE_DOUBLE, memory.get(), d.space.get(), H5P_DEFAULT, out) < 0)
-    throw Error(ErrorClass::Malformed, where + ": cannot read" + reason());
+  if (H5Dread(d.id.get(), H5T_NATIVE_DOUBLE, memory.get(), d.space.get(), H5P_DEFAULT, out) < 0) read_failed(where);
 }
 
 // All values of a dataset of at most `most` values, as doubles.
@@ -72,7 +78,7 @@ inline std::vector<double> read_all(const Dataset& d, const std::string& where, 
                                                  std::to_string(most) + " expected");
   std::vector<double> values(static_cast<std::size_t>(count));
   if (count > 0 && H5Dread(d.id.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data()) < 0)
-    throw Error(ErrorClass::Malformed, where + ": cannot read" + reason());
+    read_failed(where);
   return values;
 }
 

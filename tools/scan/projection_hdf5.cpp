@@ -26,6 +26,7 @@ using hdf5::exists;
 using hdf5::Handle;
 using hdf5::open_dataset;
 using hdf5::read_box;
+using hdf5::read_failed;
 using hdf5::shape_text;
 using QuietHdf5Errors = hdf5::QuietErrors;
 std::string hdf5_reason() { return hdf5::reason(); }
@@ -124,7 +125,7 @@ DxchangeProjections open_dxchange_projections_in_process(const std::string& path
                                                    " angles for " + std::to_string(views) + " views");
     result.theta_deg.resize(static_cast<std::size_t>(count));
     if (H5Dread(theta.id.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, result.theta_deg.data()) < 0)
-      throw Error(ErrorClass::Malformed, path + ": dataset " + kTheta + ": cannot read" + hdf5_reason());
+      read_failed(path + ": dataset " + kTheta);
   }
 
   auto reader = std::make_unique<DxchangeReader>(path, std::move(file), std::move(data), name);

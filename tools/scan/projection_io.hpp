@@ -178,6 +178,9 @@ struct DxchangeOptions {
   // entry's data, an ITK image stack's /ITKImage/0/VoxelData, ...); flat and
   // dark fields still come from /exchange/data_white and data_dark.
   std::string dataset;
+  // What the child process that runs libhdf5 may allocate (recon's
+  // --memory); 0: kDefaultChildMemory (isolated_worker.hpp).
+  std::uint64_t memory_bytes = 0;
 };
 
 struct DxchangeProjections {
