@@ -1,4 +1,4 @@
-// What running libhdf5 in a child process (tools/hdf5_child/isolated_worker.hpp)
+// What running libhdf5 in a child process (tools/isolated/isolated_worker.hpp)
 // costs: the same HDF5 files read slab by slab, and a DXchange scan read
 // band by band as ivol recon does, through the in-process readers and
 // through the isolated ones, alternating, in one run.

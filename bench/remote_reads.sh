@@ -84,7 +84,9 @@ import h5py
 url, what, counts, name, size = sys.argv[1:]
 t0 = time.time()
 with h5py.File(url, "r", driver="ros3") as f:
-    d = next(f[k] for k in f if isinstance(f[k], h5py.Dataset)) if "data" not in f else f["data"]
+    found = []
+    f.visititems(lambda key, item: found.append(item) if isinstance(item, h5py.Dataset) and item.ndim == 3 else None)
+    d = found[0]  # ivol's export: /exchange/data
     z, y, x = (n // 2 for n in d.shape)
     read = {"open (info)": lambda: d.shape, "z slice": lambda: d[z], "y slice": lambda: d[:, y],
             "x slice": lambda: d[:, :, x], "64^3 box": lambda: d[z - 32:z + 32, y - 32:y + 32, x - 32:x + 32],

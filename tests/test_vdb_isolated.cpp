@@ -1,5 +1,5 @@
 // The OpenVDB reader the converters use (open_vdb_slabs, libopenvdb in a
-// child process, tools/hdf5_child/vdb_isolated.cpp): values and geometry as
+// child process, tools/isolated/vdb_isolated.cpp): values and geometry as
 // OpenVDB's own accessor and transform give them, a damaged file's huge
 // allocation refused in the child and never made here, a crash of the child
 // an error naming the file.

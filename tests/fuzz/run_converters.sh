@@ -10,9 +10,9 @@ flags="-std=c++17 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recov
 hdf5_flags=$(pkg-config --cflags --libs hdf5-serial 2>/dev/null || echo "-I/usr/include/hdf5/serial -lhdf5_serial")
 # Every converter, projection reader and the HDF5 child; not recon_io/,
 # which needs the OpenCL FDK.
-converters=$(ls "$root"/tools/{convert,scan,hdf5_child}/*.cpp)
+converters=$(ls "$root"/tools/{convert,scan,isolated}/*.cpp)
 clang++ $flags -DIVOL_VERSION_STRING='"fuzz"' -I"$root/libformat/include" -I"$root/libformat/src" \
-  -I"$root/tools/convert" -I"$root/tools/scan" -I"$root/tools/hdf5_child" -I"$root/recon/include" "$root"/libformat/src/*.cpp $converters \
+  -I"$root/tools/convert" -I"$root/tools/scan" -I"$root/tools/isolated" -I"$root/recon/include" "$root"/libformat/src/*.cpp $converters \
   "$root"/recon/src/{geometry,projections,rtk_geometry_xml}.cpp \
   "$root/tests/fuzz/fuzz_converters.cpp" -lzstd -lz -lcurl -ltiff -lopenvdb -ltbb -lImath-3_1 -lpugixml $hdf5_flags \
   -o "$out/fuzz_converters"
