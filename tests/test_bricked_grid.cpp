@@ -124,7 +124,7 @@ TEST(BrickedGrid, EveryVoxelsBitsComeBackThroughBoxesSlicesAndVoxels) {
       for (const BlockInfo& b : r.info().blocks)
         if (b.stream == 3) {
           ++values_blocks;
-          EXPECT_TRUE(b.codec == 3 || b.codec == 2 || b.codec == 0) << int{b.codec};  // the smallest
+          EXPECT_TRUE(b.codec <= 4 && b.codec != 1) << int{b.codec};  // the smallest
           predicted_blocks += b.codec == 3;
         }
       EXPECT_EQ(values_blocks, bricks);
@@ -164,6 +164,42 @@ TEST(BrickedGrid, PredictionMakesSmoothVolumesSmallerThanBytePlanes) {
     Reader r(planes_path);  // codec 2 bricks read back too
     EXPECT_EQ(bits_of(r, full_box(d)), v);
   }
+}
+
+// An object-fidelity volume (a noisy ball, one background value elsewhere,
+// −0 here): bricks of background alone are codec 4's 4-byte form, bricks at
+// the ball's surface masked (codec 4), and every voxel's bits come back.
+TEST(BrickedGrid, ObjectFidelityBricksMaskTheirBackground) {
+  const Dims d{48, 40, 36};
+  std::mt19937 rng(22);
+  std::normal_distribution<float> noise(0.5f, 0.05f);
+  std::vector<std::uint16_t> v(voxel_count(d), 0x8000);
+  std::size_t i = 0;
+  for (std::uint32_t z = 0; z < d[2]; ++z)
+    for (std::uint32_t y = 0; y < d[1]; ++y)
+      for (std::uint32_t x = 0; x < d[0]; ++x, ++i)
+        if (std::hypot(x - 20.0, y - 18.0, z - 16.0) < 13.0) v[i] = float_to_binary16(noise(rng));
+  const std::string path = write("bricked_object.ivol", d, v, ValueEncoding::Binary16, 3);
+  Reader r(path);
+  EXPECT_EQ(bits_of(r, full_box(d)), v);
+  const Box s = slice_box(d, Axis::Y, 18);
+  EXPECT_EQ(bits_of(r, s), crop(v, d, s));
+  EXPECT_TRUE(check_file(path).ok());
+  std::size_t constant = 0, masked = 0;
+  const auto bytes = test::read_bytes(path);
+  for (const BlockInfo& b : r.info().blocks) {
+    if (b.stream != 3 || b.codec != 4) continue;
+    const std::uint8_t form = bytes[b.file_offset + 32 + 2];
+    EXPECT_EQ(bytes[b.file_offset + 32] | bytes[b.file_offset + 33] << 8, 0x8000);  // the background, −0
+    if (form == 0) {
+      ++constant;
+      EXPECT_EQ(b.stored_size, 32u + 4u);  // the block header and the 4-byte payload
+    } else {
+      ++masked;
+    }
+  }
+  EXPECT_GT(constant, 50u);  // of 6 x 5 x 5 = 150 bricks of 8^3, most outside the ball
+  EXPECT_GT(masked, 10u);    // the ball's surface
 }
 
 // A file cut after half its bricks (its metadata comes last, so it is lost

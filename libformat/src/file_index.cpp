@@ -11,6 +11,7 @@
 #include "framing.hpp"
 #include "ivol/crc32c.hpp"
 #include "ivol/error.hpp"
+#include "ivol/masked_codec.hpp"
 #include "ivol/predicted_codec.hpp"
 #include "layout.hpp"
 
@@ -195,7 +196,8 @@ class StructureReader {
     if (v.kind == StructureKind::Nested && (v.cell_log2 < 1 || v.cell_log2 > 31))
       fail(ErrorClass::Malformed, "index", "cell_log2 " + std::to_string(v.cell_log2) + " is outside 1 .. 31");
     if (v.kind == StructureKind::Bricked && !info_.framed())
-      fail(ErrorClass::Malformed, "index", "a bricked regular grid (structure_kind 5) needs framed blocks (format 1.3)");
+      fail(ErrorClass::Malformed, "index",
+           "a bricked regular grid (structure_kind 5) needs framed blocks (format 1.3)");
     if (v.kind == StructureKind::Bricked && (v.cell_log2 < 1 || v.cell_log2 > layout::kMaxBrickLog2))
       fail(ErrorClass::Malformed, "index",
            "brick_log2 (byte 11) " + std::to_string(v.cell_log2) + " is outside 1 .. " +
@@ -308,11 +310,12 @@ class StructureReader {
         continue;  // an ignorable block of a stream we do not know: skipped
       }
       if (blk.flags != 0) bad(ErrorClass::Malformed, "blocks of known streams must have flags 0");
-      if (blk.codec > 3) bad(ErrorClass::UnsupportedFeature, "codec " + std::to_string(blk.codec) + " is not known");
-      // Codec 3 predicts within a brick of 16-bit values (spec §7.2).
-      if (blk.codec == 3 &&
+      if (blk.codec > 4) bad(ErrorClass::UnsupportedFeature, "codec " + std::to_string(blk.codec) + " is not known");
+      // Codecs 3 and 4 hold a brick of 16-bit values (spec §7.2, §7.3).
+      if ((blk.codec == 3 || blk.codec == 4) &&
           (blk.stream != 3 || v.kind != StructureKind::Bricked || v.encoding == ValueEncoding::Float32))
-        bad(ErrorClass::Malformed, "codec 3 is only for values blocks of a bricked grid of 16-bit values");
+        bad(ErrorClass::Malformed,
+            "codec " + std::to_string(blk.codec) + " is only for values blocks of a bricked grid of 16-bit values");
       const std::uint64_t width = stream_width(blk.stream, v.encoding);
       const std::uint64_t decoded = blk.element_count * width;
       if (decoded > layout::kMaxBlockDecodedBytes)
@@ -329,6 +332,11 @@ class StructureReader {
         bad(ErrorClass::Malformed, "stored_size " + std::to_string(blk.stored_size) + " exceeds " +
                                        std::to_string(predicted_payload_bound(blk.element_count) + frame) +
                                        ", the largest codec 3 payload of " + std::to_string(blk.element_count) +
+                                       " values" + (frame ? " and the block header" : ""));
+      if (blk.codec == 4 && blk.stored_size > masked_payload_bound(blk.element_count) + frame)
+        bad(ErrorClass::Malformed, "stored_size " + std::to_string(blk.stored_size) + " exceeds " +
+                                       std::to_string(masked_payload_bound(blk.element_count) + frame) +
+                                       ", the largest codec 4 payload of " + std::to_string(blk.element_count) +
                                        " values" + (frame ? " and the block header" : ""));
       if ((blk.codec == 1 || blk.codec == 2) && blk.stored_size > ZSTD_compressBound(decoded) + frame)
         bad(ErrorClass::Malformed, "stored_size " + std::to_string(blk.stored_size) + " exceeds " +
