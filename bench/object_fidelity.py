@@ -43,7 +43,8 @@ def write_ivol(ivol, v, tmp, level):
 
 
 def breakdown(path, v):
-    """Bytes by brick kind and codec: (blocks, stored bytes) per row."""
+    """Bytes by brick kind (of a block's first brick) and codec: (blocks,
+    bricks, stored bytes) per row."""
     import ivolref
     r, ix, _ = ivolref.open_ivol(path)
     r.close()
@@ -54,7 +55,7 @@ def breakdown(path, v):
     where = {}
     for first, ext, origin in ivolref_bricks(n, B):
         where[first] = origin
-    rows = collections.defaultdict(lambda: [0, 0])
+    rows = collections.defaultdict(lambda: [0, 0, 0])
     for e in ix.blocks:
         if e.stream != 3:
             key = "metadata" if e.stream == 1 else "stream %d" % e.stream
@@ -65,8 +66,9 @@ def breakdown(path, v):
             kind = "background only" if k == b.size else "no background" if k == 0 else "mixed"
             key = "%s, codec %d" % (kind, e.codec)
         rows[key][0] += 1
-        rows[key][1] += e.stored_size
-    rows["header, index, footer"] = [0, os.path.getsize(path) - sum(s for _, s in rows.values())]
+        rows[key][1] += e.element_count // B ** 3 if e.stream == 3 else 0
+        rows[key][2] += e.stored_size
+    rows["header, index, footer"] = [0, 0, os.path.getsize(path) - sum(s for _, _, s in rows.values())]
     return rows
 
 
@@ -118,11 +120,11 @@ def main():
                 100.0 * sizes["after", 9] / h5 - 100, "yes" if exact else "NO"))
             sys.stdout.flush()
     for phantom, total, rows in details:
-        print("\n%s object, ivol at zstd 3 (%s bytes):\n\n| bricks | blocks | bytes | share |\n|---|---:|---:|---:|"
-              % (phantom, "{:,}".format(total)))
+        print("\n%s object, ivol at zstd 3 (%s bytes):\n\n| blocks of | blocks | bricks | bytes | share |\n"
+              "|---|---:|---:|---:|---:|" % (phantom, "{:,}".format(total)))
         for key in sorted(rows):
-            blocks, size = rows[key]
-            print("| %s | %d | %s | %.1f %% |" % (key, blocks, "{:,}".format(size), 100.0 * size / total))
+            blocks, bricks, size = rows[key]
+            print("| %s | %d | %d | %s | %.1f %% |" % (key, blocks, bricks, "{:,}".format(size), 100.0 * size / total))
 
 
 if __name__ == "__main__":

@@ -167,10 +167,11 @@ TEST(BrickedGrid, PredictionMakesSmoothVolumesSmallerThanBytePlanes) {
 }
 
 // An object-fidelity volume (a noisy ball, one background value elsewhere,
-// −0 here): bricks of background alone are codec 4's 4-byte form, bricks at
-// the ball's surface masked (codec 4), and every voxel's bits come back.
+// −0 here): bricks of background alone are codec 4's 4-byte form, runs of
+// them in a layer of bricks one block, bricks at the ball's surface masked
+// (codec 4), and every voxel's bits come back.
 TEST(BrickedGrid, ObjectFidelityBricksMaskTheirBackground) {
-  const Dims d{48, 40, 36};
+  const Dims d{48, 40, 40};  // whole bricks of 8^3: 512 values each
   std::mt19937 rng(22);
   std::normal_distribution<float> noise(0.5f, 0.05f);
   std::vector<std::uint16_t> v(voxel_count(d), 0x8000);
@@ -182,24 +183,44 @@ TEST(BrickedGrid, ObjectFidelityBricksMaskTheirBackground) {
   const std::string path = write("bricked_object.ivol", d, v, ValueEncoding::Binary16, 3);
   Reader r(path);
   EXPECT_EQ(bits_of(r, full_box(d)), v);
-  const Box s = slice_box(d, Axis::Y, 18);
-  EXPECT_EQ(bits_of(r, s), crop(v, d, s));
+  for (int axis = 0; axis < 3; ++axis) {
+    const Box s = slice_box(d, static_cast<Axis>(axis), 5 + axis);
+    EXPECT_EQ(bits_of(r, s), crop(v, d, s)) << axis;
+  }
+  EXPECT_EQ(r.voxel_bits(47, 39, 39), 0x8000);
   EXPECT_TRUE(check_file(path).ok());
-  std::size_t constant = 0, masked = 0;
+  // Of 6 x 5 x 5 = 150 bricks of 8^3, those wholly outside the ball, counted here.
+  std::size_t outside = 0;
+  for (std::uint32_t k = 0; k < 5; ++k)
+    for (std::uint32_t j = 0; j < 5; ++j)
+      for (std::uint32_t m = 0; m < 6; ++m) {
+        bool all = true;
+        for (std::uint32_t z = 8 * k; z < std::min(d[2], 8 * k + 8); ++z)
+          for (std::uint32_t y = 8 * j; y < 8 * j + 8; ++y)
+            for (std::uint32_t x = 8 * m; x < 8 * m + 8; ++x) all = all && v[(z * d[1] + y) * d[0] + x] == 0x8000;
+        outside += all;
+      }
+  std::size_t constant_bricks = 0, constant_blocks = 0, masked = 0, runs = 0;
   const auto bytes = test::read_bytes(path);
   for (const BlockInfo& b : r.info().blocks) {
     if (b.stream != 3 || b.codec != 4) continue;
-    const std::uint8_t form = bytes[b.file_offset + 32 + 2];
     EXPECT_EQ(bytes[b.file_offset + 32] | bytes[b.file_offset + 33] << 8, 0x8000);  // the background, −0
-    if (form == 0) {
-      ++constant;
+    if (bytes[b.file_offset + 32 + 2] == 0) {
       EXPECT_EQ(b.stored_size, 32u + 4u);  // the block header and the 4-byte payload
+      EXPECT_EQ(b.element_count % 512, 0u) << "not whole bricks";
+      constant_bricks += b.element_count / 512;
+      ++constant_blocks;
+      runs += b.element_count > 512;
     } else {
+      EXPECT_EQ(b.element_count, 512u);  // one brick
       ++masked;
     }
   }
-  EXPECT_GT(constant, 50u);  // of 6 x 5 x 5 = 150 bricks of 8^3, most outside the ball
-  EXPECT_GT(masked, 10u);    // the ball's surface
+  EXPECT_EQ(constant_bricks, outside);
+  EXPECT_GT(outside, 50u);
+  EXPECT_GT(runs, 0u);
+  EXPECT_LT(constant_blocks, outside / 2);  // merged into runs within each layer of bricks
+  EXPECT_GT(masked, 10u);                   // the ball's surface
 }
 
 // A file cut after half its bricks (its metadata comes last, so it is lost

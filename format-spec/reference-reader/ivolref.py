@@ -581,27 +581,54 @@ def brick_layout(size, b):
 
 
 def check_bricks(ix, values):
-    """§6.4, §8A.4: every values block holds exactly one brick.  The number of
-    bricks is compared with the number of blocks before any brick is listed,
-    so a claimed size costs nothing."""
+    """§6.4, §8A.4, §7.3: every values block holds exactly one brick, or (codec
+    4) a run of whole bricks that follow one another.  Each block is checked
+    on its own, by the brick its first element and its end fall on, so a
+    claimed size costs nothing."""
     (nx, ny, nz), extent, first = brick_layout(ix.size, ix.cell_log2)
-    if nx * ny * nz != len(values):
+    B = 1 << ix.cell_log2
+    sx, sy, sz = ix.size
+    total = sx * sy * sz
+    if len(values) > nx * ny * nz:
         fail("malformed", "block table: %d values blocks, the bricked grid has %d bricks "
-             "(one brick per block)" % (len(values), nx * ny * nz))
-    ordered = sorted(values, key=lambda e: e.first_element)
+             "(at least one brick per block)" % (len(values), nx * ny * nz))
+
+    def brick_starting_at(v):
+        """The brick (i, j, k) whose first value is v, or None: the layers of
+        bricks before it are whole, then the rows of its layer, then the
+        bricks of its row (§8A.4's first(i, j, k) taken apart)."""
+        if not 0 <= v < total:
+            return None
+        layer = min(B, sz) * sy * sx            # every layer but the last is B voxels deep
+        k = v // layer
+        ez = extent(0, 0, k)[2]
+        v -= k * layer
+        row = min(B, sy) * sx * ez
+        j = v // row
+        ey = extent(0, j, k)[1]
+        v -= j * row
+        one = min(B, sx) * ey * ez
+        if v % one:
+            return None
+        return (v // one, j, k)
+
     ix.brick_of = {}
-    q = 0
-    for k in range(nz):
-        for j in range(ny):
-            for i in range(nx):
-                e = ordered[q]
-                q += 1
-                ext = extent(i, j, k)
-                if e.first_element != first(i, j, k) or e.element_count != ext[0] * ext[1] * ext[2]:
-                    fail("malformed", "block table: %s: brick (%d, %d, %d) is elements %d..%d"
-                         % (ix.where(e), i, j, k, first(i, j, k),
-                            first(i, j, k) + ext[0] * ext[1] * ext[2]))
-                ix.brick_of[e.first_element] = ext
+    for e in values:
+        b = brick_starting_at(e.first_element)
+        if b is None:
+            fail("malformed", "block table: %s: first_element %d is not the first value of a brick"
+                 % (ix.where(e), e.first_element))
+        ext = extent(*b)
+        voxels = ext[0] * ext[1] * ext[2]
+        end = e.first_element + e.element_count
+        if e.codec == 4:      # §7.3: a run of whole bricks
+            if end != total and brick_starting_at(end) is None:
+                fail("malformed", "block table: %s: a codec 4 block ends at element %d, inside a "
+                     "brick" % (ix.where(e), end))
+        elif e.element_count != voxels:
+            fail("malformed", "block table: %s: brick (%d, %d, %d) is elements %d..%d"
+                 % (ix.where(e), b[0], b[1], b[2], e.first_element, e.first_element + voxels))
+        ix.brick_of[e.first_element] = ext
 
 
 def check_stream_kind(ix, e):

@@ -1431,15 +1431,26 @@ def _read_grid(data, entries, meta_entry, sk, ve, D, cell_log2, size):
     n_values_cov = _tile(entries, 3)
     if sk in (2, 5) and n_values_cov != X * Y * Z:
         _fail("malformed", "stream.coverage", "stream 3")
-    if sk == 5:   # §8A.4: one brick per values block, bricks in raster order
+    if sk == 5:   # §8A.4: one brick per values block (codec 4: a run of whole bricks, §7.3)
         bricks = bricked_order(size, cell_log2)
         vblocks = sorted((e for e in entries if e["stream"] == 3), key=lambda e: e["first"])
-        if len(vblocks) != len(bricks):
+        if len(vblocks) > len(bricks):
             _fail("malformed", "bricked.blocks", "%d blocks, %d bricks" % (len(vblocks), len(bricks)))
-        for e, (first, ext, _) in zip(vblocks, bricks):
-            if e["first"] != first or e["count"] != ext[0] * ext[1] * ext[2]:
+        q = 0
+        for e in vblocks:
+            if q >= len(bricks) or e["first"] != bricks[q][0]:
                 _fail("malformed", "bricked.block", "block %d" % e["n"])
-            e["brick"] = ext
+            e["brick"] = bricks[q][1]
+            left, held = e["count"], 0
+            while left > 0 and q < len(bricks):
+                ext = bricks[q][1]
+                left -= ext[0] * ext[1] * ext[2]
+                q, held = q + 1, held + 1
+            if left != 0:
+                _fail("malformed", "codec4.run" if e["codec"] == CODEC_MASKED else "bricked.block",
+                      "block %d" % e["n"])
+            if held > 1 and e["codec"] != CODEC_MASKED:
+                _fail("malformed", "bricked.block", "block %d" % e["n"])
     if sk == 3:
         _tile(entries, 4)
     if sk == 4:
@@ -3004,6 +3015,29 @@ def gen_masked():
           "Bricked grid 8x8x8 binary16, bricks of 4: codec 4 and codec 3 bricks in turn.",
           codec=lambda q: (CODEC_MASKED, CODEC_PREDICTED)[q % 2])
 
+    def runs(*spans, background=None):
+        """Merges the bricks q0 .. q1 - 1 of each span into one codec 4 block."""
+        def mutate(blocks):
+            for q0, q1 in sorted(spans, reverse=True):
+                part = blocks[q0:q1]
+                vals = [v for b in part for v in struct.unpack("<%dH" % b.count, b.data)]
+                merged = Blk(STREAM_VALUES, 0, part[0].first, len(vals), b"".join(b.data for b in part),
+                             codec=CODEC_MASKED)
+                bg = background if background is not None else max(sorted(set(vals)), key=vals.count)
+                merged.stored = masked_payload(vals, bg)
+                blocks[q0:q1] = [merged]
+        return mutate
+    inside = arr_f16(np.round(rng.normal(0.6, 0.1, 12 * 10 * 9), 3), (9, 10, 12))
+    src = object_volume(12, 10, 9, 0x3C00, inside)
+    # Bricks of 4: 3 x 3 x 3 of them; the ball (centre 4, 3.3, 3; radius 3) leaves bricks 2, 5, 6, 7,
+    # 8 and most of the last layer background alone.
+    valid("bricked_12x10x9_binary16_masked_runs", src, BINARY16, 2,
+          "Bricked grid 12x10x9 binary16, bricks of 4: codec 4 blocks holding runs of whole bricks "
+          "(§7.3, §8A.4): bricks 5 .. 8 (across a row of bricks; background 1.0 alone, form 0), bricks "
+          "18 .. 26 (the last layer), and bricks 0 .. 1 (form 1, the ball's values behind one mask); "
+          "the others one brick each.",
+          mutate=runs((0, 2), (5, 9), (18, 27)))
+
     # ---- invalid: one rule broken each (a 7x6x5 uint16 object, bricks of 4)
     src = object_volume(7, 6, 5, 500, rng.integers(600, 700, (5, 6, 7)).astype(np.uint16))
     first_n = 4 * 4 * 4
@@ -3054,6 +3088,25 @@ def gen_masked():
     inv("bricked_codec4_padding_bit", "malformed", "codec4.padding",
         "A codec 4 block of 6 values whose mask byte has bit 7 (past the last value) set.",
         per_brick=lambda q: dict(background=500, form=1), mutate=padding_mutate)
+    def run_inside_brick(blocks):   # bricks 0 and 1 and the first 8 values of brick 2 in one block
+        runs((0, 3))(blocks)
+        b = blocks[0]
+        vals = list(struct.unpack("<%dH" % b.count, b.data))
+        cut = bricked_order((7, 6, 5), 2)[2][0] + 8   # bricks 0 and 1, and 8 values of brick 2
+        first_part = Blk(STREAM_VALUES, 0, b.first, cut, b.data[:2 * cut], codec=CODEC_MASKED)
+        first_part.stored = masked_payload(vals[:cut], 500)
+        second = Blk(STREAM_VALUES, 0, b.first + cut, b.count - cut, b.data[2 * cut:], codec=CODEC_MASKED)
+        second.stored = masked_payload(vals[cut:], 500)
+        blocks[0:1] = [first_part, second]
+    inv("bricked_codec4_run_ends_inside_a_brick", "malformed", None,
+        "A codec 4 block holding bricks 0 and 1 and the first 8 values of brick 2 (a run must end at a "
+        "brick, §7.3); the next codec 4 block holds the rest of brick 2, starting inside it.",
+        mutate=run_inside_brick)
+    inv("bricked_codec2_two_bricks", "malformed", "bricked.block",
+        "A codec 2 block holding bricks 0 and 1: only codec 4 may hold a run of bricks (§8A.4).",
+        codec=CODEC_PLANES, mutate=lambda blocks: blocks.__setitem__(
+            slice(0, 2), [Blk(STREAM_VALUES, 0, 0, blocks[0].count + blocks[1].count,
+                              blocks[0].data + blocks[1].data, codec=CODEC_PLANES)]))
     reg = write_regular(src, UINT16)
     rblocks = grid_blocks(reg, CODEC_ZSTD)
     rblocks[0].stored = masked_payload([int(v) for v in src.reshape(-1)], 500)

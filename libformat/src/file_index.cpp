@@ -417,7 +417,8 @@ class StructureReader {
     }
   }
 
-  // Spec §8A.4: a values block of a bricked grid holds exactly one brick.
+  // Spec §8A.4: a values block of a bricked grid holds exactly one brick,
+  // or (codec 4, §7.3) a run of whole bricks that follow one another.
   void check_one_brick(const BlockInfo& blk, const std::string& part) {
     const VolumeLayout& v = info_.layout;
     std::uint64_t total = 1;  // more than 2^56 voxels is refused with the coverage below
@@ -430,6 +431,13 @@ class StructureReader {
     if (!grid.brick_at(blk.first_element, brick))
       fail(ErrorClass::Malformed, part,
            "first_element " + std::to_string(blk.first_element) + " is not the first value of a brick");
+    if (blk.codec == 4) {
+      const std::uint64_t end = blk.first_element + blk.element_count;
+      if (end != total && !grid.brick_at(end, brick))
+        fail(ErrorClass::Malformed, part,
+             "a codec 4 block ends at element " + std::to_string(end) + ", inside a brick");
+      return;
+    }
     const Dims e = grid.extent(brick[0], brick[1], brick[2]);
     const std::uint64_t voxels = std::uint64_t{e[0]} * e[1] * e[2];
     if (blk.element_count != voxels)
