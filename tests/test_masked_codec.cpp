@@ -131,6 +131,52 @@ TEST(MaskedCodec, RefusesPayloadsThatBreakTheSpec) {
   }
 }
 
+// The frame holds the mask, the low bytes and the high bytes each in zstd
+// blocks of their own (entropy tables of their own): one frame with its
+// content size, and smaller than the same content compressed in one run
+// when the low bytes are noise and the high bytes smooth (CT values).
+TEST(MaskedCodec, EachPartEndsAZstdBlock) {
+  std::mt19937 rng(7);
+  std::vector<std::uint16_t> v(32768, 0x8000);
+  std::size_t others = 0;
+  for (std::size_t i = 0; i < v.size(); ++i)
+    if (i % 3 != 0) v[i] = static_cast<std::uint16_t>(0x3800 + (i >> 12) * 256 + rng() % 256), ++others;
+  const Bytes p = ivol::encode_masked(v.data(), v.size(), 0x8000, 3);
+  const std::uint8_t* frame = p.data() + 4;
+  const std::size_t size = p.size() - 4;
+  const std::size_t m = v.size() / 8;
+  ASSERT_EQ(ZSTD_getFrameContentSize(frame, size), m + 2 * others);
+  ASSERT_EQ(ZSTD_findFrameCompressedSize(frame, size), size);
+  // Count the zstd blocks (RFC 8878 §3.1.1.2): the frame header, then
+  // 3-byte block headers.
+  std::size_t at = 4;
+  const std::uint8_t descriptor = frame[at++];
+  const unsigned fcs_flag = descriptor >> 6, single = (descriptor >> 5) & 1, dict_flag = descriptor & 3;
+  at += single ? 0 : 1;
+  at += dict_flag == 0 ? 0 : dict_flag == 1 ? 1 : dict_flag == 2 ? 2 : 4;
+  at += fcs_flag == 0 ? (single ? 1 : 0) : fcs_flag == 1 ? 2 : fcs_flag == 2 ? 4 : 8;
+  int blocks = 0;
+  for (bool last = false; !last; ++blocks) {
+    const std::uint32_t h = frame[at] | frame[at + 1] << 8 | frame[at + 2] << 16;
+    last = h & 1;
+    at += 3 + ((h >> 1 & 3) == 1 ? 1 : h >> 3);
+  }
+  EXPECT_GE(blocks, 3);
+  Bytes content(m, 0);
+  Bytes lo, hi;
+  for (std::size_t i = 0; i < v.size(); ++i)
+    if (v[i] == 0x8000)
+      content[i / 8] = static_cast<std::uint8_t>(content[i / 8] | 1u << (i % 8));
+    else
+      lo.push_back(static_cast<std::uint8_t>(v[i])), hi.push_back(static_cast<std::uint8_t>(v[i] >> 8));
+  content.insert(content.end(), lo.begin(), lo.end());
+  content.insert(content.end(), hi.begin(), hi.end());
+  Bytes one_run(ZSTD_compressBound(content.size()));
+  one_run.resize(ZSTD_compress(one_run.data(), one_run.size(), content.data(), content.size(), 3));
+  EXPECT_LT(size, one_run.size());
+  EXPECT_EQ(decode(p, v.size()), v);
+}
+
 TEST(MaskedCodec, MostCommonValueAgainstACountedMap) {
   std::mt19937 rng(3);
   for (int t = 0; t < 20; ++t) {

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "ivol/error.hpp"
+#include "zstd_parts.hpp"
 
 namespace ivol {
 namespace {
@@ -70,12 +71,7 @@ std::vector<std::uint8_t> encode_masked(const std::uint16_t* values, std::size_t
   ZSTD_CCtx_reset(context.get(), ZSTD_reset_session_and_parameters);
   ZSTD_CCtx_setParameter(context.get(), ZSTD_c_compressionLevel, zstd_level);
   ZSTD_CCtx_setParameter(context.get(), ZSTD_c_contentSizeFlag, 1);
-  out.resize(kMaskedHeaderSize + ZSTD_compressBound(content.size()));
-  const std::size_t size = ZSTD_compress2(context.get(), out.data() + kMaskedHeaderSize, out.size() - kMaskedHeaderSize,
-                                          content.data(), content.size());
-  if (ZSTD_isError(size))
-    throw Error(ErrorClass::Io, std::string("zstd compression failed: ") + ZSTD_getErrorName(size));
-  out.resize(kMaskedHeaderSize + size);
+  detail::compress_parts(context.get(), {{content.data(), m}, {lo, others}, {hi, others}}, out, kMaskedHeaderSize);
   return out;
 }
 
