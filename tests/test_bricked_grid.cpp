@@ -170,9 +170,9 @@ TEST(BrickedGrid, PredictionMakesSmoothVolumesSmallerThanBytePlanes) {
 // −0 here): bricks of background alone are codec 4's 4-byte form, runs of
 // them in a layer of bricks one block, bricks at the ball's surface masked
 // (codec 4), and every voxel's bits come back.
-TEST(BrickedGrid, ObjectFidelityBricksMaskTheirBackground) {
-  const Dims d{48, 40, 40};  // whole bricks of 8^3: 512 values each
-  std::mt19937 rng(22);
+// A noisy ball of binary16 values in a background of −0.
+std::vector<std::uint16_t> make_object(const Dims& d, unsigned seed) {
+  std::mt19937 rng(seed);
   std::normal_distribution<float> noise(0.5f, 0.05f);
   std::vector<std::uint16_t> v(voxel_count(d), 0x8000);
   std::size_t i = 0;
@@ -180,6 +180,12 @@ TEST(BrickedGrid, ObjectFidelityBricksMaskTheirBackground) {
     for (std::uint32_t y = 0; y < d[1]; ++y)
       for (std::uint32_t x = 0; x < d[0]; ++x, ++i)
         if (std::hypot(x - 20.0, y - 18.0, z - 16.0) < 13.0) v[i] = float_to_binary16(noise(rng));
+  return v;
+}
+
+TEST(BrickedGrid, ObjectFidelityBricksMaskTheirBackground) {
+  const Dims d{48, 40, 40};  // whole bricks of 8^3: 512 values each
+  const auto v = make_object(d, 22);
   const std::string path = write("bricked_object.ivol", d, v, ValueEncoding::Binary16, 3);
   Reader r(path);
   EXPECT_EQ(bits_of(r, full_box(d)), v);
@@ -221,6 +227,47 @@ TEST(BrickedGrid, ObjectFidelityBricksMaskTheirBackground) {
   EXPECT_GT(runs, 0u);
   EXPECT_LT(constant_blocks, outside / 2);  // merged into runs within each layer of bricks
   EXPECT_GT(masked, 10u);                   // the ball's surface
+}
+
+// An object-fidelity file (codec 4 bricks and runs of background bricks)
+// cut inside a block after its first half: salvage reads every block before
+// the cut exactly and the rest as the stored code 0 (spec §18).
+TEST(BrickedGrid, ACutObjectFileKeepsItsCompleteBricksAndRuns) {
+  const Dims d{48, 40, 40};
+  const auto v = make_object(d, 23);
+  const std::string path = write("bricked_object_cut_source.ivol", d, v, ValueEncoding::Binary16, 3);
+  const Reader whole(path);
+  std::size_t runs_before = 0;
+  const BlockInfo* cut_at = nullptr;
+  for (const BlockInfo& b : whole.info().blocks) {
+    if (b.stream != 3) continue;
+    if (b.first_element >= voxel_count(d) / 2) {
+      cut_at = &b;
+      break;
+    }
+    runs_before += b.codec == 4 && b.element_count > 512;
+  }
+  ASSERT_NE(cut_at, nullptr);
+  EXPECT_GT(runs_before, 0u);  // the cut keeps some runs whole
+  auto bytes = test::read_bytes(path);
+  bytes.resize(cut_at->file_offset + 10);
+  const std::string cut = test::temp_path("bricked_object_cut.ivol");
+  test::write_bytes(cut, bytes);
+  ReaderOptions options;
+  options.salvage = true;
+  Reader r(cut, options);
+  ASSERT_TRUE(r.info().salvage);
+  std::vector<DamagedRegion> damaged;
+  const auto got = r.read_box_bits(full_box(d), 0, &damaged);
+  EXPECT_FALSE(damaged.empty());
+  const detail_free::BrickOrder order(d, 3);
+  std::size_t i = 0;
+  for (std::uint32_t z = 0; z < d[2]; ++z)
+    for (std::uint32_t y = 0; y < d[1]; ++y)
+      for (std::uint32_t x = 0; x < d[0]; ++x, ++i) {
+        const std::uint16_t stored = static_cast<std::uint16_t>(got[2 * i] | got[2 * i + 1] << 8);
+        ASSERT_EQ(stored, order.value_index(x, y, z) < cut_at->first_element ? v[i] : 0) << x << "," << y << "," << z;
+      }
 }
 
 // A file cut after half its bricks (its metadata comes last, so it is lost

@@ -103,10 +103,9 @@ std::vector<std::uint8_t> decode_stored_block(const std::string& path, const Blo
     for (std::size_t i = 0; i < values.size(); ++i) layout::store<std::uint16_t>(decoded.data() + 2 * i, values[i]);
     return decoded;
   }
-  if (block.codec == 4) {  // spec §7.3: a brick of 16-bit values, the background masked
+  if (block.codec == 4) {  // spec §7.3: a brick (or a run of bricks) of 16-bit values, the background masked
     if (!brick || width != 2)
-      throw Error(ErrorClass::Malformed,
-                  part + "codec 4 is only for a values block holding one brick of 16-bit values");
+      throw Error(ErrorClass::Malformed, part + "codec 4 is only for a values block holding bricks of 16-bit values");
     std::vector<std::uint8_t> decoded(decoded_size);
     std::vector<std::uint16_t> values(block.element_count);
     try {

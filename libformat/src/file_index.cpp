@@ -196,8 +196,7 @@ class StructureReader {
     if (v.kind == StructureKind::Nested && (v.cell_log2 < 1 || v.cell_log2 > 31))
       fail(ErrorClass::Malformed, "index", "cell_log2 " + std::to_string(v.cell_log2) + " is outside 1 .. 31");
     if (v.kind == StructureKind::Bricked && !info_.framed())
-      fail(ErrorClass::Malformed, "index",
-           "a bricked regular grid (structure_kind 5) needs framed blocks (format 1.3)");
+      fail(ErrorClass::Malformed, "index", "a bricked regular grid (structure_kind 5) needs framed blocks (format 1.3)");
     if (v.kind == StructureKind::Bricked && (v.cell_log2 < 1 || v.cell_log2 > layout::kMaxBrickLog2))
       fail(ErrorClass::Malformed, "index",
            "brick_log2 (byte 11) " + std::to_string(v.cell_log2) + " is outside 1 .. " +
