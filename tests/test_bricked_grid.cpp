@@ -124,7 +124,7 @@ TEST(BrickedGrid, EveryVoxelsBitsComeBackThroughBoxesSlicesAndVoxels) {
       for (const BlockInfo& b : r.info().blocks)
         if (b.stream == 3) {
           ++values_blocks;
-          EXPECT_TRUE(b.codec == 3 || b.codec == 2 || b.codec == 0) << int{b.codec};  // the smallest
+          EXPECT_TRUE(b.codec <= 4 && b.codec != 1) << int{b.codec};  // the smallest
           predicted_blocks += b.codec == 3;
         }
       EXPECT_EQ(values_blocks, bricks);
@@ -164,6 +164,110 @@ TEST(BrickedGrid, PredictionMakesSmoothVolumesSmallerThanBytePlanes) {
     Reader r(planes_path);  // codec 2 bricks read back too
     EXPECT_EQ(bits_of(r, full_box(d)), v);
   }
+}
+
+// An object-fidelity volume (a noisy ball, one background value elsewhere,
+// −0 here): bricks of background alone are codec 4's 4-byte form, runs of
+// them in a layer of bricks one block, bricks at the ball's surface masked
+// (codec 4), and every voxel's bits come back.
+// A noisy ball of binary16 values in a background of −0.
+std::vector<std::uint16_t> make_object(const Dims& d, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> noise(0.5f, 0.05f);
+  std::vector<std::uint16_t> v(voxel_count(d), 0x8000);
+  std::size_t i = 0;
+  for (std::uint32_t z = 0; z < d[2]; ++z)
+    for (std::uint32_t y = 0; y < d[1]; ++y)
+      for (std::uint32_t x = 0; x < d[0]; ++x, ++i)
+        if (std::hypot(x - 20.0, y - 18.0, z - 16.0) < 13.0) v[i] = float_to_binary16(noise(rng));
+  return v;
+}
+
+TEST(BrickedGrid, ObjectFidelityBricksMaskTheirBackground) {
+  const Dims d{48, 40, 40};  // whole bricks of 8^3: 512 values each
+  const auto v = make_object(d, 22);
+  const std::string path = write("bricked_object.ivol", d, v, ValueEncoding::Binary16, 3);
+  Reader r(path);
+  EXPECT_EQ(bits_of(r, full_box(d)), v);
+  for (int axis = 0; axis < 3; ++axis) {
+    const Box s = slice_box(d, static_cast<Axis>(axis), 5 + axis);
+    EXPECT_EQ(bits_of(r, s), crop(v, d, s)) << axis;
+  }
+  EXPECT_EQ(r.voxel_bits(47, 39, 39), 0x8000);
+  EXPECT_TRUE(check_file(path).ok());
+  // Of 6 x 5 x 5 = 150 bricks of 8^3, those wholly outside the ball, counted here.
+  std::size_t outside = 0;
+  for (std::uint32_t k = 0; k < 5; ++k)
+    for (std::uint32_t j = 0; j < 5; ++j)
+      for (std::uint32_t m = 0; m < 6; ++m) {
+        bool all = true;
+        for (std::uint32_t z = 8 * k; z < std::min(d[2], 8 * k + 8); ++z)
+          for (std::uint32_t y = 8 * j; y < 8 * j + 8; ++y)
+            for (std::uint32_t x = 8 * m; x < 8 * m + 8; ++x) all = all && v[(z * d[1] + y) * d[0] + x] == 0x8000;
+        outside += all;
+      }
+  std::size_t constant_bricks = 0, constant_blocks = 0, masked = 0, runs = 0;
+  const auto bytes = test::read_bytes(path);
+  for (const BlockInfo& b : r.info().blocks) {
+    if (b.stream != 3 || b.codec != 4) continue;
+    EXPECT_EQ(bytes[b.file_offset + 32] | bytes[b.file_offset + 33] << 8, 0x8000);  // the background, −0
+    if (bytes[b.file_offset + 32 + 2] == 0) {
+      EXPECT_EQ(b.stored_size, 32u + 4u);  // the block header and the 4-byte payload
+      EXPECT_EQ(b.element_count % 512, 0u) << "not whole bricks";
+      constant_bricks += b.element_count / 512;
+      ++constant_blocks;
+      runs += b.element_count > 512;
+    } else {
+      EXPECT_EQ(b.element_count, 512u);  // one brick
+      ++masked;
+    }
+  }
+  EXPECT_EQ(constant_bricks, outside);
+  EXPECT_GT(outside, 50u);
+  EXPECT_GT(runs, 0u);
+  EXPECT_LT(constant_blocks, outside / 2);  // merged into runs within each layer of bricks
+  EXPECT_GT(masked, 10u);                   // the ball's surface
+}
+
+// An object-fidelity file (codec 4 bricks and runs of background bricks)
+// cut inside a block after its first half: salvage reads every block before
+// the cut exactly and the rest as the stored code 0 (spec §18).
+TEST(BrickedGrid, ACutObjectFileKeepsItsCompleteBricksAndRuns) {
+  const Dims d{48, 40, 40};
+  const auto v = make_object(d, 23);
+  const std::string path = write("bricked_object_cut_source.ivol", d, v, ValueEncoding::Binary16, 3);
+  const Reader whole(path);
+  std::size_t runs_before = 0;
+  const BlockInfo* cut_at = nullptr;
+  for (const BlockInfo& b : whole.info().blocks) {
+    if (b.stream != 3) continue;
+    if (b.first_element >= voxel_count(d) / 2) {
+      cut_at = &b;
+      break;
+    }
+    runs_before += b.codec == 4 && b.element_count > 512;
+  }
+  ASSERT_NE(cut_at, nullptr);
+  EXPECT_GT(runs_before, 0u);  // the cut keeps some runs whole
+  auto bytes = test::read_bytes(path);
+  bytes.resize(cut_at->file_offset + 10);
+  const std::string cut = test::temp_path("bricked_object_cut.ivol");
+  test::write_bytes(cut, bytes);
+  ReaderOptions options;
+  options.salvage = true;
+  Reader r(cut, options);
+  ASSERT_TRUE(r.info().salvage);
+  std::vector<DamagedRegion> damaged;
+  const auto got = r.read_box_bits(full_box(d), 0, &damaged);
+  EXPECT_FALSE(damaged.empty());
+  const detail_free::BrickOrder order(d, 3);
+  std::size_t i = 0;
+  for (std::uint32_t z = 0; z < d[2]; ++z)
+    for (std::uint32_t y = 0; y < d[1]; ++y)
+      for (std::uint32_t x = 0; x < d[0]; ++x, ++i) {
+        const std::uint16_t stored = static_cast<std::uint16_t>(got[2 * i] | got[2 * i + 1] << 8);
+        ASSERT_EQ(stored, order.value_index(x, y, z) < cut_at->first_element ? v[i] : 0) << x << "," << y << "," << z;
+      }
 }
 
 // A file cut after half its bricks (its metadata comes last, so it is lost

@@ -149,6 +149,38 @@ TEST(ReferenceReader, AgreesWithLibformatOnBrickedGrids) {
   EXPECT_GE(predicted_files, 4);  // tiny bricks may be smaller under codec 2 or stored
 }
 
+// Bricked grids of object fidelity (one background value around a part)
+// with codec 4 (§7.3), both forms: the reference reader decodes them from
+// the spec, libformat from its own code.
+TEST(ReferenceReader, AgreesWithLibformatOnMaskedBricks) {
+  std::mt19937 rng(23);
+  const Dims shapes[] = {{19, 13, 9}, {16, 16, 16}};
+  for (const Dims& d : shapes)
+    for (std::uint16_t background : {std::uint16_t{0x8000}, std::uint16_t{0x7E01}, std::uint16_t{300}}) {
+      std::vector<std::uint16_t> v(voxel_count(d), background);
+      for (std::size_t i = 0; i < v.size(); ++i) {
+        const std::size_t x = i % d[0], y = i / d[0] % d[1], z = i / d[0] / d[1];
+        if (x * x + y * y + z * z < 60) v[i] = static_cast<std::uint16_t>(rng());
+      }
+      BrickedOptions o;
+      o.brick_log2 = 2;
+      o.encoding = background == 300 ? ValueEncoding::UInt16 : ValueEncoding::Binary16;
+      const std::string path = test::temp_path("bricked_masked_ref.ivol");
+      BrickedGridWriter writer(path, d, o);
+      while (writer.next_layer_count() > 0)
+        writer.add_layer(v.data() + std::size_t{writer.next_layer_first()} * d[0] * d[1]);
+      writer.finish(Metadata{});
+      const Reader written(path);
+      const auto bytes = test::read_bytes(path);
+      int forms[2] = {0, 0};
+      for (const BlockInfo& b : written.info().blocks)
+        if (b.codec == 4) ++forms[bytes[b.file_offset + 32 + 2] & 1];
+      EXPECT_GT(forms[0], 0);  // bricks of the background alone
+      EXPECT_GT(forms[1], 0);  // bricks at the part's surface
+      expect_readers_agree(path);
+    }
+}
+
 TEST(ReferenceReader, RefusesWhatLibformatRefuses) {
   const Dims dims{9, 9, 9};
   const std::vector<float> volume(voxel_count(dims), 0.5f);

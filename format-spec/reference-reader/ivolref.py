@@ -349,6 +349,7 @@ KIND_NAMES = {1: "octree", 2: "regular grid", 3: "rectilinear grid", 4: "nested 
               5: "bricked regular grid"}
 MAX_BRICK_LOG2 = 8                                                     # §6.1 byte 11
 PREDICTED_HEADER = 24                                                  # §7.2
+MASKED_HEADER = 4                                                      # §7.3
 MAX_BLOCK_DECODED = 64 * 1024 * 1024                                   # §7
 MAX_METADATA = 16 * 1024 * 1024                                        # §11
 
@@ -519,10 +520,10 @@ def read_index(header, footer, idx):
                  % (ix.where(e), e.flags, e.stream))
         check_stream_kind(ix, e)
         check_block_level(ix, e)
-        if e.codec == 3 and not (e.stream == STREAM_VALUES and structure_kind == KIND_BRICKED
-                                 and value_encoding in (1, 2)):   # §7 codec 3
-            fail("malformed", "block table: %s: codec 3 is valid only on values blocks of "
-                 "a bricked regular grid of 16-bit values" % ix.where(e))
+        if e.codec in (3, 4) and not (e.stream == STREAM_VALUES and structure_kind == KIND_BRICKED
+                                      and value_encoding in (1, 2)):   # §7 codecs 3 and 4
+            fail("malformed", "block table: %s: codec %d is valid only on values blocks of "
+                 "a bricked regular grid of 16-bit values" % (ix.where(e), e.codec))
         entries.append(e)
     if expected_offset != footer.index_offset:
         fail("malformed", "block table: the last block ends at %d, expected index_offset %d"
@@ -580,27 +581,54 @@ def brick_layout(size, b):
 
 
 def check_bricks(ix, values):
-    """§6.4, §8A.4: every values block holds exactly one brick.  The number of
-    bricks is compared with the number of blocks before any brick is listed,
-    so a claimed size costs nothing."""
+    """§6.4, §8A.4, §7.3: every values block holds exactly one brick, or (codec
+    4) a run of whole bricks that follow one another.  Each block is checked
+    on its own, by the brick its first element and its end fall on, so a
+    claimed size costs nothing."""
     (nx, ny, nz), extent, first = brick_layout(ix.size, ix.cell_log2)
-    if nx * ny * nz != len(values):
+    B = 1 << ix.cell_log2
+    sx, sy, sz = ix.size
+    total = sx * sy * sz
+    if len(values) > nx * ny * nz:
         fail("malformed", "block table: %d values blocks, the bricked grid has %d bricks "
-             "(one brick per block)" % (len(values), nx * ny * nz))
-    ordered = sorted(values, key=lambda e: e.first_element)
+             "(at least one brick per block)" % (len(values), nx * ny * nz))
+
+    def brick_starting_at(v):
+        """The brick (i, j, k) whose first value is v, or None: the layers of
+        bricks before it are whole, then the rows of its layer, then the
+        bricks of its row (§8A.4's first(i, j, k) taken apart)."""
+        if not 0 <= v < total:
+            return None
+        layer = min(B, sz) * sy * sx            # every layer but the last is B voxels deep
+        k = v // layer
+        ez = extent(0, 0, k)[2]
+        v -= k * layer
+        row = min(B, sy) * sx * ez
+        j = v // row
+        ey = extent(0, j, k)[1]
+        v -= j * row
+        one = min(B, sx) * ey * ez
+        if v % one:
+            return None
+        return (v // one, j, k)
+
     ix.brick_of = {}
-    q = 0
-    for k in range(nz):
-        for j in range(ny):
-            for i in range(nx):
-                e = ordered[q]
-                q += 1
-                ext = extent(i, j, k)
-                if e.first_element != first(i, j, k) or e.element_count != ext[0] * ext[1] * ext[2]:
-                    fail("malformed", "block table: %s: brick (%d, %d, %d) is elements %d..%d"
-                         % (ix.where(e), i, j, k, first(i, j, k),
-                            first(i, j, k) + ext[0] * ext[1] * ext[2]))
-                ix.brick_of[e.first_element] = ext
+    for e in values:
+        b = brick_starting_at(e.first_element)
+        if b is None:
+            fail("malformed", "block table: %s: first_element %d is not the first value of a brick"
+                 % (ix.where(e), e.first_element))
+        ext = extent(*b)
+        voxels = ext[0] * ext[1] * ext[2]
+        end = e.first_element + e.element_count
+        if e.codec == 4:      # §7.3: a run of whole bricks
+            if end != total and brick_starting_at(end) is None:
+                fail("malformed", "block table: %s: a codec 4 block ends at element %d, inside a "
+                     "brick" % (ix.where(e), end))
+        elif e.element_count != voxels:
+            fail("malformed", "block table: %s: brick (%d, %d, %d) is elements %d..%d"
+                 % (ix.where(e), b[0], b[1], b[2], e.first_element, e.first_element + voxels))
+        ix.brick_of[e.first_element] = ext
 
 
 def check_stream_kind(ix, e):
@@ -716,10 +744,12 @@ def zstd_compress_bound(n):
 def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
     """§7: read one block, check its CRC, decode it.  Returns the decoded bytes."""
     where = ix.where(e)
-    if e.codec in (1, 2, 3):   # §7: bounded before the stored bytes are read
+    if e.codec in (1, 2, 3, 4):   # §7: bounded before the stored bytes are read
         bound = zstd_compress_bound(e.element_count * stream_width(ix, e.stream))
         if e.codec == 3:       # §7.2: the codec header and a frame of 2n bytes
             bound = PREDICTED_HEADER + zstd_compress_bound(2 * e.element_count)
+        if e.codec == 4:       # §7.3: the codec header and a frame of the mask and every value
+            bound = MASKED_HEADER + zstd_compress_bound((e.element_count + 7) // 8 + 2 * e.element_count)
         if ix.header.framed:   # §7.1: plus the block header
             bound += BLOCK_HEADER_SIZE
         if e.stored_size > bound:
@@ -738,9 +768,10 @@ def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
 def decode_payload(ix, e, stored, limit=MAX_BLOCK_DECODED):
     """§7: decode a block's payload (its stored bytes without a block header)."""
     where = ix.where(e)
-    if e.codec not in (0, 1, 2, 3):   # checked when the block is read (SPEC-NOTES 8)
+    if e.codec not in (0, 1, 2, 3, 4):   # checked when the block is read (SPEC-NOTES 8)
         fail("unsupported-feature", "%s: codec %d, this reader knows 0 (stored), 1 (zstd), "
-             "2 (zstd over byte planes) and 3 (predicted 16-bit)" % (where, e.codec))
+             "2 (zstd over byte planes), 3 (predicted 16-bit) and 4 (masked 16-bit)"
+             % (where, e.codec))
     width = stream_width(ix, e.stream)
     size = e.element_count * width
     if size > MAX_BLOCK_DECODED:
@@ -757,6 +788,11 @@ def decode_payload(ix, e, stored, limit=MAX_BLOCK_DECODED):
         if ext is None or e.stream != STREAM_VALUES or width != 2:
             fail("malformed", "%s: codec 3 outside a brick of 16-bit values" % where)
         return decode_predicted(stored, ext, where)
+    if e.codec == 4:
+        ext = getattr(ix, "brick_of", {}).get(e.first_element)
+        if ext is None or e.stream != STREAM_VALUES or width != 2:
+            fail("malformed", "%s: codec 4 outside a brick of 16-bit values" % where)
+        return decode_masked(stored, e.element_count, where)
     content = decode_zstd_frame(stored, size, where)
     if e.codec == 1:
         return content
@@ -820,6 +856,45 @@ def decode_predicted(payload, ext, where):
     return v.astype("<u2").tobytes()
 
 
+def decode_masked(payload, n, where):
+    """§7.3 codec 4: the background value, then (form 1) one zstd frame of the
+    mask and the other values' byte planes.  Returns little-endian u16."""
+    if len(payload) < MASKED_HEADER:
+        fail("malformed", "%s: codec 4 payload of %d bytes, shorter than its 4-byte header"
+             % (where, len(payload)))
+    (background,) = struct.unpack_from("<H", payload, 0)
+    form = payload[2]
+    if payload[3] != 0:
+        fail("malformed", "%s: codec 4 reserved byte 3 is %d, not 0" % (where, payload[3]))
+    if form == 0:
+        if len(payload) != MASKED_HEADER:
+            fail("malformed", "%s: codec 4 form 0 (constant) has a payload of %d bytes, not 4"
+                 % (where, len(payload)))
+        return np.full(n, background, "<u2").tobytes()
+    if form != 1:
+        fail("malformed", "%s: codec 4 form %d, expected 0 or 1" % (where, form))
+    m = (n + 7) // 8
+
+    def frame_size(content_size):   # the mask and two bytes per value that is not the background
+        if content_size < m or content_size > m + 2 * n or (content_size - m) % 2:
+            fail("malformed", "%s: codec 4 frame holds %d bytes, not a %d-byte mask and two "
+                 "bytes per other value" % (where, content_size, m))
+        return content_size
+    content = decode_zstd_frame(bytes(payload[MASKED_HEADER:]), None, where, frame_size)
+    mask = np.unpackbits(np.frombuffer(content[:m], np.uint8), bitorder="little")
+    if mask[n:].any():
+        fail("malformed", "%s: codec 4 mask bits past the last value are set" % where)
+    background_at = mask[:n].astype(bool)
+    others = n - int(background_at.sum())
+    if len(content) != m + 2 * others:
+        fail("malformed", "%s: codec 4 mask leaves %d values that are not the background, the "
+             "frame holds %d" % (where, others, (len(content) - m) // 2))
+    planes = np.frombuffer(content[m:], np.uint8).astype(np.uint16)
+    v = np.full(n, background, np.uint16)
+    v[~background_at] = planes[:others] | (planes[others:] << 8)
+    return v.astype("<u2").tobytes()
+
+
 def unshuffle_byte_planes(content, n, w):
     """§7 codec 2 (since 1.2): the frame's content holds the decoded bytes
     regrouped by byte position; decoded byte i·w + p = content byte p·n + i.
@@ -834,9 +909,11 @@ def unshuffle_byte_planes(content, n, w):
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 
 
-def decode_zstd_frame(data, size, where):
+def decode_zstd_frame(data, size, where, size_rule=None):
     """§7 codecs 1 and 2: exactly one zstd frame (RFC 8878 §3.1.1) with
-    Frame_Content_Size.  Codec 2 applies the same frame rules (SPEC-NOTES 57)."""
+    Frame_Content_Size.  Codec 2 applies the same frame rules (SPEC-NOTES 57).
+    size_rule (codec 4, whose content size the frame states): checks the
+    stated size and returns it, in place of a known `size`."""
     def need(n, what):
         if len(data) < n:
             fail("malformed", "%s: zstd frame ends inside the %s" % (where, what))
@@ -861,6 +938,8 @@ def decode_zstd_frame(data, size, where):
     content_size = int.from_bytes(data[p:p + fcs_size], "little")
     content_size += 256 if fcs_size == 2 else 0
     p += fcs_size
+    if size_rule is not None:
+        size = size_rule(content_size)
     if dictionary_id != 0:
         fail("malformed", "%s: zstd frame needs dictionary %d" % (where, dictionary_id))
     if content_size != size:

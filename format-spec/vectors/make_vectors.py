@@ -65,6 +65,7 @@ KIND_NAME = {KIND_OCTREE: "octree", KIND_REGULAR: "regular",           # as meta
 CODEC_STORED, CODEC_ZSTD = 0, 1
 CODEC_PLANES = 2                 # zstd over byte planes, since 1.2 (§7)
 CODEC_PREDICTED = 3              # predicted 16-bit, since 1.3 (§7.2)
+CODEC_MASKED = 4                 # masked 16-bit, since 1.3 (§7.3)
 LORENZO = (1, 1, 1, -1, -1, -1, 1)
 
 
@@ -161,6 +162,62 @@ def predicted_decode(st, ext):
                 U[i] = (predict(U, ext, x, y, z, shift, taps, level) + d) % 65536
                 i += 1
     vals = [b16_order_inverse(u) if value_map == 1 else u for u in U]
+    return struct.pack("<%dH" % n, *vals)
+
+
+def masked_payload(vals, background, form=None, reserved=0, zcheck=False):
+    """§7.3: the background, the form, and (form 1) the zstd frame of the
+    mask and the other values' low bytes then high bytes.  form None: 0 when
+    every value is the background, else 1."""
+    n = len(vals)
+    others = [v for v in vals if v != background]
+    if form is None:
+        form = 1 if others else 0
+    head = struct.pack("<HBB", background, form, reserved)
+    if form == 0:
+        return head
+    mask = bytearray((n + 7) // 8)
+    for i, v in enumerate(vals):
+        if v == background:
+            mask[i // 8] |= 1 << (i % 8)
+    content = bytes(mask) + bytes(v & 0xFF for v in others) + bytes(v >> 8 for v in others)
+    return head + zframe(content, zcheck)
+
+
+def masked_decode(st, n):
+    """§7.3, for the self-test: the values of a codec 4 payload."""
+    if len(st) < 4:
+        _fail("malformed", "codec4.short")
+    background, form, reserved = struct.unpack_from("<HBB", st, 0)
+    if reserved != 0:
+        _fail("malformed", "codec4.reserved")
+    if form == 0:
+        if len(st) != 4:
+            _fail("malformed", "codec4.constant_size")
+        return struct.pack("<%dH" % n, *([background] * n))
+    if form != 1:
+        _fail("malformed", "codec4.form")
+    m = (n + 7) // 8
+    try:
+        size = zstandard.get_frame_parameters(st[4:]).content_size
+    except zstandard.ZstdError:
+        _fail("malformed", "zstd.frame")
+    if size < m or size > m + 2 * n or (size - m) % 2:
+        _fail("malformed", "codec4.content_size")
+    content = zstd_content(st[4:], size)
+    bits = [content[i // 8] >> (i % 8) & 1 for i in range(8 * m)]
+    if any(bits[n:]):
+        _fail("malformed", "codec4.padding")
+    k = n - sum(bits[:n])
+    if size != m + 2 * k:
+        _fail("malformed", "codec4.count")
+    vals, j = [], 0
+    for i in range(n):
+        if bits[i]:
+            vals.append(background)
+        else:
+            vals.append(content[m + j] | content[m + k + j] << 8)
+            j += 1
     return struct.pack("<%dH" % n, *vals)
 
 
@@ -737,6 +794,12 @@ def bricked_blocks(g, codec=CODEC_PREDICTED, **pred):
         if c == CODEC_PREDICTED:
             kw = pred["per_brick"](q) if "per_brick" in pred else pred
             blk.stored = predicted_payload(vals, ext, **kw)
+        if c == CODEC_MASKED:       # the brick's most common value as background, unless given
+            kw = pred["per_brick"](q) if "per_brick" in pred else dict(pred)
+            background = kw.pop("background", None)
+            if background is None:
+                background = max(sorted(set(vals)), key=vals.count)
+            blk.stored = masked_payload(vals, background, **kw)
         blocks.append(blk)
     return blocks
 
@@ -1042,6 +1105,10 @@ def decode_block(data, e, width):
         if e.get("brick") is None or width != 2:
             _fail("malformed", "codec3.where")
         return predicted_decode(st, e["brick"])
+    if e["codec"] == CODEC_MASKED:
+        if e.get("brick") is None or width != 2:
+            _fail("malformed", "codec4.where")
+        return masked_decode(st, e["count"])
     out = zstd_content(st, need)
     if e["codec"] == CODEC_PLANES:
         return from_byte_planes(out, width)
@@ -1198,11 +1265,13 @@ def read_ivol(data, verify=True):
         if stream in (1, 2, 3) or (stream == 4 and sk == 3) or (stream == 5 and sk == 4):
             if flags != 0:
                 _fail("malformed", "block.flags", "block %d" % b)
-            if codec not in (0, 1, 2, 3):
+            if codec not in (0, 1, 2, 3, 4):
                 _fail("unsupported-feature", "codec", "block %d codec %d" % (b, codec))
-            if codec == 3 and not (stream == 3 and sk == 5 and ve in (1, 2)):
-                _fail("malformed", "codec3.where", "block %d" % b)
+            if codec in (3, 4) and not (stream == 3 and sk == 5 and ve in (1, 2)):
+                _fail("malformed", "codec%d.where" % codec, "block %d" % b)
             if codec == 3 and ss > 24 + zstd_bound(2 * cnt) + (32 if framed else 0):
+                _fail("malformed", "block.stored_bound", "block %d" % b)
+            if codec == 4 and ss > 4 + zstd_bound((cnt + 7) // 8 + 2 * cnt) + (32 if framed else 0):
                 _fail("malformed", "block.stored_bound", "block %d" % b)
             if cnt * width[stream] > MIB64:
                 _fail("malformed", "block.too_large", "block %d" % b)
@@ -1362,15 +1431,26 @@ def _read_grid(data, entries, meta_entry, sk, ve, D, cell_log2, size):
     n_values_cov = _tile(entries, 3)
     if sk in (2, 5) and n_values_cov != X * Y * Z:
         _fail("malformed", "stream.coverage", "stream 3")
-    if sk == 5:   # §8A.4: one brick per values block, bricks in raster order
+    if sk == 5:   # §8A.4: one brick per values block (codec 4: a run of whole bricks, §7.3)
         bricks = bricked_order(size, cell_log2)
         vblocks = sorted((e for e in entries if e["stream"] == 3), key=lambda e: e["first"])
-        if len(vblocks) != len(bricks):
+        if len(vblocks) > len(bricks):
             _fail("malformed", "bricked.blocks", "%d blocks, %d bricks" % (len(vblocks), len(bricks)))
-        for e, (first, ext, _) in zip(vblocks, bricks):
-            if e["first"] != first or e["count"] != ext[0] * ext[1] * ext[2]:
+        q = 0
+        for e in vblocks:
+            if q >= len(bricks) or e["first"] != bricks[q][0]:
                 _fail("malformed", "bricked.block", "block %d" % e["n"])
-            e["brick"] = ext
+            e["brick"] = bricks[q][1]
+            left, held = e["count"], 0
+            while left > 0 and q < len(bricks):
+                ext = bricks[q][1]
+                left -= ext[0] * ext[1] * ext[2]
+                q, held = q + 1, held + 1
+            if left != 0:
+                _fail("malformed", "codec4.run" if e["codec"] == CODEC_MASKED else "bricked.block",
+                      "block %d" % e["n"])
+            if held > 1 and e["codec"] != CODEC_MASKED:
+                _fail("malformed", "bricked.block", "block %d" % e["n"])
     if sk == 3:
         _tile(entries, 4)
     if sk == 4:
@@ -2177,17 +2257,18 @@ def gen():
     inv("block_stored_size_plus_1", pen(vblk, "stored_size", "<I", len(bblocks[vblk].stored_bytes()) + 1),
         "malformed", "block.placement",
         "A block's stored_size one too large: the next block does not start where it ends.")
-    for unknown in (4, 255):
+    for unknown in (5, 255):
         bl = level_blocks(bt, CODEC_ZSTD)
         bl.append(meta_block(DEFAULT_META))
         bl[vblk].codec = unknown
         bl[vblk].stored = bl[vblk].data
         d, _ = assemble(bt, bl)
         inv("codec_%d" % unknown, d, "unsupported-feature", "codec",
-            "A values block with codec %d (unknown: 1.3 defines 0 to 3); its stored bytes are the "
-            "raw values, CRC correct.%s" % (unknown, " (Was codec_3 up to 1.2, codec_2 in the 1.0 and 1.1 "
-                                           "vectors: 1.2 made codec 2 zstd over byte planes, 1.3 codec 3 "
-                                           "predicted 16-bit.)" if unknown == 4 else ""))
+            "A values block with codec %d (unknown: 1.3 defines 0 to 4); its stored bytes are the "
+            "raw values, CRC correct.%s" % (unknown, " (Was codec_4 in the earlier 1.3 drafts, codec_3 up "
+                                           "to 1.2, codec_2 in the 1.0 and 1.1 vectors: 1.2 made codec 2 "
+                                           "zstd over byte planes, 1.3 codec 3 predicted 16-bit and codec 4 "
+                                           "masked 16-bit.)" if unknown == 5 else ""))
     bl = level_blocks(bt, CODEC_ZSTD)
     bl.append(meta_block(DEFAULT_META))
     bl[vblk].codec = CODEC_PREDICTED
@@ -2537,6 +2618,7 @@ def gen():
     gen_codec2_invalid(bt, vblk, nblk1)
     gen_framed()
     gen_bricked()
+    gen_masked()
     return SAMPLE
 
 
@@ -2876,6 +2958,171 @@ def gen_bricked():
     data, _ = assemble(g32, [meta_block(DEFAULT_META)] + b32, structure_kind=KIND_BRICKED, ireserved=2, **framed)
     add_invalid("bricked_float32_codec3", data, "malformed", "codec3.where",
                 "A bricked grid of float32 values whose brick has codec 3, which holds 16-bit values only.")
+
+
+def gen_masked():
+    """§7.3 (1.3 draft): bricked grids with codec 4 blocks (constant and
+    masked forms, any background pattern), then files that break one rule
+    each."""
+    framed = dict(framed=True, minor=3)
+    rng = np.random.default_rng(2202)
+
+    def masked_file(src, enc, b, codec=CODEC_MASKED, mutate=None, **kw):
+        g = write_bricked(src, enc, b)
+        blocks = bricked_blocks(g, codec, **kw)
+        if mutate:
+            mutate(blocks)
+        blocks.insert(0, meta_block(DEFAULT_META))
+        data, _ = assemble(g, blocks, structure_kind=KIND_BRICKED, ireserved=b, **framed)
+        return data
+
+    def valid(name, src, enc, b, desc, lods=True, **kw):
+        add_valid(name, masked_file(src, enc, b, **kw), src, enc, desc, lods=lods, kind=KIND_BRICKED,
+                  extra={"brick_log2": b})
+
+    def object_volume(X, Y, Z, background, inside):
+        """A ball of `inside` values in a volume of `background`."""
+        z, y, x = np.meshgrid(np.arange(Z), np.arange(Y), np.arange(X), indexing="ij")
+        ball = (x - X / 3) ** 2 + (y - Y / 3) ** 2 + (z - Z / 3) ** 2 < (min(X, Y, Z) / 3) ** 2
+        return np.where(ball, inside, background).astype(np.uint16)
+
+    # ---- valid
+    inside = arr_f16(np.round(rng.normal(0.8, 0.2, 12 * 10 * 9), 3), (9, 10, 12))
+    src = object_volume(12, 10, 9, 0x8000, inside)
+    valid("bricked_12x10x9_binary16_masked_object", src, BINARY16, 2,
+          "Bricked grid 12x10x9 binary16, bricks of 4: a ball of values in a background of -0 (0x8000); "
+          "every brick codec 4 (§7.3) with its most common value as background: bricks of -0 alone are "
+          "form 0 (a 4-byte payload), the others form 1 (mask and byte planes).")
+    inside = rng.integers(0, 65536, (5, 6, 7)).astype(np.uint16)
+    src = object_volume(7, 6, 5, 0x7E01, inside)
+    src.reshape(-1)[[3, 50, 100]] = 0x7E01
+    valid("bricked_7x6x5_binary16_masked_nan_background", src, BINARY16, 2,
+          "Bricked grid 7x6x5 binary16, bricks of 4, edge bricks of 3 and 1 voxels (mask bytes not "
+          "full): the background is the NaN 0x7E01; its payload comes back bit for bit.")
+    src = rng.integers(1000, 1010, (4, 4, 6)).astype(np.uint16)
+    valid("bricked_6x4x4_uint16_masked_not_most_common", src, UINT16, 2,
+          "Bricked grid 6x4x4 uint16 of ten values, bricks of 4: every brick codec 4 with background "
+          "1009, whatever its share (a reader decodes what the mask says, §7.3); every other frame "
+          "carries a content checksum.",
+          per_brick=lambda q: dict(background=1009, zcheck=q % 2 == 0))
+    src = np.full((3, 5, 4), 4242, np.uint16)
+    valid("bricked_4x5x3_uint16_masked_all_background_form_1", src, UINT16, 2,
+          "Bricked grid 4x5x3 uint16 of one value, bricks of 4: form 1 with a mask of all ones, so the "
+          "frame holds the mask alone (k = 0 other values).", form=1)
+    inside = arr_f16(np.round(rng.normal(0.3, 0.1, 8 * 8 * 8), 3), (8, 8, 8))
+    src = object_volume(8, 8, 8, 0x0000, inside)
+    valid("bricked_8x8x8_binary16_codecs_3_and_4", src, BINARY16, 2,
+          "Bricked grid 8x8x8 binary16, bricks of 4: codec 4 and codec 3 bricks in turn.",
+          codec=lambda q: (CODEC_MASKED, CODEC_PREDICTED)[q % 2])
+
+    def runs(*spans, background=None):
+        """Merges the bricks q0 .. q1 - 1 of each span into one codec 4 block."""
+        def mutate(blocks):
+            for q0, q1 in sorted(spans, reverse=True):
+                part = blocks[q0:q1]
+                vals = [v for b in part for v in struct.unpack("<%dH" % b.count, b.data)]
+                merged = Blk(STREAM_VALUES, 0, part[0].first, len(vals), b"".join(b.data for b in part),
+                             codec=CODEC_MASKED)
+                bg = background if background is not None else max(sorted(set(vals)), key=vals.count)
+                merged.stored = masked_payload(vals, bg)
+                blocks[q0:q1] = [merged]
+        return mutate
+    inside = arr_f16(np.round(rng.normal(0.6, 0.1, 12 * 10 * 9), 3), (9, 10, 12))
+    src = object_volume(12, 10, 9, 0x3C00, inside)
+    # Bricks of 4: 3 x 3 x 3 of them; the ball (centre 4, 3.3, 3; radius 3) leaves bricks 2, 5, 6, 7,
+    # 8 and most of the last layer background alone.
+    valid("bricked_12x10x9_binary16_masked_runs", src, BINARY16, 2,
+          "Bricked grid 12x10x9 binary16, bricks of 4: codec 4 blocks holding runs of whole bricks "
+          "(§7.3, §8A.4): bricks 5 .. 8 (across a row of bricks; background 1.0 alone, form 0), bricks "
+          "18 .. 26 (the last layer), and bricks 0 .. 1 (form 1, the ball's values behind one mask); "
+          "the others one brick each.",
+          mutate=runs((0, 2), (5, 9), (18, 27)))
+
+    # ---- invalid: one rule broken each (a 7x6x5 uint16 object, bricks of 4)
+    src = object_volume(7, 6, 5, 500, rng.integers(600, 700, (5, 6, 7)).astype(np.uint16))
+    first_n = 4 * 4 * 4
+
+    def first_brick(change):
+        def mutate(blocks):
+            blocks[0].stored = change(blocks[0].stored)
+        return mutate
+
+    def inv(name, expect, tag, desc, **kw):
+        add_invalid(name, masked_file(src, UINT16, 2, **kw), expect, tag, desc)
+
+    inv("bricked_codec4_form_2", "malformed", "codec4.form",
+        "A codec 4 block whose form (payload byte 2) is 2.",
+        mutate=first_brick(lambda st: st[:2] + b"\x02" + st[3:]))
+    inv("bricked_codec4_reserved", "malformed", "codec4.reserved",
+        "A codec 4 block whose reserved payload byte 3 is 1.",
+        mutate=first_brick(lambda st: st[:3] + b"\x01" + st[4:]))
+    inv("bricked_codec4_short", "malformed", "codec4.short",
+        "A codec 4 block of 3 bytes, shorter than its 4-byte codec header.",
+        mutate=first_brick(lambda st: st[:3]))
+    inv("bricked_codec4_constant_with_frame", "malformed", "codec4.constant_size",
+        "A codec 4 block of form 0 (constant) followed by a zstd frame: form 0 is exactly 4 bytes.",
+        mutate=first_brick(lambda st: st[:2] + b"\x00" + st[3:]))
+    mask_all_but_one = bytes([0xFE] + [0xFF] * 7)
+    inv("bricked_codec4_count_mismatch", "malformed", "codec4.count",
+        "A codec 4 block whose mask leaves 1 value that is not the background but whose frame holds 2.",
+        mutate=first_brick(lambda st: st[:4] + zframe(mask_all_but_one + bytes([1, 2, 0, 0]), False)))
+    inv("bricked_codec4_odd_content", "malformed", "codec4.content_size",
+        "A codec 4 block whose frame holds the 8-byte mask and 3 bytes: not two bytes per value.",
+        mutate=first_brick(lambda st: st[:4] + zframe(mask_all_but_one + bytes(3), False)))
+    inv("bricked_codec4_content_too_large", "malformed", "codec4.content_size",
+        "A codec 4 block whose frame holds the mask and 2n + 2 bytes, more than n values.",
+        mutate=first_brick(lambda st: st[:4] + zframe(bytes(8 + 2 * first_n + 2), False)))
+    inv("bricked_codec4_content_too_small", "malformed", "codec4.content_size",
+        "A codec 4 block whose frame holds 6 bytes, less than the 8-byte mask.",
+        mutate=first_brick(lambda st: st[:4] + zframe(bytes(6), False)))
+    inv("bricked_codec4_trailing_byte", "malformed", "zstd.extra",
+        "A codec 4 block (form 1) with one byte after its zstd frame.",
+        mutate=first_brick(lambda st: st + b"\0"))
+
+    def padding_mutate(blocks):   # the last brick is 3x2x1 = 6 values: mask bits 6 and 7 are padding
+        b = blocks[-1]
+        vals = list(struct.unpack("<%dH" % b.count, b.data))
+        mask = sum(1 << i for i, v in enumerate(vals) if v == 500) | 0x80
+        k = sum(1 for v in vals if v != 500)
+        b.stored = struct.pack("<HBB", 500, 1, 0) + zframe(bytes([mask]) + bytes(2 * k), False)
+    inv("bricked_codec4_padding_bit", "malformed", "codec4.padding",
+        "A codec 4 block of 6 values whose mask byte has bit 7 (past the last value) set.",
+        per_brick=lambda q: dict(background=500, form=1), mutate=padding_mutate)
+    def run_inside_brick(blocks):   # bricks 0 and 1 and the first 8 values of brick 2 in one block
+        runs((0, 3))(blocks)
+        b = blocks[0]
+        vals = list(struct.unpack("<%dH" % b.count, b.data))
+        cut = bricked_order((7, 6, 5), 2)[2][0] + 8   # bricks 0 and 1, and 8 values of brick 2
+        first_part = Blk(STREAM_VALUES, 0, b.first, cut, b.data[:2 * cut], codec=CODEC_MASKED)
+        first_part.stored = masked_payload(vals[:cut], 500)
+        second = Blk(STREAM_VALUES, 0, b.first + cut, b.count - cut, b.data[2 * cut:], codec=CODEC_MASKED)
+        second.stored = masked_payload(vals[cut:], 500)
+        blocks[0:1] = [first_part, second]
+    inv("bricked_codec4_run_ends_inside_a_brick", "malformed", None,
+        "A codec 4 block holding bricks 0 and 1 and the first 8 values of brick 2 (a run must end at a "
+        "brick, §7.3); the next codec 4 block holds the rest of brick 2, starting inside it.",
+        mutate=run_inside_brick)
+    inv("bricked_codec2_two_bricks", "malformed", "bricked.block",
+        "A codec 2 block holding bricks 0 and 1: only codec 4 may hold a run of bricks (§8A.4).",
+        codec=CODEC_PLANES, mutate=lambda blocks: blocks.__setitem__(
+            slice(0, 2), [Blk(STREAM_VALUES, 0, 0, blocks[0].count + blocks[1].count,
+                              blocks[0].data + blocks[1].data, codec=CODEC_PLANES)]))
+    reg = write_regular(src, UINT16)
+    rblocks = grid_blocks(reg, CODEC_ZSTD)
+    rblocks[0].stored = masked_payload([int(v) for v in src.reshape(-1)], 500)
+    rblocks[0].codec = CODEC_MASKED
+    data, _ = assemble(reg, [meta_block(DEFAULT_META)] + rblocks, structure_kind=KIND_REGULAR, **framed)
+    add_invalid("regular_with_codec4", data, "malformed", "codec4.where",
+                "A regular grid (structure_kind 2) whose one values block has codec 4, valid only in a "
+                "bricked grid (§7).")
+    f32src = arr_f32(rng.normal(0, 1, 4 * 4 * 4), (4, 4, 4))
+    g32 = write_bricked(f32src, FLOAT32, 2)
+    b32 = bricked_blocks(g32, CODEC_ZSTD)
+    b32[0].codec = CODEC_MASKED
+    b32[0].stored = struct.pack("<HBB", 0, 0, 0)
+    data, _ = assemble(g32, [meta_block(DEFAULT_META)] + b32, structure_kind=KIND_BRICKED, ireserved=2, **framed)
+    add_invalid("bricked_float32_codec4", data, "malformed", "codec4.where",
+                "A bricked grid of float32 values whose brick has codec 4, which holds 16-bit values only.")
 
 
 def gen_grids_valid():

@@ -9,6 +9,7 @@
 #include "framing.hpp"
 #include "ivol/crc32c.hpp"
 #include "ivol/error.hpp"
+#include "ivol/masked_codec.hpp"
 #include "ivol/predicted_codec.hpp"
 #include "layout.hpp"
 
@@ -96,6 +97,19 @@ std::vector<std::uint8_t> decode_stored_block(const std::string& path, const Blo
     std::vector<std::uint16_t> values(block.element_count);
     try {
       decode_predicted(stored.data(), stored.size(), *brick, values.data());
+    } catch (const Error& e) {
+      throw Error(e.error_class(), part + e.what());
+    }
+    for (std::size_t i = 0; i < values.size(); ++i) layout::store<std::uint16_t>(decoded.data() + 2 * i, values[i]);
+    return decoded;
+  }
+  if (block.codec == 4) {  // spec §7.3: a brick (or a run of bricks) of 16-bit values, the background masked
+    if (!brick || width != 2)
+      throw Error(ErrorClass::Malformed, part + "codec 4 is only for a values block holding bricks of 16-bit values");
+    std::vector<std::uint8_t> decoded(decoded_size);
+    std::vector<std::uint16_t> values(block.element_count);
+    try {
+      decode_masked(stored.data(), stored.size(), values.size(), values.data());
     } catch (const Error& e) {
       throw Error(e.error_class(), part + e.what());
     }

@@ -9,6 +9,7 @@
 #include "brick_grid.hpp"
 #include "ivol/crc32c.hpp"
 #include "ivol/error.hpp"
+#include "ivol/masked_codec.hpp"
 #include "ivol/predicted_codec.hpp"
 #include "layout.hpp"
 
@@ -39,8 +40,8 @@ struct BrickedGridWriter::Impl {
     return v;
   }
 
-  // One brick, cut from the layer and encoded: codec 3, or stored when
-  // prediction does not make it smaller (random bits).
+  // One brick, cut from the layer and encoded: the smallest of codec 3,
+  // codec 2 and codec 4, or stored when none is smaller (random bits).
   EncodedBlock encode(const std::uint16_t* layer, std::uint32_t i, std::uint32_t j, std::uint32_t k) const {
     const Dims& d = dims();
     const Dims e = grid.extent(i, j, k);
@@ -72,7 +73,15 @@ struct BrickedGridWriter::Impl {
     WriteOptions w;
     w.zstd_level = options.zstd_level;
     EncodedBlock planes = encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), w);
-    if (planes.bytes.size() < block.bytes.size()) return planes;
+    if (planes.bytes.size() < block.bytes.size()) block = std::move(planes);
+    // Where one value (an object-fidelity file's background) fills an eighth
+    // of the brick or more, codec 4 stores only the others, behind a mask;
+    // a brick of that value alone is 4 bytes (bench/RESULTS.md, issue 22).
+    const CommonValue common = most_common_value(brick.data(), n);
+    if (common.count >= n / 8) {
+      std::vector<std::uint8_t> masked = encode_masked(brick.data(), n, common.value, options.zstd_level);
+      if (masked.size() < block.bytes.size()) block.bytes = std::move(masked), block.codec = Codec::Masked;
+    }
     if (block.bytes.size() >= 2 * n) {
       block.codec = Codec::Stored;
       block.bytes.resize(2 * n);
@@ -92,6 +101,32 @@ struct BrickedGridWriter::Impl {
   std::uint64_t decoded_bytes = 0;
   std::chrono::steady_clock::time_point start;
 };
+
+namespace {
+
+// Bricks of the background alone that follow one another in the layer (the
+// same 4-byte codec 4 payload) become one block (spec §7.3): in an
+// object-fidelity file they are most bricks, and a block each cost 68 bytes
+// of block header, payload and index entry. A run stays within 4 MiB of
+// values, so that reading one voxel of it decodes no more than that.
+std::vector<EncodedBlock> merge_background_runs(std::vector<EncodedBlock> blocks) {
+  constexpr std::uint64_t kMaxRunValues = (4u << 20) / 2;
+  auto background_only = [](const EncodedBlock& b) {
+    return b.codec == Codec::Masked && b.bytes.size() == kMaskedHeaderSize;
+  };
+  std::vector<EncodedBlock> out;
+  for (EncodedBlock& b : blocks) {
+    if (!out.empty() && background_only(b) && background_only(out.back()) && out.back().bytes == b.bytes &&
+        std::uint64_t{out.back().element_count} + b.element_count <= kMaxRunValues) {
+      out.back().element_count += b.element_count;
+      continue;
+    }
+    out.push_back(std::move(b));
+  }
+  return out;
+}
+
+}  // namespace
 
 BrickedGridWriter::BrickedGridWriter(const std::string& path, const Dims& dims, const BrickedOptions& options)
     : impl_(std::make_unique<Impl>(path, dims, options)) {
@@ -145,7 +180,7 @@ void BrickedGridWriter::add_layer(const std::uint16_t* values) {
   }
   for (auto& t : pool) t.join();
   if (failure) std::rethrow_exception(failure);
-  for (const EncodedBlock& b : blocks) {
+  for (const EncodedBlock& b : merge_background_runs(std::move(blocks))) {
     m.file.append(b);
     m.decoded_bytes += 2ull * b.element_count;
   }

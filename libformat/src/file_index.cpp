@@ -11,6 +11,7 @@
 #include "framing.hpp"
 #include "ivol/crc32c.hpp"
 #include "ivol/error.hpp"
+#include "ivol/masked_codec.hpp"
 #include "ivol/predicted_codec.hpp"
 #include "layout.hpp"
 
@@ -308,11 +309,12 @@ class StructureReader {
         continue;  // an ignorable block of a stream we do not know: skipped
       }
       if (blk.flags != 0) bad(ErrorClass::Malformed, "blocks of known streams must have flags 0");
-      if (blk.codec > 3) bad(ErrorClass::UnsupportedFeature, "codec " + std::to_string(blk.codec) + " is not known");
-      // Codec 3 predicts within a brick of 16-bit values (spec §7.2).
-      if (blk.codec == 3 &&
+      if (blk.codec > 4) bad(ErrorClass::UnsupportedFeature, "codec " + std::to_string(blk.codec) + " is not known");
+      // Codecs 3 and 4 hold a brick of 16-bit values (spec §7.2, §7.3).
+      if ((blk.codec == 3 || blk.codec == 4) &&
           (blk.stream != 3 || v.kind != StructureKind::Bricked || v.encoding == ValueEncoding::Float32))
-        bad(ErrorClass::Malformed, "codec 3 is only for values blocks of a bricked grid of 16-bit values");
+        bad(ErrorClass::Malformed,
+            "codec " + std::to_string(blk.codec) + " is only for values blocks of a bricked grid of 16-bit values");
       const std::uint64_t width = stream_width(blk.stream, v.encoding);
       const std::uint64_t decoded = blk.element_count * width;
       if (decoded > layout::kMaxBlockDecodedBytes)
@@ -329,6 +331,11 @@ class StructureReader {
         bad(ErrorClass::Malformed, "stored_size " + std::to_string(blk.stored_size) + " exceeds " +
                                        std::to_string(predicted_payload_bound(blk.element_count) + frame) +
                                        ", the largest codec 3 payload of " + std::to_string(blk.element_count) +
+                                       " values" + (frame ? " and the block header" : ""));
+      if (blk.codec == 4 && blk.stored_size > masked_payload_bound(blk.element_count) + frame)
+        bad(ErrorClass::Malformed, "stored_size " + std::to_string(blk.stored_size) + " exceeds " +
+                                       std::to_string(masked_payload_bound(blk.element_count) + frame) +
+                                       ", the largest codec 4 payload of " + std::to_string(blk.element_count) +
                                        " values" + (frame ? " and the block header" : ""));
       if ((blk.codec == 1 || blk.codec == 2) && blk.stored_size > ZSTD_compressBound(decoded) + frame)
         bad(ErrorClass::Malformed, "stored_size " + std::to_string(blk.stored_size) + " exceeds " +
@@ -409,7 +416,8 @@ class StructureReader {
     }
   }
 
-  // Spec §8A.4: a values block of a bricked grid holds exactly one brick.
+  // Spec §8A.4: a values block of a bricked grid holds exactly one brick,
+  // or (codec 4, §7.3) a run of whole bricks that follow one another.
   void check_one_brick(const BlockInfo& blk, const std::string& part) {
     const VolumeLayout& v = info_.layout;
     std::uint64_t total = 1;  // more than 2^56 voxels is refused with the coverage below
@@ -422,6 +430,13 @@ class StructureReader {
     if (!grid.brick_at(blk.first_element, brick))
       fail(ErrorClass::Malformed, part,
            "first_element " + std::to_string(blk.first_element) + " is not the first value of a brick");
+    if (blk.codec == 4) {
+      const std::uint64_t end = blk.first_element + blk.element_count;
+      if (end != total && !grid.brick_at(end, brick))
+        fail(ErrorClass::Malformed, part,
+             "a codec 4 block ends at element " + std::to_string(end) + ", inside a brick");
+      return;
+    }
     const Dims e = grid.extent(brick[0], brick[1], brick[2]);
     const std::uint64_t voxels = std::uint64_t{e[0]} * e[1] * e[2];
     if (blk.element_count != voxels)

@@ -14,6 +14,7 @@
 #include "ivol/temporary_file.hpp"
 #include "ivol/writer.hpp"
 #include "layout.hpp"
+#include "zstd_parts.hpp"
 
 namespace ivol {
 namespace {
@@ -73,9 +74,18 @@ EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_ele
     ZSTD_CCtx_setParameter(cctx, ZSTD_c_compressionLevel, options.zstd_level);
     ZSTD_CCtx_setParameter(cctx, ZSTD_c_checksumFlag, 1);
     ZSTD_CCtx_setParameter(cctx, ZSTD_c_contentSizeFlag, 1);
-    const std::size_t size = ZSTD_compress2(cctx, block.bytes.data(), block.bytes.size(), content, raw_size);
-    if (ZSTD_isError(size))
-      throw Error(ErrorClass::Io, std::string("zstd compression failed: ") + ZSTD_getErrorName(size));
+    std::size_t size;
+    if (planes && (width == 2 || width == 4)) {  // each plane ends a zstd block: entropy tables of its own
+      const std::uint8_t* r = regrouped.data();
+      const std::size_t n = element_count;
+      size = width == 2
+                 ? detail::compress_parts(cctx, {{r, n}, {r + n, n}}, block.bytes, 0)
+                 : detail::compress_parts(cctx, {{r, n}, {r + n, n}, {r + 2 * n, n}, {r + 3 * n, n}}, block.bytes, 0);
+    } else {
+      size = ZSTD_compress2(cctx, block.bytes.data(), block.bytes.size(), content, raw_size);
+      if (ZSTD_isError(size))
+        throw Error(ErrorClass::Io, std::string("zstd compression failed: ") + ZSTD_getErrorName(size));
+    }
     if (size < raw_size) {
       block.bytes.resize(size);
       block.codec = planes ? Codec::ZstdBytePlanes : Codec::Zstd;

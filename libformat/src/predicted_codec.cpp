@@ -15,6 +15,7 @@
 #include "ivol/error.hpp"
 #include "predicted_fit.hpp"
 #include "predicted_rows.hpp"
+#include "zstd_parts.hpp"
 
 namespace ivol {
 namespace {
@@ -186,11 +187,8 @@ std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const Br
   ZSTD_CCtx_reset(context.get(), ZSTD_reset_session_and_parameters);
   ZSTD_CCtx_setParameter(context.get(), ZSTD_c_compressionLevel, options.zstd_level);
   ZSTD_CCtx_setParameter(context.get(), ZSTD_c_contentSizeFlag, 1);
-  const std::size_t size = ZSTD_compress2(context.get(), out.data() + kPredictedHeaderSize,
-                                          out.size() - kPredictedHeaderSize, planes.data(), planes.size());
-  if (ZSTD_isError(size))
-    throw Error(ErrorClass::Io, std::string("zstd compression failed: ") + ZSTD_getErrorName(size));
-  out.resize(kPredictedHeaderSize + size);
+  // Each plane ends a zstd block: entropy tables of its own (zstd_parts.hpp).
+  detail::compress_parts(context.get(), {{planes.data(), n}, {planes.data() + n, n}}, out, kPredictedHeaderSize);
   return out;
 }
 

@@ -21,7 +21,7 @@ enum class Stream : std::uint8_t { Metadata = 1, Nodes = 2, Values = 3, Borders 
 // Spec §7. ZstdBytePlanes: zstd over the elements' bytes regrouped by byte
 // position (since format 1.2). Predicted: a brick of 16-bit values, predicted
 // (ivol/predicted_codec.hpp; format 1.3).
-enum class Codec : std::uint8_t { Stored = 0, Zstd = 1, ZstdBytePlanes = 2, Predicted = 3 };
+enum class Codec : std::uint8_t { Stored = 0, Zstd = 1, ZstdBytePlanes = 2, Predicted = 3, Masked = 4 };
 
 struct WriteOptions {
   // Decoded bytes per block, at most. Small blocks make slices and regions

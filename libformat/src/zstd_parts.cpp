@@ -1,0 +1,54 @@
+#include "zstd_parts.hpp"
+
+#include <string>
+
+#include "ivol/error.hpp"
+
+namespace ivol::detail {
+namespace {
+
+void check(std::size_t code) {
+  if (ZSTD_isError(code))
+    throw Error(ErrorClass::Io, std::string("zstd compression failed: ") + ZSTD_getErrorName(code));
+}
+
+}  // namespace
+
+std::size_t compress_parts(ZSTD_CCtx* cctx, std::initializer_list<ZstdPart> parts, std::vector<std::uint8_t>& out,
+                           std::size_t offset) {
+  std::size_t total = 0;
+  for (const ZstdPart& p : parts) total += p.size;
+  const std::size_t bound = ZSTD_compressBound(total);
+  // Room for a block header per flush beyond the bound, so that the
+  // flushed frame never runs out of room before it can be compared.
+  out.resize(offset + bound + 8 * parts.size() + 64);
+  check(ZSTD_CCtx_setPledgedSrcSize(cctx, total));
+  ZSTD_outBuffer dst{out.data() + offset, out.size() - offset, 0};
+  std::size_t left = parts.size();
+  for (const ZstdPart& p : parts) {
+    const ZSTD_EndDirective mode = --left == 0 ? ZSTD_e_end : ZSTD_e_flush;
+    if (p.size == 0 && mode == ZSTD_e_flush) continue;
+    ZSTD_inBuffer src{p.data, p.size, 0};
+    std::size_t remaining;
+    do {
+      remaining = ZSTD_compressStream2(cctx, &dst, &src, mode);
+      check(remaining);
+      if (remaining != 0 && dst.pos == dst.size) throw Error(ErrorClass::Io, "zstd: the frame outgrew its buffer");
+    } while (remaining != 0 || src.pos < src.size);
+  }
+  if (dst.pos <= bound) {
+    out.resize(offset + dst.pos);
+    return dst.pos;
+  }
+  // The flushes' block headers took it past the bound: one run instead.
+  std::vector<std::uint8_t> whole;
+  whole.reserve(total);
+  for (const ZstdPart& p : parts) whole.insert(whole.end(), p.data, p.data + p.size);
+  ZSTD_CCtx_reset(cctx, ZSTD_reset_session_only);
+  const std::size_t size = ZSTD_compress2(cctx, out.data() + offset, bound, whole.data(), whole.size());
+  check(size);
+  out.resize(offset + size);
+  return size;
+}
+
+}  // namespace ivol::detail

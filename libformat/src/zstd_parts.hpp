@@ -1,0 +1,31 @@
+// One zstd frame of several parts (byte planes, a mask and byte planes),
+// each part ending a zstd block, so that each gets entropy tables of its
+// own: the noisy low bytes of CT values then no longer share a Huffman
+// table with the slowly varying high bytes. The frame is an ordinary frame
+// (Frame_Content_Size, one frame, no dictionary): readers see no difference.
+// Measured (bench/RESULTS.md, issue 22): 5-8 % smaller blocks at zstd 3.
+#pragma once
+
+#include <zstd.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <initializer_list>
+#include <vector>
+
+namespace ivol::detail {
+
+struct ZstdPart {
+  const std::uint8_t* data;
+  std::size_t size;
+};
+
+// Compresses the parts, in order, as one frame into `out` from `offset` on
+// (resized to fit), with `cctx`'s parameters (the caller sets level,
+// checksum and content size); returns the frame's size. Never larger than
+// ZSTD_compressBound of the whole: where the flushes would make it so, the
+// parts are compressed as one run instead.
+std::size_t compress_parts(ZSTD_CCtx* cctx, std::initializer_list<ZstdPart> parts, std::vector<std::uint8_t>& out,
+                           std::size_t offset);
+
+}  // namespace ivol::detail
