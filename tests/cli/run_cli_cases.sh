@@ -71,6 +71,13 @@ case_ convert-raw-dims   1 "--dims"                  -- "$IVOL" convert "$work/v
 case_ convert-raw-size   2 "need 126976"             -- "$IVOL" convert "$work/v.raw" "$work/x.ivol" --dims 32,32,31 --type f32
 test ! -e "$work/x.ivol" && case_ no-partial-output 0 "" -- true
 case_ convert-raw-ivol   0 "lossless"                -- "$IVOL" convert "$work/v.raw" "$work/v.ivol" --dims 32,32,32 --type f32 --voxel-size 0.5
+# --brick sets the brick's side both ways from the default 32 (a
+# 64 and 128 once came out as 32).
+head -c $((128 * 128 * 8 * 2)) /dev/urandom >"$work/b16.raw"
+for side in 8 64 128; do
+  "$IVOL" -q convert "$work/b16.raw" "$work/b$side.ivol" --dims 128,128,8 --type u16 --structure bricked --brick "$side" -f
+  case_ "convert-brick-$side" 0 "\"brick\": $side" -- "$IVOL" info --json "$work/b$side.ivol"
+done
 /usr/bin/python3 -c "import struct; open('$work/f.raw','wb').write(struct.pack('<4096f', *[i * 0.001 for i in range(4096)]))"
 case_ convert-lossy      0 "lossy: f32 rounded to binary16" -- "$IVOL" convert "$work/f.raw" "$work/h.ivol" --dims 16,16,16 --encoding binary16 --allow-lossy
 case_ convert-keep       0 "coarsened"               -- "$IVOL" convert "$work/v.raw" "$work/k.ivol" --dims 32,32,32 --keep threshold=otsu,margin=1

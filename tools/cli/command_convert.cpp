@@ -222,7 +222,8 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       if (!s->encoding.empty()) options.encoding = parse_encoding(s->encoding);
       if (!s->keep.empty()) options.keep = parse_keep(s->keep, "--keep");
       options.block_bytes = s->block_bytes;
-      while ((1u << options.brick_log2) > s->brick) --options.brick_log2;  // a power of two, checked above
+      options.brick_log2 = 0;  // --brick is a power of two, checked above
+      while ((1u << options.brick_log2) < s->brick) ++options.brick_log2;
       options.zstd_level = s->zstd_level;
       options.byte_planes = s->codec == "zstd-planes";
       options.framed_blocks = s->format_version == "1.3";

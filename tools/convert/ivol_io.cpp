@@ -271,7 +271,7 @@ bool choose_bricked(const ImportOptions& options, ValueEncoding encoding, std::u
                     ImportReport& report) {
   std::string against;
   if (options.keep) against = "a keep rule coarsens regions, which only an octree holds";
-  if (encoding == ValueEncoding::Float32) against = "float32 values (codec 3 predicts 16-bit values)";
+  if (encoding == ValueEncoding::Float32) against = "float32 values (codecs 3 and 4 hold 16-bit values)";
   if (!options.byte_planes) against = "--codec zstd (codec 1 only, for format 1.0/1.1 readers)";
   if (!options.framed_blocks) against = "format 1.2 (a bricked grid needs format 1.3)";
   if (options.structure == StructureChoice::Bricked) {
@@ -291,8 +291,8 @@ bool choose_bricked(const ImportOptions& options, ValueEncoding encoding, std::u
     return false;
   }
   report.structure_reason =
-      "lossless every-voxel 16-bit values: bricks predicted in 3-D (codec 3) are smaller than an octree of one-voxel "
-      "leaves (--structure octree overrides)";
+      "lossless every-voxel 16-bit values: bricks predicted in 3-D (codec 3) or masked around their background "
+      "(codec 4) are smaller than an octree of one-voxel leaves (--structure octree overrides)";
   return true;
 }
 

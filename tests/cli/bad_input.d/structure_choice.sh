@@ -7,7 +7,7 @@ import sys, numpy as np
 PY
 bad bricked-with-keep 2 "--structure bricked: a keep rule coarsens regions, which only an octree holds" \
     -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --keep threshold=10,margin=1
-bad bricked-float32 2 "--structure bricked: float32 values (codec 3 predicts 16-bit values)" \
+bad bricked-float32 2 "--structure bricked: float32 values (codecs 3 and 4 hold 16-bit values)" \
     -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --encoding float32
 bad bricked-format-1.2 2 "--structure bricked: format 1.2 (a bricked grid needs format 1.3)" \
     -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --format-version 1.2
