@@ -148,21 +148,24 @@ class NeedPyramid {
     all_.resize(cell_level_ + 1);
     dims_.resize(cell_level_ + 1);
     dims_[cell_level_] = mask.cells;
-    any_[cell_level_] = mask.need;
-    all_[cell_level_] = mask.need;
+    // The cell level is the mask itself (read through at(), packed or not),
+    // not a copy: two copies of a byte mask were 2 bytes a cell.
     for (int l = static_cast<int>(cell_level_) - 1; l >= 0; --l) {
       const Dims& f = dims_[l + 1];
       const Dims d{(f[0] + 1) / 2, (f[1] + 1) / 2, (f[2] + 1) / 2};
       dims_[l] = d;
       any_[l].assign(voxel_count(d), 0);
       all_[l].assign(voxel_count(d), 1);
+      const bool from_mask = static_cast<unsigned>(l) + 1 == cell_level_;
       for (std::uint32_t k = 0; k < f[2]; ++k)
         for (std::uint32_t j = 0; j < f[1]; ++j)
           for (std::uint32_t i = 0; i < f[0]; ++i) {
             const std::uint64_t child = (std::uint64_t{k} * f[1] + j) * f[0] + i;
             const std::uint64_t parent = (std::uint64_t{k / 2} * d[1] + j / 2) * d[0] + i / 2;
-            any_[l][parent] |= any_[l + 1][child];
-            all_[l][parent] &= all_[l + 1][child];
+            const std::uint8_t need = from_mask ? (mask.at(child) ? 1 : 0) : any_[l + 1][child];
+            const std::uint8_t every = from_mask ? need : all_[l + 1][child];
+            any_[l][parent] |= need;
+            all_[l][parent] &= every;
           }
     }
   }
@@ -183,7 +186,8 @@ class NeedPyramid {
     i >>= shift, j >>= shift, k >>= shift;
     const Dims& d = dims_[at];
     if (i >= d[0] || j >= d[1] || k >= d[2]) return false;
-    return p[at][(std::uint64_t{k} * d[1] + j) * d[0] + i] != 0;
+    const std::uint64_t n = (std::uint64_t{k} * d[1] + j) * d[0] + i;
+    return at == cell_level_ ? mask_.at(n) : p[at][n] != 0;
   }
   const NeedMask& mask_;
   unsigned depth_ = 0;
