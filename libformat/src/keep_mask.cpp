@@ -89,8 +89,7 @@ float otsu_threshold(const float* data, std::uint64_t count, unsigned bins) {
   return otsu_threshold_from_histogram(histogram, lo, hi);
 }
 
-void add_to_otsu_histogram(const float* data, std::uint64_t count, float lo, float hi,
-                           std::vector<double>& histogram) {
+void add_to_otsu_histogram(const float* data, std::uint64_t count, float lo, float hi, std::vector<double>& histogram) {
   const std::uint64_t bins = histogram.size();
   const double scale = static_cast<double>(bins) / (static_cast<double>(hi) - lo);
   for (std::uint64_t i = 0; i < count; ++i) {

@@ -11,8 +11,7 @@
 
 namespace ivol::recon::detail {
 
-RecordSpool::RecordSpool(std::size_t record_floats, HostAllowance& allowance, std::string directory,
-                         std::string what)
+RecordSpool::RecordSpool(std::size_t record_floats, HostAllowance& allowance, std::string directory, std::string what)
     : floats_(record_floats), allowance_(allowance), directory_(std::move(directory)), what_(std::move(what)) {
   if (directory_.empty()) {
     const char* tmpdir = std::getenv("TMPDIR");

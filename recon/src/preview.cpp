@@ -10,6 +10,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "host_spool.hpp"
 #include "ivol/error.hpp"
@@ -32,19 +33,25 @@ VolumeGrid coarsened(const VolumeGrid& full, unsigned factor) {
   return coarse;
 }
 
-// FDK of `grid` from every `thinning`-th view with thinning² pixels merged
-// (fewer where the scan is small); each z-slice goes to `slice` in order, on
-// rank 0 only when distributed.
-void reconstruct_thinned(ProjectionSource& projections, const ScanGeometry& geometry, const FdkOptions& options,
-                         const VolumeGrid& grid, unsigned thinning,
-                         const std::function<void(std::uint32_t k, const float* values)>& slice) {
-  // Keep at least a few pixels and views when the scan is small.
+// Every view_step-th view, bin² pixels merged: `thinning` each, less where
+// that would leave too few pixels or views (a small scan).
+std::pair<unsigned, unsigned> thinned_steps(const ScanGeometry& geometry, unsigned thinning) {
   unsigned bin = thinning;
   while (bin > 1 && (geometry.detector.columns / static_cast<int>(bin) < 16 ||
                      geometry.detector.rows / static_cast<int>(bin) < 16))
     bin /= 2;
   unsigned view_step = thinning;
   while (view_step > 1 && geometry.view_count() / view_step < 32) view_step /= 2;
+  return {view_step, bin};
+}
+
+// FDK of `grid` from every `thinning`-th view with thinning² pixels merged
+// (fewer where the scan is small); each z-slice goes to `slice` in order, on
+// rank 0 only when distributed.
+void reconstruct_thinned(ProjectionSource& projections, const ScanGeometry& geometry, const FdkOptions& options,
+                         const VolumeGrid& grid, unsigned thinning,
+                         const std::function<void(std::uint32_t k, const float* values)>& slice) {
+  const auto [view_step, bin] = thinned_steps(geometry, thinning);
   ReducedProjections reduced(projections, view_step, bin);
   const ScanGeometry reduced_geometry = reduce_scan(geometry, view_step, bin);
   FdkReconstructor reconstructor(reduced, reduced_geometry, options);
@@ -181,9 +188,22 @@ std::uint64_t packed_mask_bytes(const VolumeGrid& cells) { return (cells.voxel_c
 std::uint64_t detection_fixed_bytes(const VolumeGrid& full, const DetectionMaskOptions& detection) {
   const DetectionShape shape = detection_shape(full, detection);
   const std::uint64_t area = std::uint64_t{shape.cells.size[0]} * shape.cells.size[1];
-  const std::uint64_t floats =
-      shape.ring_layers * area + std::uint64_t{shape.cells.size[0]} * shape.samples.size[1] + area + shape.otsu_row_floats;
+  const std::uint64_t floats = shape.ring_layers * area + std::uint64_t{shape.cells.size[0]} * shape.samples.size[1] +
+                               area + shape.otsu_row_floats;
   return floats * sizeof(float) + packed_mask_bytes(shape.cells);
+}
+
+std::uint64_t detection_temp_bytes(const ScanGeometry& geometry, const FdkOptions& options, const VolumeGrid& full,
+                                   const DetectionMaskOptions& detection) {
+  const DetectionShape shape = detection_shape(full, detection);
+  const std::uint64_t fixed = detection_fixed_bytes(full, detection);
+  const std::uint64_t records =
+      (shape.cells.voxel_count() + shape.otsu_row_floats * ((std::uint64_t{shape.samples.size[2]} + 1) / 2)) *
+      sizeof(float);
+  const std::uint64_t room = detection.preview_memory > fixed ? detection.preview_memory - fixed : 0;
+  const auto [view_step, bin] = thinned_steps(geometry, detection.rule.thinning);
+  return (records > room ? records - room : 0) +
+         filtered_rows_disk_bound(reduce_scan(geometry, view_step, bin), options);
 }
 
 DetectionMask detect_need_mask(ProjectionSource& projections, const ScanGeometry& geometry, const FdkOptions& options,
@@ -193,12 +213,12 @@ DetectionMask detect_need_mask(ProjectionSource& projections, const ScanGeometry
   // refused before any work when the budget cannot hold them.
   const std::uint64_t fixed_bytes = detection_fixed_bytes(full, detection);
   if (detection.preview_memory < fixed_bytes)
-    throw Error(ErrorClass::LimitExceeded,
-                "detection preview: its memory budget of " + std::to_string(detection.preview_memory) +
-                    " bytes is below the " + std::to_string(fixed_bytes) + " bytes it holds whatever the budget (" +
-                    std::to_string(shape.ring_layers) + " slices of " + std::to_string(shape.cells.size[0]) + "x" +
-                    std::to_string(shape.cells.size[1]) + " cells, a need mask of 1 bit per cell: " +
-                    std::to_string(packed_mask_bytes(shape.cells)) + " bytes)");
+    throw Error(
+        ErrorClass::LimitExceeded,
+        "detection preview: its memory budget of " + std::to_string(detection.preview_memory) + " bytes is below the " +
+            std::to_string(fixed_bytes) + " bytes it holds whatever the budget (" + std::to_string(shape.ring_layers) +
+            " slices of " + std::to_string(shape.cells.size[0]) + "x" + std::to_string(shape.cells.size[1]) +
+            " cells, a need mask of 1 bit per cell: " + std::to_string(packed_mask_bytes(shape.cells)) + " bytes)");
   const auto start = std::chrono::steady_clock::now();
   // The same samples and pooling as reconstruct_detection_preview.
   const unsigned ratio = shape.ratio, reach = shape.reach;

@@ -21,6 +21,7 @@
 #include "mpi_exchange.hpp"
 #include "option_parsing.hpp"
 #include "output_rules.hpp"
+#include "recon_budget.hpp"
 #include "recon_built_slabs.hpp"
 #include "recon_slabs.hpp"
 #include "report.hpp"
@@ -48,9 +49,10 @@ struct ReconSettings {
   std::string refine = "detection";
   unsigned margin = 2;
   std::uint32_t nested_cell = 16;
-  unsigned preview_factor = 0;  // 0: the rule's own (2 for detection, 4 for the preview rule and --keep)
-  std::uint64_t memory_mib = 1024;
-  std::string temp_dir;  // the octree writer's spill file (--temp-dir)
+  unsigned preview_factor = 0;   // 0: the rule's own (2 for detection, 4 for the preview rule and --keep)
+  std::uint64_t memory_mib = 0;  // 0: memory_budget's default
+  MemoryBudget memory;           // what the run uses (set when it starts)
+  std::string temp_dir;          // the octree writer's spill file (--temp-dir)
   bool no_disk_check = false;
   bool json = false;
   bool force = false;
@@ -73,11 +75,12 @@ nlohmann::json voxel_json(const recon::VolumeGrid& grid) {
 
 // A quarter of --memory: the writer's slab, the filtered rows and (on CPU
 // devices) the device's slabs take one each.
-std::uint64_t memory_share(const ReconSettings& s) { return (s.memory_mib << 20) / 4; }
+std::uint64_t memory_share(const ReconSettings& s) { return s.memory.bytes / 4; }
 
 // Each part's peak host memory (or temporary disk), for the report.
 nlohmann::json memory_json(const ReconSettings& s, const recon::FdkReport& fdk, std::size_t devices) {
-  return {{"budget_bytes", s.memory_mib << 20},
+  return {{"budget_bytes", s.memory.bytes},
+          {"budget_rule", s.memory.rule},
           {"device_slab_bytes", fdk.device_bytes_per_slab * devices},
           {"filtered_rows_host_bytes", fdk.filtered_rows_host_bytes},
           {"filtered_rows_disk_bytes", fdk.filtered_rows_disk_bytes},
@@ -239,6 +242,18 @@ struct FoundObject {
   std::uint64_t preview_spilled_bytes = 0;
 };
 
+recon::DetectionMaskOptions detection_options(const ReconSettings& s, const recon::FdkOptions& fdk_options,
+                                              unsigned factor, std::optional<float> given_threshold) {
+  recon::DetectionMaskOptions options;
+  options.rule = kDetection;
+  options.rule.factor = factor;
+  options.margin_voxels = s.margin;
+  options.threshold = given_threshold;
+  options.preview_memory = memory_share(s);
+  options.temp_directory = fdk_options.temp_directory;  // where the filtered rows go
+  return options;
+}
+
 // The refinement rule (docs/refinement.md). detection: each preview cell the
 // largest sample of a 1/(factor/2) reconstruction within the margin of it,
 // against a share of Otsu's threshold that covers the preview's blur; the
@@ -253,13 +268,7 @@ FoundObject find_object(const ReconSettings& s, const recon::VolumeGrid& grid, c
                         OpenedScan& scan, bool detection, unsigned factor, std::optional<float> given_threshold) {
   FoundObject found;
   if (detection) {
-    recon::DetectionMaskOptions options;
-    options.rule = kDetection;
-    options.rule.factor = factor;
-    options.margin_voxels = s.margin;
-    options.threshold = given_threshold;
-    options.preview_memory = memory_share(s);
-    options.temp_directory = fdk_options.temp_directory;  // where the filtered rows go
+    const recon::DetectionMaskOptions options = detection_options(s, fdk_options, factor, given_threshold);
     recon::DetectionMask detected =
         recon::detect_need_mask(*scan.projections, scan.geometry, fdk_options, grid, options);
     found.mask = std::move(detected.mask);
@@ -304,14 +313,16 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   const unsigned factor = s.preview_factor ? s.preview_factor : detection ? kDetection.factor : 4;
   std::optional<float> given_threshold;
   if (s.threshold != "otsu") given_threshold = static_cast<float>(parse_number(s.threshold, "--threshold"));
-  const FoundObject found = find_object(s, grid, fdk_options, scan, detection, factor, given_threshold);
+  FoundObject found = find_object(s, grid, fdk_options, scan, detection, factor, given_threshold);
   const float threshold = found.threshold;
-  const NeedMask& mask = found.mask;
   auto generation_start = std::chrono::steady_clock::now();
   GenerationOptions generation;
   generation.nested_cell = s.nested_cell;
-  std::unique_ptr<VoxelStructure> structure = generate_structure(kind, mask, generation);
+  std::unique_ptr<VoxelStructure> structure = generate_structure(kind, found.mask, generation);
   const double generating = seconds_since(generation_start);
+  // The structure holds what the reconstruction needs of the mask.
+  const std::uint64_t need_mask_bytes = found.mask.memory_bytes();
+  found.mask = NeedMask{};
 
   metadata.provenance["reconstruction"]["structure"] = {
       {"kind", s.structure},
@@ -409,6 +420,8 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   report["memory"]["preview_bytes"] = found.preview_bytes;
   report["memory"]["preview_spilled_bytes"] = found.preview_spilled_bytes;
   report["memory"]["value_window_bytes"] = values.peak_bytes();
+  report["memory"]["need_mask_bytes"] = need_mask_bytes;
+  report["memory"]["structure_bricks_bytes"] = structure->bricks().size() * sizeof(Brick);
   if (mpi) report["ranks"] = ranks_json(ranks);
   if (s.json) {
     std::cout << report.dump(2) << "\n";
@@ -502,12 +515,13 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
                   "detection, 4 with --refine preview and --keep ...otsu)")
       ->check(CLI::IsMember({2, 4, 8, 16, 32}));
   out->add_option("--memory", s->memory_mib,
-                  "About how many MiB of host memory the run may use: a quarter each for the writer's slab, the "
-                  "filtered detector rows (the rest go to a temporary file, see --temp-dir), on CPU devices the "
-                  "device's slabs and, with --structure, the detection preview's cells (the rest to a temporary "
-                  "file)")
-      ->check(whole_number())
-      ->capture_default_str();
+                  "About how many MiB of host memory the run may use (default: half of the memory cgroup's limit "
+                  "when one is set, else half of MemAvailable, at least 256 MiB; printed in the notes and --json): "
+                  "a quarter each for the writer's slab, the filtered detector rows (the rest go to a temporary "
+                  "file, see --temp-dir), on CPU devices the device's slabs and, with --structure, the detection "
+                  "preview (its cells and the samples for Otsu's threshold, the rest to a temporary file; the need "
+                  "mask at 1 bit per cell) and then the structure's value window (slabs are cut thinner to fit)")
+      ->check(whole_number());
   out->add_option(
       "--temp-dir", s->temp_dir,
       "Directory of the octree writer's temporary spill file and of the filtered detector rows and the "
@@ -520,6 +534,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
   // mpi: this process is one rank of a distributed run (mpirun), or null.
   auto run = [s, &global](MpiRun* mpi) {
     const auto start = std::chrono::steady_clock::now();
+    s->memory = memory_budget(s->memory_mib);
     if (!s->structure.empty() && !s->keep.empty())
       throw UsageError("--keep", "--keep and --structure: choose one (--structure uses --threshold)");
     if (lower_extension(s->output) != ".ivol") throw UsageError("-o", "'" + s->output + "' is not an .ivol name");
@@ -541,12 +556,6 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     s->scan.memory_bytes = s->memory_mib << 20;
     OpenedScan scan = open_scan(s->scan);
     const recon::VolumeGrid grid = grid_of(*s, scan);
-    // Before any work (the preview included): the file and, for an octree,
-    // the spill file must find room (convert/disk_space.hpp).
-    if (writes && !s->no_disk_check)
-      convert::require_disk_space(convert::ivol_disk_needs(grid.size, parse_encoding(s->encoding),
-                                                           s->structure.empty() || s->structure == "octree", s->output,
-                                                           s->temp_dir));
     recon::FdkOptions options;
     options.window = recon::parse_ramp_window(s->window);
     options.cutoff = s->cutoff;
@@ -572,6 +581,21 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     // Distributed, rank 0 writes the file and reports; the others only reconstruct.
     const bool root = !mpi || mpi->rank() == 0;
     const bool quiet = global.quiet || !root;
+    // Before any work (the preview included): every file the run writes must
+    // find room, the output and each temporary file (recon_budget.hpp).
+    if (writes && !s->no_disk_check) {
+      std::optional<recon::DetectionMaskOptions> detection;
+      if (!s->structure.empty() && s->refine == "detection")
+        detection =
+            detection_options(*s, options, s->preview_factor ? s->preview_factor : kDetection.factor, std::nullopt);
+      const ReconDiskNeeds needs =
+          recon_disk_needs(scan.geometry, grid, options, detection, parse_encoding(s->encoding),
+                           s->structure.empty() || s->structure == "octree", s->output, s->temp_dir);
+      convert::require_disk_space(needs.reconstruction);
+      convert::require_disk_space(needs.preview);
+    }
+    if (!quiet)
+      std::cerr << "ivol recon: memory budget " << human_bytes(s->memory.bytes) << ": " << s->memory.rule << "\n";
     // Distributed and dense, each rank reconstructs whole writer slabs by
     // itself (recon_built_slabs.hpp); the preview is still shared.
     recon::FdkOptions reconstructor_options = options;

@@ -22,7 +22,6 @@ float otsu_threshold_from_histogram(const std::vector<double>& histogram, double
 // over [lo, hi], lo < hi the smallest and largest of all the values: the
 // binning otsu_threshold uses, so that values added in parts, once their
 // range is known, give its threshold exactly.
-void add_to_otsu_histogram(const float* data, std::uint64_t count, float lo, float hi,
-                           std::vector<double>& histogram);
+void add_to_otsu_histogram(const float* data, std::uint64_t count, float lo, float hi, std::vector<double>& histogram);
 
 }  // namespace ivol

@@ -96,9 +96,9 @@ class VoxelStructure {
 // mask over a low-resolution grid whose cells are `factor` full-resolution
 // voxels wide (factor a power of two; 1 = full resolution).
 struct NeedMask {
-  Dims dims{};                   // full-resolution dimensions of the volume
-  std::uint32_t factor = 1;      // full-resolution voxels per mask cell, per axis
-  Dims cells{};                  // ceil(dims / factor)
+  Dims dims{};                     // full-resolution dimensions of the volume
+  std::uint32_t factor = 1;        // full-resolution voxels per mask cell, per axis
+  Dims cells{};                    // ceil(dims / factor)
   std::vector<std::uint8_t> need;  // 1 where the cell needs full resolution, [z][y][x]
   // Or the same cells one bit each (cell n is bit n % 64 of word n / 64),
   // with `need` empty: an eighth of the memory, for masks of large volumes

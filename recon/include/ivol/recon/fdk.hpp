@@ -163,6 +163,13 @@ class FdkReconstructor {
   std::unique_ptr<Impl> impl_;
 };
 
+// The most bytes the filtered rows of a scan of `geometry` can take in the
+// temporary file with `host_budget` bytes of host memory (0: the default,
+// as FdkOptions::filtered_rows_memory_limit): every row of every view kept
+// at once (one slab reading all of them) less what the host holds, or 0
+// without cache_filtered_rows. For the disk check before a run.
+std::uint64_t filtered_rows_disk_bound(const ScanGeometry& geometry, const FdkOptions& options);
+
 FdkReport reconstruct_fdk(ProjectionSource& projections, const ScanGeometry& geometry, const VolumeGrid& grid,
                           const FdkOptions& options, const SlabSink& sink);
 

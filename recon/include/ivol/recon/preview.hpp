@@ -91,6 +91,12 @@ struct DetectionMask {
 // What detect_need_mask holds whatever its budget (the ring, the slice
 // buffers, the packed need mask), in bytes.
 std::uint64_t detection_fixed_bytes(const VolumeGrid& full, const DetectionMaskOptions& detection);
+// The most bytes detect_need_mask can write to temporary files: the cell
+// layers and Otsu's samples beyond its budget, and the thinned scan's
+// filtered rows beyond options.filtered_rows_memory_limit
+// (filtered_rows_disk_bound). For the disk check before a run.
+std::uint64_t detection_temp_bytes(const ScanGeometry& geometry, const FdkOptions& options, const VolumeGrid& full,
+                                   const DetectionMaskOptions& detection);
 
 DetectionMask detect_need_mask(ProjectionSource& projections, const ScanGeometry& geometry, const FdkOptions& options,
                                const VolumeGrid& full, const DetectionMaskOptions& detection);
