@@ -367,12 +367,19 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   StructureStreamWriter& writer = *writer_storage;
   StructureValueWindow values(*structure);
   double writing_during_fdk = 0;  // the writer works inside the FDK's slab hand-over
-  const recon::FdkReport fdk =
-      reconstructor.reconstruct_structure(grid, *structure, values, [&](std::uint32_t z_complete) {
+  // The values in flight take the preview's quarter of --memory, the
+  // preview being done: slabs are cut thinner until they fit it.
+  recon::FdkReconstructor::ValueWindowBound window;
+  window.memory_limit = memory_share(s);
+  window.writer_slab_slices = writer.slab_slices();
+  const recon::FdkReport fdk = reconstructor.reconstruct_structure(
+      grid, *structure, values,
+      [&](std::uint32_t z_complete) {
         const auto began = std::chrono::steady_clock::now();
         writer.write_ready(z_complete, values);
         writing_during_fdk += seconds_since(began);
-      });
+      },
+      window);
   if (mpi) mpi->every_slab_received();  // the rest of the file is compressed on every rank
   if (complete_metadata) complete_metadata(metadata);
   const StreamingResult written = writer.finish(metadata, values);
@@ -420,6 +427,9 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   report["memory"]["preview_bytes"] = found.preview_bytes;
   report["memory"]["preview_spilled_bytes"] = found.preview_spilled_bytes;
   report["memory"]["value_window_bytes"] = values.peak_bytes();
+  report["memory"]["value_window_model_bytes"] = fdk.value_window_model_bytes;
+  report["memory"]["value_window_budget_bytes"] = window.memory_limit;
+  report["slab_slices"] = fdk.slab_slices;
   report["memory"]["need_mask_bytes"] = need_mask_bytes;
   report["memory"]["structure_bricks_bytes"] = structure->bricks().size() * sizeof(Brick);
   if (mpi) report["ranks"] = ranks_json(ranks);
