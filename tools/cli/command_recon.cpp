@@ -294,15 +294,14 @@ FoundObject find_object(const ReconSettings& s, const recon::VolumeGrid& grid, c
 // The paper's pipeline: a low-resolution preview finds the object, the
 // structure is generated from it, the FDK backprojects into the structure's
 // voxels only, and the structure is written as an .ivol file of its kind
-// while the slabs finish. Peak host memory: the preview (1/factor³ of the
-// dense volume), the structure's bricks (40 bytes each), the values of the
-// voxels between the writer's slab and the slabs in flight
-// (StructureValueWindow), the writer's slab (--memory / 4), the filtered
-// detector rows (--memory / 4, the rest in a temporary file), on CPU devices
-// the device's buffers (--memory / 4) and the task lists of the slabs in
-// flight; never the dense volume nor all the values. The detection preview
-// holds its cell layers within --memory / 4 (shared with the value window,
-// unenforced), the rest in a temporary file in --temp-dir.
+// while the slabs finish. Host memory, by quarters of --memory (README,
+// "ivol recon"): the writer's slab, the filtered detector rows (the rest in
+// a temporary file), on CPU devices the device's buffers, and the detection
+// preview (cells and Otsu's samples beyond it in temporary files; its ring
+// and the 1-bit need mask refused when they do not fit) and then the
+// structure's value window (slabs thinned to fit it). Beyond --memory: the
+// structure's bricks (48 bytes each) and the FDK's index of them, the task
+// lists of the slabs in flight. Never the dense volume nor all the values.
 int run_structure(const ReconSettings& s, const GlobalOptions& global, const recon::VolumeGrid& grid,
                   const recon::FdkOptions& fdk_options, OpenedScan& scan, recon::FdkReconstructor& reconstructor,
                   Metadata metadata, const std::function<void(Metadata&)>& complete_metadata,
