@@ -232,6 +232,10 @@ std::vector<float> reconstruct_fdk_dense(ProjectionSource& projections, const Sc
   return volume;
 }
 
+void FdkReconstructor::set_cpu_device_memory_limit(std::uint64_t bytes) {
+  impl_->options.cpu_device_memory_limit = bytes;
+}
+
 std::uint64_t filtered_rows_disk_bound(const ScanGeometry& geometry, const FdkOptions& options) {
   if (!options.cache_filtered_rows) return 0;
   // Rows are kept in pairs, a pair of every view at a time (fdk_filtered_rows.hpp).

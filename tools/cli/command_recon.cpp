@@ -2,6 +2,9 @@
 // straight into an .ivol file slab by slab.
 #include <chrono>
 #include <cstdlib>
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
@@ -57,6 +60,17 @@ struct ReconSettings {
   bool json = false;
   bool force = false;
 };
+
+// Gives the heap's free memory back to the system between phases: glibc
+// keeps what a phase freed (the preview's cell layers, the generator's
+// parts) and, its mmap threshold raised by the first large free, serves
+// later large buffers from the heap, so RSS kept a phase's peak (issue 23,
+// bench/RESULTS.md).
+void return_free_memory() {
+#if defined(__GLIBC__)
+  ::malloc_trim(0);
+#endif
+}
 
 // One size for every axis or one per axis (x, y, z: z along the rotation axis).
 recon::Vec3 parse_voxel(const std::string& text) {
@@ -313,6 +327,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   std::optional<float> given_threshold;
   if (s.threshold != "otsu") given_threshold = static_cast<float>(parse_number(s.threshold, "--threshold"));
   FoundObject found = find_object(s, grid, fdk_options, scan, detection, factor, given_threshold);
+  return_free_memory();
   const float threshold = found.threshold;
   auto generation_start = std::chrono::steady_clock::now();
   GenerationOptions generation;
@@ -322,6 +337,13 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   // The structure holds what the reconstruction needs of the mask.
   const std::uint64_t need_mask_bytes = found.mask.memory_bytes();
   found.mask = NeedMask{};
+  return_free_memory();
+  if (!global.quiet && (!mpi || mpi->rank() == 0))
+    std::cerr << std::fixed << std::setprecision(1) << "ivol recon: preview " << found.seconds << " s (held "
+              << human_bytes(found.preview_bytes) << ", spilled " << human_bytes(found.preview_spilled_bytes)
+              << "); structure generated in " << generating << " s: " << structure->bricks().size() << " bricks ("
+              << human_bytes(structure->bricks().size() * sizeof(Brick)) << "), " << structure->voxel_count()
+              << " voxels\n";
 
   metadata.provenance["reconstruction"]["structure"] = {
       {"kind", s.structure},
@@ -347,9 +369,25 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
     mpi->gather(rank_stats(mine, start));
     return kExitOk;
   }
+  // The structure's bricks (and the FDK's and the writer's index of them,
+  // about 13 bytes a brick) now count against --memory: the device slabs on
+  // CPU devices and the writer's slab share what they leave with the
+  // filtered rows and the value window, a quarter each but no less than a
+  // sixteenth of --memory each (below that, slabs would be too thin to be
+  // worth it; the run then goes over --memory, which the notes say). The
+  // value window keeps its quarter (the preview's, the preview being done):
+  // at 1152³ it needed 125 MiB with one-slice slabs (bench/RESULTS.md).
+  const std::uint64_t structure_held = structure->bricks().size() * (sizeof(Brick) + 13);
+  const std::uint64_t left = s.memory.bytes > structure_held ? s.memory.bytes - structure_held : 0;
+  const std::uint64_t part = std::min(memory_share(s), std::max(left / 4, s.memory.bytes / 16));
+  reconstructor.set_cpu_device_memory_limit(part);
+  if (!global.quiet && 4 * part > left)
+    std::cerr << "ivol recon: the structure's " << human_bytes(structure_held) << " leave " << human_bytes(left)
+              << " of --memory; its parts take " << human_bytes(part) << " each, going over --memory by "
+              << human_bytes(4 * part + structure_held - s.memory.bytes) << "\n";
   StreamingOptions options;
   options.build.encoding = parse_encoding(s.encoding);
-  options.slab_budget_bytes = memory_share(s);
+  options.slab_budget_bytes = part;
   options.spill_directory = s.temp_dir;
   // The other ranks take a share of the compression once their slabs are
   // sent; the writer calls it on this (the MPI) thread.
@@ -366,8 +404,9 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   StructureStreamWriter& writer = *writer_storage;
   StructureValueWindow values(*structure);
   double writing_during_fdk = 0;  // the writer works inside the FDK's slab hand-over
-  // The values in flight take the preview's quarter of --memory, the
-  // preview being done: slabs are cut thinner until they fit it.
+  // The values in flight take their part (the preview's quarter once the
+  // preview is done, less the structure's share): slabs are cut thinner
+  // until they fit it.
   recon::FdkReconstructor::ValueWindowBound window;
   window.memory_limit = memory_share(s);
   window.writer_slab_slices = writer.slab_slices();
@@ -430,6 +469,9 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   report["memory"]["value_window_budget_bytes"] = window.memory_limit;
   report["slab_slices"] = fdk.slab_slices;
   report["memory"]["need_mask_bytes"] = need_mask_bytes;
+  report["memory"]["structure_held_bytes"] = structure_held;
+  report["memory"]["reconstruction_part_bytes"] = part;
+  report["memory"]["writer_slab_budget_bytes"] = part;
   report["memory"]["structure_bricks_bytes"] = structure->bricks().size() * sizeof(Brick);
   if (mpi) report["ranks"] = ranks_json(ranks);
   if (s.json) {
@@ -544,6 +586,11 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
   auto run = [s, &global](MpiRun* mpi) {
     const auto start = std::chrono::steady_clock::now();
     s->memory = memory_budget(s->memory_mib);
+#if defined(__GLIBC__)
+    // Large buffers always from mmap, so that freeing them returns them
+    // (glibc's threshold otherwise rises to the largest freed, up to 32 MiB).
+    ::mallopt(M_MMAP_THRESHOLD, 1 << 20);
+#endif
     if (!s->structure.empty() && !s->keep.empty())
       throw UsageError("--keep", "--keep and --structure: choose one (--structure uses --threshold)");
     if (lower_extension(s->output) != ".ivol") throw UsageError("-o", "'" + s->output + "' is not an .ivol name");

@@ -170,6 +170,10 @@ class FdkReconstructor {
     return reconstruct_structure(grid, structure, values, progress, ValueWindowBound{});
   }
 
+  // Changes FdkOptions::cpu_device_memory_limit for the reconstructions to
+  // come (the CLI's budget, once the structure's own memory is known).
+  void set_cpu_device_memory_limit(std::uint64_t bytes);
+
   std::vector<std::string> device_names() const;
   // Warnings about the scan (e.g. a short arc), known before reconstructing.
   const std::vector<std::string>& warnings() const;
