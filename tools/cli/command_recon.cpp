@@ -671,6 +671,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     import.encoding = parse_encoding(s->encoding);
     import.framed_blocks = s->format_version == "1.3";
     import.slab_budget_bytes = memory_share(*s);
+    import.memory_bytes = s->memory.bytes;  // the writer's own checks, by the same budget
     import.temp_directory = s->temp_dir;
     import.check_disk_space = false;  // checked above
     double preview_seconds = 0.0;
