@@ -85,13 +85,18 @@ float otsu_threshold(const float* data, std::uint64_t count, unsigned bins) {
     if (!std::isnan(data[i])) lo = std::min(lo, data[i]), hi = std::max(hi, data[i]);
   if (!(hi > lo)) return lo;
   std::vector<double> histogram(bins, 0.0);
-  const double scale = bins / (static_cast<double>(hi) - lo);
+  add_to_otsu_histogram(data, count, lo, hi, histogram);
+  return otsu_threshold_from_histogram(histogram, lo, hi);
+}
+
+void add_to_otsu_histogram(const float* data, std::uint64_t count, float lo, float hi, std::vector<double>& histogram) {
+  const std::uint64_t bins = histogram.size();
+  const double scale = static_cast<double>(bins) / (static_cast<double>(hi) - lo);
   for (std::uint64_t i = 0; i < count; ++i) {
     if (std::isnan(data[i])) continue;
     const auto b = std::min<std::uint64_t>(bins - 1, static_cast<std::uint64_t>((data[i] - lo) * scale));
     histogram[b] += 1.0;
   }
-  return otsu_threshold_from_histogram(histogram, lo, hi);
 }
 
 }  // namespace ivol

@@ -288,6 +288,8 @@ void StructureStreamWriter::write_ready(std::uint32_t z_complete, StructureValue
   impl_->write_ready(z_complete, values);
 }
 
+std::uint32_t StructureStreamWriter::slab_slices() const { return impl_->octree ? impl_->octree->slab_slices() : 1; }
+
 StreamingResult StructureStreamWriter::finish(const Metadata& metadata, StructureValueSource& values) {
   return impl_->finish(metadata, values);
 }

@@ -5,10 +5,13 @@
 #include <atomic>
 #include <cmath>
 #include <stdexcept>
-#include <unordered_map>
+#include <utility>
+#include <vector>
 
 #include "fdk_session.hpp"
+#include "ivol/error.hpp"
 #include "ivol/structure_stream.hpp"
+#include "value_window_model.hpp"
 
 namespace ivol::recon {
 namespace {
@@ -115,14 +118,19 @@ void stack_thin_bricks(const std::vector<Brick>& bricks, SlabIndex& x) {
   x.is_upper.assign(bricks.size(), 0);
   auto key = [](std::uint64_t i, std::uint64_t j, std::uint64_t k) { return (k << 42) | (j << 21) | i; };
   auto thin = [](const Brick& b) { return is_fine(b) && b.count[2] < kDepth; };
-  std::unordered_map<std::uint64_t, std::uint32_t> thin_at;
+  // Thin bricks by their corner, sorted for lookup: 16 bytes each, where a
+  // hash map took about 40 (tens of millions of them at 1152³, issue 23).
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> thin_at;
+  thin_at.reserve(static_cast<std::size_t>(std::count_if(bricks.begin(), bricks.end(), thin)));
   for (std::uint32_t n = 0; n < bricks.size(); ++n)
-    if (thin(bricks[n])) thin_at.emplace(key(bricks[n].origin[0], bricks[n].origin[1], bricks[n].origin[2]), n);
+    if (thin(bricks[n])) thin_at.emplace_back(key(bricks[n].origin[0], bricks[n].origin[1], bricks[n].origin[2]), n);
+  std::sort(thin_at.begin(), thin_at.end());
   for (std::uint32_t n = 0; n < bricks.size(); ++n) {
     const Brick& b = bricks[n];
     if (!thin(b) || x.is_upper[n] || x.upper[n] != kNone) continue;
-    const auto found = thin_at.find(key(b.origin[0], b.origin[1], std::uint64_t{b.origin[2]} + b.count[2]));
-    if (found == thin_at.end()) continue;
+    const std::uint64_t above = key(b.origin[0], b.origin[1], std::uint64_t{b.origin[2]} + b.count[2]);
+    const auto found = std::lower_bound(thin_at.begin(), thin_at.end(), std::make_pair(above, std::uint32_t{0}));
+    if (found == thin_at.end() || found->first != above) continue;
     const std::uint32_t u = found->second;
     const Brick& top = bricks[u];
     if (x.is_upper[u] || x.upper[u] != kNone || top.count[0] != b.count[0] || top.count[1] != b.count[1] ||
@@ -283,10 +291,31 @@ detail::RowBand band_for(const ScanGeometry& geometry, const VolumeGrid& grid, c
   return detail::rows_for_slab(geometry, grid, k0, std::max(k1, k0 + 1));
 }
 
+// The most the value window holds over a reconstruction in these slabs:
+// after slab s is delivered and before the writer catches up, it holds the
+// voxels from where the writer last released (the last whole writer slab
+// below what slab s − 1 completed) up to those slab s and the slabs before
+// it wrote (starting below their highest sample's slice + 1).
+std::uint64_t value_window_peak(const detail::ValueWindowModel& model, const SlabIndex& index,
+                                std::uint32_t writer_slab_slices, std::uint32_t depth) {
+  std::uint64_t peak = 0;
+  std::uint32_t hi = 0;
+  for (std::size_t s = 0; s < index.bricks.size(); ++s) {
+    if (index.bricks[s].empty()) continue;
+    const std::uint32_t completed = s == 0 ? 0 : index.complete_below[s - 1];
+    const std::uint32_t lo = writer_slab_slices > 1 ? completed / writer_slab_slices * writer_slab_slices : completed;
+    hi = std::max(
+        hi, static_cast<std::uint32_t>(std::clamp(std::ceil(index.k_high[s]) + 1.0, 1.0, static_cast<double>(depth))));
+    peak = std::max(peak, model.bytes(lo, hi));
+  }
+  return peak;
+}
+
 }  // namespace
 
 FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const VoxelStructure& structure,
-                                                  StructureValueWindow& values, const StructureProgress& progress) {
+                                                  StructureValueWindow& values, const StructureProgress& progress,
+                                                  const ValueWindowBound& window) {
   const auto start = std::chrono::steady_clock::now();
   Impl& m = *impl_;
   grid.validate();
@@ -301,9 +330,30 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
   // Slabs as thick as a dense reconstruction would use: a slab's task sums
   // never outnumber its voxels by more than the padding of the stacks.
   const detail::SlabPlan plan = detail::plan_slabs(m.problem, m.handles, m.options, {0, grid.size[2]});
-  const SlabOf slab_of{plan.slices, (grid.size[2] + plan.slices - 1) / plan.slices};
+  std::uint32_t slices = plan.slices;
+  std::uint64_t window_bytes = 0;
+  SlabOf slab_of{slices, (grid.size[2] + slices - 1) / slices};
+  SlabIndex index = index_slabs(structure, slab_of);
+  if (window.memory_limit > 0) {
+    // Thinner slabs until the values in flight fit their share.
+    const detail::ValueWindowModel model(structure);
+    while (true) {
+      window_bytes = value_window_peak(model, index, window.writer_slab_slices, grid.size[2]);
+      if (window_bytes <= window.memory_limit) break;
+      if (slices == 1) {
+        m.problem.grid = nullptr;
+        throw Error(ErrorClass::LimitExceeded,
+                    "FDK: the structure's values in flight need " + std::to_string(window_bytes) +
+                        " bytes with one-slice slabs and the writer's slabs of " +
+                        std::to_string(window.writer_slab_slices) + " slices, over their memory budget of " +
+                        std::to_string(window.memory_limit) + " bytes");
+      }
+      slices = std::max<std::uint32_t>(1, slices / 2);
+      slab_of = SlabOf{slices, (grid.size[2] + slices - 1) / slices};
+      index = index_slabs(structure, slab_of);
+    }
+  }
   const std::size_t slab_count = slab_of.count;
-  const SlabIndex index = index_slabs(structure, slab_of);
   std::vector<detail::RowBand> bands;
   int widest = 0;
   for (std::size_t s = 0; s < slab_count; ++s) {
@@ -317,7 +367,8 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
     throw std::runtime_error("FDK: allocating device memory: " + detail::describe(error));
   }
   report.slab_count = slab_count;
-  report.slab_slices = plan.slices;
+  report.slab_slices = slices;
+  report.value_window_model_bytes = window_bytes;
   report.device_bytes_per_slab = plan.bytes;
   const std::vector<detail::DeviceTimings> before = m.device_timings();
   const double constructor_setup = m.setup_seconds;
@@ -364,7 +415,7 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
           if (progress) progress(index.complete_below[s]);
           delivering += detail::seconds_since(delivery_start);
         },
-        m.options.exchange.get(), plan.slices);
+        m.options.exchange.get(), slices);
   } catch (...) {
     m.problem.grid = nullptr;
     throw;

@@ -1,18 +1,19 @@
 #include "ivol/recon/preview.hpp"
 
-#include <fcntl.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <functional>
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
+#include "host_spool.hpp"
+#include "ivol/error.hpp"
 #include "ivol/keep_mask.hpp"
 
 namespace ivol::recon {
@@ -32,19 +33,25 @@ VolumeGrid coarsened(const VolumeGrid& full, unsigned factor) {
   return coarse;
 }
 
-// FDK of `grid` from every `thinning`-th view with thinning² pixels merged
-// (fewer where the scan is small); each z-slice goes to `slice` in order, on
-// rank 0 only when distributed.
-void reconstruct_thinned(ProjectionSource& projections, const ScanGeometry& geometry, const FdkOptions& options,
-                         const VolumeGrid& grid, unsigned thinning,
-                         const std::function<void(std::uint32_t k, const float* values)>& slice) {
-  // Keep at least a few pixels and views when the scan is small.
+// Every view_step-th view, bin² pixels merged: `thinning` each, less where
+// that would leave too few pixels or views (a small scan).
+std::pair<unsigned, unsigned> thinned_steps(const ScanGeometry& geometry, unsigned thinning) {
   unsigned bin = thinning;
   while (bin > 1 && (geometry.detector.columns / static_cast<int>(bin) < 16 ||
                      geometry.detector.rows / static_cast<int>(bin) < 16))
     bin /= 2;
   unsigned view_step = thinning;
   while (view_step > 1 && geometry.view_count() / view_step < 32) view_step /= 2;
+  return {view_step, bin};
+}
+
+// FDK of `grid` from every `thinning`-th view with thinning² pixels merged
+// (fewer where the scan is small); each z-slice goes to `slice` in order, on
+// rank 0 only when distributed.
+void reconstruct_thinned(ProjectionSource& projections, const ScanGeometry& geometry, const FdkOptions& options,
+                         const VolumeGrid& grid, unsigned thinning,
+                         const std::function<void(std::uint32_t k, const float* values)>& slice) {
+  const auto [view_step, bin] = thinned_steps(geometry, thinning);
   ReducedProjections reduced(projections, view_step, bin);
   const ScanGeometry reduced_geometry = reduce_scan(geometry, view_step, bin);
   FdkReconstructor reconstructor(reduced, reduced_geometry, options);
@@ -82,80 +89,6 @@ void check_factor(unsigned factor, unsigned smallest) {
 double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
-
-// Finished layers of cells until the threshold is known: in host memory
-// while the budget lasts, the rest in an unlinked temporary file.
-class CellLayers {
- public:
-  CellLayers(std::size_t area, std::uint64_t budget, std::string directory)
-      : area_(area), budget_(budget), directory_(std::move(directory)) {
-    if (directory_.empty()) {
-      const char* tmpdir = std::getenv("TMPDIR");
-      directory_ = tmpdir != nullptr && *tmpdir != '\0' ? tmpdir : "/tmp";
-    }
-  }
-  CellLayers(const CellLayers&) = delete;
-  CellLayers& operator=(const CellLayers&) = delete;
-  ~CellLayers() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-
-  void put(std::size_t layer, const float* values) {
-    if (layer < held_.size() || (held_.size() == layer && (layer + 1) * bytes() <= budget_)) {
-      held_.resize(std::max(held_.size(), layer + 1));
-      held_[layer].assign(values, values + area_);
-      return;
-    }
-    if (fd_ < 0) open_file();
-    transfer(true, layer, const_cast<float*>(values));
-    spilled_ += bytes();
-  }
-  void get(std::size_t layer, float* values) {
-    if (layer < held_.size()) {
-      std::copy(held_[layer].begin(), held_[layer].end(), values);
-      return;
-    }
-    transfer(false, layer, values);
-  }
-  std::uint64_t held_bytes() const { return held_.size() * bytes(); }
-  std::uint64_t spilled_bytes() const { return spilled_; }
-
- private:
-  std::uint64_t bytes() const { return area_ * sizeof(float); }
-  void open_file() {
-    fd_ = ::open(directory_.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
-    if (fd_ >= 0) return;
-    std::string name = directory_ + "/ivol-preview-XXXXXX";
-    fd_ = ::mkstemp(name.data());
-    if (fd_ < 0)
-      throw std::runtime_error("detection preview: the preview exceeds its memory budget of " +
-                               std::to_string(budget_) + " bytes and no temporary file can be made in '" + directory_ +
-                               "': " + std::strerror(errno));
-    ::unlink(name.c_str());
-  }
-  // Layers past those held lie one after another from the file's start.
-  void transfer(bool write, std::size_t layer, float* values) {
-    auto* at = reinterpret_cast<char*>(values);
-    std::uint64_t left = bytes();
-    auto offset = static_cast<off_t>((layer - held_.size()) * bytes());
-    while (left > 0) {
-      const ssize_t n = write ? ::pwrite(fd_, at, left, offset) : ::pread(fd_, at, left, offset);
-      if (n < 0 && errno == EINTR) continue;
-      if (n <= 0)
-        throw std::runtime_error("detection preview: " + std::string(write ? "writing" : "reading") +
-                                 " the temporary file in '" + directory_ +
-                                 "' failed: " + (n < 0 ? std::strerror(errno) : "end of file"));
-      at += n, left -= static_cast<std::uint64_t>(n), offset += n;
-    }
-  }
-
-  std::size_t area_;
-  std::uint64_t budget_;
-  std::string directory_;
-  std::vector<std::vector<float>> held_;
-  int fd_ = -1;
-  std::uint64_t spilled_ = 0;
-};
 
 }  // namespace
 
@@ -221,87 +154,168 @@ Preview reconstruct_detection_preview(ProjectionSource& projections, const ScanG
   return preview;
 }
 
-DetectionMask detect_need_mask(ProjectionSource& projections, const ScanGeometry& geometry, const FdkOptions& options,
-                               const VolumeGrid& full, const DetectionMaskOptions& detection) {
+namespace {
+
+// The detection preview's shapes: samples at 1/spacing, `ratio` of them per
+// cell and axis, each cell the largest sample within `reach` samples of it.
+struct DetectionShape {
+  unsigned ratio = 1, spacing = 1, reach = 0;
+  VolumeGrid samples, cells;
+  std::size_t ring_layers = 0;      // slices pooled along x and y, held at once
+  std::size_t otsu_row_floats = 0;  // one sample in eight of an even slice
+};
+
+DetectionShape detection_shape(const VolumeGrid& full, const DetectionMaskOptions& detection) {
   const DetectionRule& rule = detection.rule;
   check_factor(rule.factor, 2);
   if (rule.thinning == 0 || !is_power_of_two(rule.thinning))
     throw std::invalid_argument("detection preview: the thinning must be a power of two");
+  DetectionShape shape;
+  shape.ratio = rule.factor > 2 ? 2 : 1;
+  shape.spacing = rule.factor / shape.ratio;
+  shape.reach = (detection.margin_voxels + shape.spacing - 1) / shape.spacing;
+  shape.samples = coarsened(full, shape.spacing);
+  shape.cells = coarsened(full, rule.factor);
+  shape.ring_layers = shape.ratio + 2 * shape.reach + 1;
+  shape.otsu_row_floats = ((shape.samples.size[0] + 1) / 2) * ((shape.samples.size[1] + 1) / 2);
+  return shape;
+}
+
+std::uint64_t packed_mask_bytes(const VolumeGrid& cells) { return (cells.voxel_count() + 63) / 64 * 8; }
+
+}  // namespace
+
+std::uint64_t detection_fixed_bytes(const VolumeGrid& full, const DetectionMaskOptions& detection) {
+  const DetectionShape shape = detection_shape(full, detection);
+  const std::uint64_t area = std::uint64_t{shape.cells.size[0]} * shape.cells.size[1];
+  const std::uint64_t floats = shape.ring_layers * area + std::uint64_t{shape.cells.size[0]} * shape.samples.size[1] +
+                               area + shape.otsu_row_floats;
+  return floats * sizeof(float) + packed_mask_bytes(shape.cells);
+}
+
+std::uint64_t detection_temp_bytes(const ScanGeometry& geometry, const FdkOptions& options, const VolumeGrid& full,
+                                   const DetectionMaskOptions& detection) {
+  const DetectionShape shape = detection_shape(full, detection);
+  const std::uint64_t fixed = detection_fixed_bytes(full, detection);
+  const std::uint64_t records =
+      (shape.cells.voxel_count() + shape.otsu_row_floats * ((std::uint64_t{shape.samples.size[2]} + 1) / 2)) *
+      sizeof(float);
+  const std::uint64_t room = detection.preview_memory > fixed ? detection.preview_memory - fixed : 0;
+  const auto [view_step, bin] = thinned_steps(geometry, detection.rule.thinning);
+  return (records > room ? records - room : 0) +
+         filtered_rows_disk_bound(reduce_scan(geometry, view_step, bin), options);
+}
+
+DetectionMask detect_need_mask(ProjectionSource& projections, const ScanGeometry& geometry, const FdkOptions& options,
+                               const VolumeGrid& full, const DetectionMaskOptions& detection) {
+  const DetectionShape shape = detection_shape(full, detection);
+  // The buffers below and the packed mask are held whatever the budget;
+  // refused before any work when the budget cannot hold them.
+  const std::uint64_t fixed_bytes = detection_fixed_bytes(full, detection);
+  if (detection.preview_memory < fixed_bytes)
+    throw Error(
+        ErrorClass::LimitExceeded,
+        "detection preview: its memory budget of " + std::to_string(detection.preview_memory) + " bytes is below the " +
+            std::to_string(fixed_bytes) + " bytes it holds whatever the budget (" + std::to_string(shape.ring_layers) +
+            " slices of " + std::to_string(shape.cells.size[0]) + "x" + std::to_string(shape.cells.size[1]) +
+            " cells, a need mask of 1 bit per cell: " + std::to_string(packed_mask_bytes(shape.cells)) + " bytes)");
   const auto start = std::chrono::steady_clock::now();
   // The same samples and pooling as reconstruct_detection_preview.
-  const unsigned ratio = rule.factor > 2 ? 2 : 1;
-  const unsigned spacing = rule.factor / ratio;
-  const unsigned reach = (detection.margin_voxels + spacing - 1) / spacing;
-  const VolumeGrid samples = coarsened(full, spacing);
+  const unsigned ratio = shape.ratio, reach = shape.reach;
   DetectionMask result;
-  result.grid = coarsened(full, rule.factor);
-  const std::size_t sx = samples.size[0], sy = samples.size[1], sz = samples.size[2];
+  result.grid = shape.cells;
+  const std::size_t sx = shape.samples.size[0], sy = shape.samples.size[1], sz = shape.samples.size[2];
   const std::size_t cx = result.grid.size[0], cy = result.grid.size[1], cz = result.grid.size[2];
   const std::size_t area = cx * cy;
   // Slices pooled along x and y, in a ring: cell layer c takes the slices
   // [ratio·c − reach, ratio·c + ratio + reach), at most ratio + 2·reach.
-  const std::size_t ring_layers = ratio + 2 * reach + 1;
+  const std::size_t ring_layers = shape.ring_layers;
   std::vector<float> ring(ring_layers * area);
   std::vector<float> along_x(cx * sy);
   std::vector<float> cells(area);
-  std::vector<float> otsu_samples;
-  otsu_samples.reserve(((sx + 1) / 2) * ((sy + 1) / 2) * ((sz + 1) / 2));
-  // The budget covers everything the preview holds; the cell layers take
-  // what the ring, the samples for Otsu and the need mask (a byte per cell)
-  // leave of it.
-  const std::uint64_t fixed_bytes =
-      (ring.size() + along_x.size() + cells.size() + otsu_samples.capacity()) * sizeof(float) + area * cz;
-  CellLayers layers(area, detection.preview_memory > fixed_bytes ? detection.preview_memory - fixed_bytes : 0,
-                    detection.temp_directory);
+  std::vector<float> otsu_row(shape.otsu_row_floats);
+  // What the budget leaves beyond those is shared by the finished cell
+  // layers and the samples for Otsu's threshold (one in eight, every even
+  // slice's), first come first held; the rest goes to temporary files.
+  detail::HostAllowance allowance{detection.preview_memory - fixed_bytes, 0};
+  detail::RecordSpool layers(area, allowance, detection.temp_directory, "the detection preview's cells");
+  detail::RecordSpool otsu_samples(otsu_row.size(), allowance, detection.temp_directory,
+                                   "the detection preview's samples for Otsu's threshold");
+  // Otsu's range, as otsu_threshold finds it (NaN ignored).
+  float lo = std::numeric_limits<float>::infinity(), hi = -std::numeric_limits<float>::infinity();
   std::size_t next_layer = 0;
   auto finish_layers_through = [&](std::size_t k) {
     for (; next_layer < cz; ++next_layer) {
       const std::size_t c = next_layer;
-      const std::size_t lo = ratio * c >= reach ? ratio * c - reach : 0;
-      const std::size_t hi = std::min(sz, ratio * c + ratio + reach);
-      if (hi - 1 > k) return;
+      const std::size_t lo_slice = ratio * c >= reach ? ratio * c - reach : 0;
+      const std::size_t hi_slice = std::min(sz, ratio * c + ratio + reach);
+      if (hi_slice - 1 > k) return;
       std::fill(cells.begin(), cells.end(), -std::numeric_limits<float>::infinity());
-      for (std::size_t z = lo; z < hi; ++z) {
+      for (std::size_t z = lo_slice; z < hi_slice; ++z) {
         const float* pooled = &ring[(z % ring_layers) * area];
         for (std::size_t i = 0; i < area; ++i) cells[i] = std::max(cells[i], pooled[i]);
       }
       layers.put(c, cells.data());
     }
   };
-  reconstruct_thinned(projections, geometry, options, samples, rule.thinning,
+  reconstruct_thinned(projections, geometry, options, shape.samples, detection.rule.thinning,
                       [&](std::uint32_t k, const float* values) {
                         for (std::size_t j = 0; j < sy; ++j)
                           pool_line(values + j * sx, sx, 1, ratio, reach, &along_x[j * cx], cx, 1);
                         float* pooled = &ring[(k % ring_layers) * area];
                         for (std::size_t i = 0; i < cx; ++i)
                           pool_line(&along_x[i], sy, cx, ratio, reach, pooled + i, cy, cx);
-                        if (k % 2 == 0)
+                        if (k % 2 == 0) {
+                          std::size_t n = 0;
                           for (std::size_t j = 0; j < sy; j += 2)
-                            for (std::size_t i = 0; i < sx; i += 2) otsu_samples.push_back(values[j * sx + i]);
+                            for (std::size_t i = 0; i < sx; i += 2) {
+                              const float v = values[j * sx + i];
+                              otsu_row[n++] = v;
+                              if (!std::isnan(v)) lo = std::min(lo, v), hi = std::max(hi, v);
+                            }
+                          otsu_samples.put(k / 2, otsu_row.data());
+                        }
                         finish_layers_through(k);
                       });
   const bool distributed = options.exchange && options.exchange->size() > 1;
   const bool producer = !distributed || options.exchange->rank() == 0;
   if (producer && next_layer != cz) throw std::logic_error("detection preview: not every cell layer was pooled");
-  share(options, otsu_samples);
-  result.otsu_threshold = otsu_threshold(otsu_samples.data(), otsu_samples.size());
-  result.threshold =
-      detection.threshold ? *detection.threshold : static_cast<float>(rule.otsu_share * result.otsu_threshold);
-  result.peak_preview_bytes = fixed_bytes + layers.held_bytes();
-  result.spilled_bytes = layers.spilled_bytes();
-  std::vector<float>().swap(otsu_samples);
+  result.peak_preview_bytes = fixed_bytes + allowance.held;
+  result.spilled_bytes = layers.spilled_bytes() + otsu_samples.spilled_bytes();
+  // Otsu's threshold of the samples, as otsu_threshold over all of them at
+  // once: the same range and the same 256 bins, the histogram added to
+  // record by record (the samples are not all held: issue 23).
+  std::vector<float> otsu{lo};
+  if (producer && hi > lo) {
+    std::vector<double> histogram(256, 0.0);
+    for (std::size_t r = 0; r < otsu_samples.count(); ++r) {
+      otsu_samples.get(r, otsu_row.data());
+      add_to_otsu_histogram(otsu_row.data(), otsu_row.size(), lo, hi, histogram);
+    }
+    otsu[0] = otsu_threshold_from_histogram(histogram, lo, hi);
+  }
+  otsu_samples.release();
+  std::vector<float>().swap(otsu_row);
+  share(options, otsu);
+  result.otsu_threshold = otsu[0];
+  result.threshold = detection.threshold ? *detection.threshold
+                                         : static_cast<float>(detection.rule.otsu_share * result.otsu_threshold);
   // The second pass: each layer of cells against the threshold, as
-  // threshold_keep_mask with no margin (the margin was applied in pooling).
-  const Dims full_dims{full.size[0], full.size[1], full.size[2]};
-  result.mask.dims = full_dims;
-  result.mask.factor = rule.factor;
+  // threshold_keep_mask with no margin (the margin was applied in pooling),
+  // into a mask of one bit per cell.
+  result.mask.dims = Dims{full.size[0], full.size[1], full.size[2]};
+  result.mask.factor = detection.rule.factor;
   result.mask.cells = Dims{result.grid.size[0], result.grid.size[1], result.grid.size[2]};
-  result.mask.need.assign(area * cz, 0);
+  result.mask.bits.assign(packed_mask_bytes(result.grid) / 8, 0);
   for (std::size_t c = 0; c < cz; ++c) {
     if (producer) layers.get(c, cells.data());
     share(options, cells);
-    std::uint8_t* need = &result.mask.need[c * area];
-    for (std::size_t i = 0; i < area; ++i) need[i] = cells[i] > result.threshold ? 1 : 0;
+    const std::uint64_t first = std::uint64_t{c} * area;
+    for (std::size_t i = 0; i < area; ++i)
+      if (cells[i] > result.threshold) {
+        const std::uint64_t n = first + i;
+        result.mask.bits[n >> 6] |= std::uint64_t{1} << (n & 63);
+      }
   }
   result.seconds = seconds_since(start);
   return result;

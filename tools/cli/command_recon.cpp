@@ -2,6 +2,9 @@
 // straight into an .ivol file slab by slab.
 #include <chrono>
 #include <cstdlib>
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
@@ -21,6 +24,7 @@
 #include "mpi_exchange.hpp"
 #include "option_parsing.hpp"
 #include "output_rules.hpp"
+#include "recon_budget.hpp"
 #include "recon_built_slabs.hpp"
 #include "recon_slabs.hpp"
 #include "report.hpp"
@@ -48,13 +52,25 @@ struct ReconSettings {
   std::string refine = "detection";
   unsigned margin = 2;
   std::uint32_t nested_cell = 16;
-  unsigned preview_factor = 0;  // 0: the rule's own (2 for detection, 4 for the preview rule and --keep)
-  std::uint64_t memory_mib = 1024;
-  std::string temp_dir;  // the octree writer's spill file (--temp-dir)
+  unsigned preview_factor = 0;   // 0: the rule's own (2 for detection, 4 for the preview rule and --keep)
+  std::uint64_t memory_mib = 0;  // 0: memory_budget's default
+  MemoryBudget memory;           // what the run uses (set when it starts)
+  std::string temp_dir;          // the octree writer's spill file (--temp-dir)
   bool no_disk_check = false;
   bool json = false;
   bool force = false;
 };
+
+// Gives the heap's free memory back to the system between phases: glibc
+// keeps what a phase freed (the preview's cell layers, the generator's
+// parts) and, its mmap threshold raised by the first large free, serves
+// later large buffers from the heap, so RSS kept a phase's peak (issue 23,
+// bench/RESULTS.md).
+void return_free_memory() {
+#if defined(__GLIBC__)
+  ::malloc_trim(0);
+#endif
+}
 
 // One size for every axis or one per axis (x, y, z: z along the rotation axis).
 recon::Vec3 parse_voxel(const std::string& text) {
@@ -73,11 +89,12 @@ nlohmann::json voxel_json(const recon::VolumeGrid& grid) {
 
 // A quarter of --memory: the writer's slab, the filtered rows and (on CPU
 // devices) the device's slabs take one each.
-std::uint64_t memory_share(const ReconSettings& s) { return (s.memory_mib << 20) / 4; }
+std::uint64_t memory_share(const ReconSettings& s) { return s.memory.bytes / 4; }
 
 // Each part's peak host memory (or temporary disk), for the report.
 nlohmann::json memory_json(const ReconSettings& s, const recon::FdkReport& fdk, std::size_t devices) {
-  return {{"budget_bytes", s.memory_mib << 20},
+  return {{"budget_bytes", s.memory.bytes},
+          {"budget_rule", s.memory.rule},
           {"device_slab_bytes", fdk.device_bytes_per_slab * devices},
           {"filtered_rows_host_bytes", fdk.filtered_rows_host_bytes},
           {"filtered_rows_disk_bytes", fdk.filtered_rows_disk_bytes},
@@ -239,6 +256,18 @@ struct FoundObject {
   std::uint64_t preview_spilled_bytes = 0;
 };
 
+recon::DetectionMaskOptions detection_options(const ReconSettings& s, const recon::FdkOptions& fdk_options,
+                                              unsigned factor, std::optional<float> given_threshold) {
+  recon::DetectionMaskOptions options;
+  options.rule = kDetection;
+  options.rule.factor = factor;
+  options.margin_voxels = s.margin;
+  options.threshold = given_threshold;
+  options.preview_memory = memory_share(s);
+  options.temp_directory = fdk_options.temp_directory;  // where the filtered rows go
+  return options;
+}
+
 // The refinement rule (docs/refinement.md). detection: each preview cell the
 // largest sample of a 1/(factor/2) reconstruction within the margin of it,
 // against a share of Otsu's threshold that covers the preview's blur; the
@@ -253,13 +282,7 @@ FoundObject find_object(const ReconSettings& s, const recon::VolumeGrid& grid, c
                         OpenedScan& scan, bool detection, unsigned factor, std::optional<float> given_threshold) {
   FoundObject found;
   if (detection) {
-    recon::DetectionMaskOptions options;
-    options.rule = kDetection;
-    options.rule.factor = factor;
-    options.margin_voxels = s.margin;
-    options.threshold = given_threshold;
-    options.preview_memory = memory_share(s);
-    options.temp_directory = fdk_options.temp_directory;  // where the filtered rows go
+    const recon::DetectionMaskOptions options = detection_options(s, fdk_options, factor, given_threshold);
     recon::DetectionMask detected =
         recon::detect_need_mask(*scan.projections, scan.geometry, fdk_options, grid, options);
     found.mask = std::move(detected.mask);
@@ -285,15 +308,14 @@ FoundObject find_object(const ReconSettings& s, const recon::VolumeGrid& grid, c
 // The paper's pipeline: a low-resolution preview finds the object, the
 // structure is generated from it, the FDK backprojects into the structure's
 // voxels only, and the structure is written as an .ivol file of its kind
-// while the slabs finish. Peak host memory: the preview (1/factor³ of the
-// dense volume), the structure's bricks (40 bytes each), the values of the
-// voxels between the writer's slab and the slabs in flight
-// (StructureValueWindow), the writer's slab (--memory / 4), the filtered
-// detector rows (--memory / 4, the rest in a temporary file), on CPU devices
-// the device's buffers (--memory / 4) and the task lists of the slabs in
-// flight; never the dense volume nor all the values. The detection preview
-// holds its cell layers within --memory / 4 (shared with the value window,
-// unenforced), the rest in a temporary file in --temp-dir.
+// while the slabs finish. Host memory, by quarters of --memory (README,
+// "ivol recon"): the writer's slab, the filtered detector rows (the rest in
+// a temporary file), on CPU devices the device's buffers, and the detection
+// preview (cells and Otsu's samples beyond it in temporary files; its ring
+// and the 1-bit need mask refused when they do not fit) and then the
+// structure's value window (slabs thinned to fit it). Beyond --memory: the
+// structure's bricks (48 bytes each) and the FDK's index of them, the task
+// lists of the slabs in flight. Never the dense volume nor all the values.
 int run_structure(const ReconSettings& s, const GlobalOptions& global, const recon::VolumeGrid& grid,
                   const recon::FdkOptions& fdk_options, OpenedScan& scan, recon::FdkReconstructor& reconstructor,
                   Metadata metadata, const std::function<void(Metadata&)>& complete_metadata,
@@ -304,14 +326,24 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   const unsigned factor = s.preview_factor ? s.preview_factor : detection ? kDetection.factor : 4;
   std::optional<float> given_threshold;
   if (s.threshold != "otsu") given_threshold = static_cast<float>(parse_number(s.threshold, "--threshold"));
-  const FoundObject found = find_object(s, grid, fdk_options, scan, detection, factor, given_threshold);
+  FoundObject found = find_object(s, grid, fdk_options, scan, detection, factor, given_threshold);
+  return_free_memory();
   const float threshold = found.threshold;
-  const NeedMask& mask = found.mask;
   auto generation_start = std::chrono::steady_clock::now();
   GenerationOptions generation;
   generation.nested_cell = s.nested_cell;
-  std::unique_ptr<VoxelStructure> structure = generate_structure(kind, mask, generation);
+  std::unique_ptr<VoxelStructure> structure = generate_structure(kind, found.mask, generation);
   const double generating = seconds_since(generation_start);
+  // The structure holds what the reconstruction needs of the mask.
+  const std::uint64_t need_mask_bytes = found.mask.memory_bytes();
+  found.mask = NeedMask{};
+  return_free_memory();
+  if (!global.quiet && (!mpi || mpi->rank() == 0))
+    std::cerr << std::fixed << std::setprecision(1) << "ivol recon: preview " << found.seconds << " s (held "
+              << human_bytes(found.preview_bytes) << ", spilled " << human_bytes(found.preview_spilled_bytes)
+              << "); structure generated in " << generating << " s: " << structure->bricks().size() << " bricks ("
+              << human_bytes(structure->bricks().size() * sizeof(Brick)) << "), " << structure->voxel_count()
+              << " voxels\n";
 
   metadata.provenance["reconstruction"]["structure"] = {
       {"kind", s.structure},
@@ -337,9 +369,25 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
     mpi->gather(rank_stats(mine, start));
     return kExitOk;
   }
+  // The structure's bricks (and the FDK's and the writer's index of them,
+  // about 13 bytes a brick) now count against --memory: the device slabs on
+  // CPU devices and the writer's slab share what they leave with the
+  // filtered rows and the value window, a quarter each but no less than a
+  // sixteenth of --memory each (below that, slabs would be too thin to be
+  // worth it; the run then goes over --memory, which the notes say). The
+  // value window keeps its quarter (the preview's, the preview being done):
+  // at 1152³ it needed 125 MiB with one-slice slabs (bench/RESULTS.md).
+  const std::uint64_t structure_held = structure->bricks().size() * (sizeof(Brick) + 13);
+  const std::uint64_t left = s.memory.bytes > structure_held ? s.memory.bytes - structure_held : 0;
+  const std::uint64_t part = std::min(memory_share(s), std::max(left / 4, s.memory.bytes / 16));
+  reconstructor.set_cpu_device_memory_limit(part);
+  if (!global.quiet && 4 * part > left)
+    std::cerr << "ivol recon: the structure's " << human_bytes(structure_held) << " leave " << human_bytes(left)
+              << " of --memory; its parts take " << human_bytes(part) << " each, going over --memory by "
+              << human_bytes(4 * part + structure_held - s.memory.bytes) << "\n";
   StreamingOptions options;
   options.build.encoding = parse_encoding(s.encoding);
-  options.slab_budget_bytes = memory_share(s);
+  options.slab_budget_bytes = part;
   options.spill_directory = s.temp_dir;
   // The other ranks take a share of the compression once their slabs are
   // sent; the writer calls it on this (the MPI) thread.
@@ -356,12 +404,20 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   StructureStreamWriter& writer = *writer_storage;
   StructureValueWindow values(*structure);
   double writing_during_fdk = 0;  // the writer works inside the FDK's slab hand-over
-  const recon::FdkReport fdk =
-      reconstructor.reconstruct_structure(grid, *structure, values, [&](std::uint32_t z_complete) {
+  // The values in flight take their part (the preview's quarter once the
+  // preview is done, less the structure's share): slabs are cut thinner
+  // until they fit it.
+  recon::FdkReconstructor::ValueWindowBound window;
+  window.memory_limit = memory_share(s);
+  window.writer_slab_slices = writer.slab_slices();
+  const recon::FdkReport fdk = reconstructor.reconstruct_structure(
+      grid, *structure, values,
+      [&](std::uint32_t z_complete) {
         const auto began = std::chrono::steady_clock::now();
         writer.write_ready(z_complete, values);
         writing_during_fdk += seconds_since(began);
-      });
+      },
+      window);
   if (mpi) mpi->every_slab_received();  // the rest of the file is compressed on every rank
   if (complete_metadata) complete_metadata(metadata);
   const StreamingResult written = writer.finish(metadata, values);
@@ -409,6 +465,14 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   report["memory"]["preview_bytes"] = found.preview_bytes;
   report["memory"]["preview_spilled_bytes"] = found.preview_spilled_bytes;
   report["memory"]["value_window_bytes"] = values.peak_bytes();
+  report["memory"]["value_window_model_bytes"] = fdk.value_window_model_bytes;
+  report["memory"]["value_window_budget_bytes"] = window.memory_limit;
+  report["slab_slices"] = fdk.slab_slices;
+  report["memory"]["need_mask_bytes"] = need_mask_bytes;
+  report["memory"]["structure_held_bytes"] = structure_held;
+  report["memory"]["reconstruction_part_bytes"] = part;
+  report["memory"]["writer_slab_budget_bytes"] = part;
+  report["memory"]["structure_bricks_bytes"] = structure->bricks().size() * sizeof(Brick);
   if (mpi) report["ranks"] = ranks_json(ranks);
   if (s.json) {
     std::cout << report.dump(2) << "\n";
@@ -502,12 +566,13 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
                   "detection, 4 with --refine preview and --keep ...otsu)")
       ->check(CLI::IsMember({2, 4, 8, 16, 32}));
   out->add_option("--memory", s->memory_mib,
-                  "About how many MiB of host memory the run may use: a quarter each for the writer's slab, the "
-                  "filtered detector rows (the rest go to a temporary file, see --temp-dir), on CPU devices the "
-                  "device's slabs and, with --structure, the detection preview's cells (the rest to a temporary "
-                  "file)")
-      ->check(whole_number())
-      ->capture_default_str();
+                  "About how many MiB of host memory the run may use (default: half of the memory cgroup's limit "
+                  "when one is set, else half of MemAvailable, at least 256 MiB; printed in the notes and --json): "
+                  "a quarter each for the writer's slab, the filtered detector rows (the rest go to a temporary "
+                  "file, see --temp-dir), on CPU devices the device's slabs and, with --structure, the detection "
+                  "preview (its cells and the samples for Otsu's threshold, the rest to a temporary file; the need "
+                  "mask at 1 bit per cell) and then the structure's value window (slabs are cut thinner to fit)")
+      ->check(whole_number());
   out->add_option(
       "--temp-dir", s->temp_dir,
       "Directory of the octree writer's temporary spill file and of the filtered detector rows and the "
@@ -520,6 +585,12 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
   // mpi: this process is one rank of a distributed run (mpirun), or null.
   auto run = [s, &global](MpiRun* mpi) {
     const auto start = std::chrono::steady_clock::now();
+    s->memory = memory_budget(s->memory_mib);
+#if defined(__GLIBC__)
+    // Large buffers always from mmap, so that freeing them returns them
+    // (glibc's threshold otherwise rises to the largest freed, up to 32 MiB).
+    ::mallopt(M_MMAP_THRESHOLD, 1 << 20);
+#endif
     if (!s->structure.empty() && !s->keep.empty())
       throw UsageError("--keep", "--keep and --structure: choose one (--structure uses --threshold)");
     if (lower_extension(s->output) != ".ivol") throw UsageError("-o", "'" + s->output + "' is not an .ivol name");
@@ -541,12 +612,6 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     s->scan.memory_bytes = s->memory_mib << 20;
     OpenedScan scan = open_scan(s->scan);
     const recon::VolumeGrid grid = grid_of(*s, scan);
-    // Before any work (the preview included): the file and, for an octree,
-    // the spill file must find room (convert/disk_space.hpp).
-    if (writes && !s->no_disk_check)
-      convert::require_disk_space(convert::ivol_disk_needs(grid.size, parse_encoding(s->encoding),
-                                                           s->structure.empty() || s->structure == "octree", s->output,
-                                                           s->temp_dir));
     recon::FdkOptions options;
     options.window = recon::parse_ramp_window(s->window);
     options.cutoff = s->cutoff;
@@ -572,6 +637,21 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     // Distributed, rank 0 writes the file and reports; the others only reconstruct.
     const bool root = !mpi || mpi->rank() == 0;
     const bool quiet = global.quiet || !root;
+    // Before any work (the preview included): every file the run writes must
+    // find room, the output and each temporary file (recon_budget.hpp).
+    if (writes && !s->no_disk_check) {
+      std::optional<recon::DetectionMaskOptions> detection;
+      if (!s->structure.empty() && s->refine == "detection")
+        detection =
+            detection_options(*s, options, s->preview_factor ? s->preview_factor : kDetection.factor, std::nullopt);
+      const ReconDiskNeeds needs =
+          recon_disk_needs(scan.geometry, grid, options, detection, parse_encoding(s->encoding),
+                           s->structure.empty() || s->structure == "octree", s->output, s->temp_dir);
+      convert::require_disk_space(needs.reconstruction);
+      convert::require_disk_space(needs.preview);
+    }
+    if (!quiet)
+      std::cerr << "ivol recon: memory budget " << human_bytes(s->memory.bytes) << ": " << s->memory.rule << "\n";
     // Distributed and dense, each rank reconstructs whole writer slabs by
     // itself (recon_built_slabs.hpp); the preview is still shared.
     recon::FdkOptions reconstructor_options = options;
@@ -591,6 +671,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     import.encoding = parse_encoding(s->encoding);
     import.framed_blocks = s->format_version == "1.3";
     import.slab_budget_bytes = memory_share(*s);
+    import.memory_bytes = s->memory.bytes;  // the writer's own checks, by the same budget
     import.temp_directory = s->temp_dir;
     import.check_disk_space = false;  // checked above
     double preview_seconds = 0.0;

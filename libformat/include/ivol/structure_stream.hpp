@@ -105,6 +105,9 @@ class StructureStreamWriter {
   // Writes what depends only on voxels starting below slice z_complete (all
   // final in `values`) and releases from `values` what no later part needs.
   void write_ready(std::uint32_t z_complete, StructureValueSource& values);
+  // Slices the writer writes at once (the octree's slab; 1 for the grids,
+  // written value by value): how far behind z_complete it may release.
+  std::uint32_t slab_slices() const;
   // Writes the rest (every value must now be final) and renames the file
   // into place.
   StreamingResult finish(const Metadata& metadata, StructureValueSource& values);

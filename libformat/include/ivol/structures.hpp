@@ -96,13 +96,20 @@ class VoxelStructure {
 // mask over a low-resolution grid whose cells are `factor` full-resolution
 // voxels wide (factor a power of two; 1 = full resolution).
 struct NeedMask {
-  Dims dims{};                   // full-resolution dimensions of the volume
-  std::uint32_t factor = 1;      // full-resolution voxels per mask cell, per axis
-  Dims cells{};                  // ceil(dims / factor)
+  Dims dims{};                     // full-resolution dimensions of the volume
+  std::uint32_t factor = 1;        // full-resolution voxels per mask cell, per axis
+  Dims cells{};                    // ceil(dims / factor)
   std::vector<std::uint8_t> need;  // 1 where the cell needs full resolution, [z][y][x]
+  // Or the same cells one bit each (cell n is bit n % 64 of word n / 64),
+  // with `need` empty: an eighth of the memory, for masks of large volumes
+  // (recon::detect_need_mask). at() reads either form.
+  std::vector<std::uint64_t> bits;
+  bool packed() const { return !bits.empty(); }
+  bool at(std::uint64_t n) const { return packed() ? ((bits[n >> 6] >> (n & 63)) & 1U) != 0 : need[n] != 0; }
   bool at(std::uint32_t i, std::uint32_t j, std::uint32_t k) const {
-    return need[(std::uint64_t{k} * cells[1] + j) * cells[0] + i] != 0;
+    return at((std::uint64_t{k} * cells[1] + j) * cells[0] + i);
   }
+  std::uint64_t memory_bytes() const { return need.size() + bits.size() * sizeof(std::uint64_t); }
 };
 
 // The paper's rule on a low-resolution reconstruction: cells above

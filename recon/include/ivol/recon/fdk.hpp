@@ -112,6 +112,9 @@ struct FdkReport {
   // cache_filtered_rows).
   std::uint64_t filtered_rows_host_bytes = 0;
   std::uint64_t filtered_rows_disk_bytes = 0;
+  // The structure path with a value window bound: the most the model of the
+  // value window gave for the slabs chosen (0 without a bound).
+  std::uint64_t value_window_model_bytes = 0;
 };
 
 // Receives slices [k_begin, k_end) of the volume, nx·ny·(k_end − k_begin)
@@ -148,9 +151,28 @@ class FdkReconstructor {
   // of the voxels between the writer's slab and the slabs in flight, the
   // task lists of the slabs in flight (32 bytes per 128 full-resolution
   // voxels, 36 per lone voxel), and 4 to 8 bytes per brick.
+  //
+  // window: with a memory_limit, slabs are cut thinner (halved) until the
+  // values in flight fit it by a model of `values` (its pages and tall
+  // voxels between the writer, `writer_slab_slices` behind in whole writer
+  // slabs, and the slab being delivered); FdkReport::value_window_model_bytes
+  // says what the model gave. When one-slice slabs do not fit either,
+  // throws Error(LimitExceeded) naming the bytes needed and the limit.
   using StructureProgress = std::function<void(std::uint32_t z_complete)>;
+  struct ValueWindowBound {
+    std::uint64_t memory_limit = 0;  // 0: none
+    std::uint32_t writer_slab_slices = 0;
+  };
   FdkReport reconstruct_structure(const VolumeGrid& grid, const VoxelStructure& structure, StructureValueWindow& values,
-                                  const StructureProgress& progress);
+                                  const StructureProgress& progress, const ValueWindowBound& window);
+  FdkReport reconstruct_structure(const VolumeGrid& grid, const VoxelStructure& structure, StructureValueWindow& values,
+                                  const StructureProgress& progress) {
+    return reconstruct_structure(grid, structure, values, progress, ValueWindowBound{});
+  }
+
+  // Changes FdkOptions::cpu_device_memory_limit for the reconstructions to
+  // come (the CLI's budget, once the structure's own memory is known).
+  void set_cpu_device_memory_limit(std::uint64_t bytes);
 
   std::vector<std::string> device_names() const;
   // Warnings about the scan (e.g. a short arc), known before reconstructing.
@@ -162,6 +184,13 @@ class FdkReconstructor {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+// The most bytes the filtered rows of a scan of `geometry` can take in the
+// temporary file with `host_budget` bytes of host memory (0: the default,
+// as FdkOptions::filtered_rows_memory_limit): every row of every view kept
+// at once (one slab reading all of them) less what the host holds, or 0
+// without cache_filtered_rows. For the disk check before a run.
+std::uint64_t filtered_rows_disk_bound(const ScanGeometry& geometry, const FdkOptions& options);
 
 FdkReport reconstruct_fdk(ProjectionSource& projections, const ScanGeometry& geometry, const VolumeGrid& grid,
                           const FdkOptions& options, const SlabSink& sink);

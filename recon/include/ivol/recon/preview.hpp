@@ -56,16 +56,20 @@ Preview reconstruct_detection_preview(ProjectionSource& projections, const ScanG
 // The detection rule's need mask without the whole preview (issue 23): the
 // same samples as reconstruct_detection_preview, pooled along z as soon as a
 // cell layer's samples have arrived (a ring of 1 + ratio + 2·reach layers
-// pooled along x and y), and each finished layer of cells kept in host
-// memory while `preview_memory` lasts (after the ring, the samples for
-// Otsu's threshold and the need mask), the rest in an unlinked temporary
-// file in `temp_directory` (TMPDIR, else /tmp, when empty). Otsu's threshold
-// needs every sample first, so the layers are thresholded in a second pass
-// over the kept layers, once it is known: the threshold is exactly that of
-// reconstruct_detection_preview (Otsu's over the same one sample in eight),
-// and the mask is need_mask_from_low_resolution(preview, ..., margin 0)'s,
-// cell for cell. Distributed, rank 0 reconstructs and broadcasts the
-// samples for Otsu and then each layer of cells.
+// pooled along x and y). Held whatever the budget: that ring, a few slices'
+// buffers and the need mask at 1 bit per cell (NeedMask::bits); the rest of
+// `preview_memory` holds, first come first held, the finished layers of
+// cells and the samples for Otsu's threshold (one in eight), and what does
+// not fit goes to unlinked temporary files in `temp_directory` (TMPDIR, else
+// /tmp, when empty). Otsu's threshold needs every sample first, so it is
+// found after the reconstruction: the samples' range is tracked as they
+// arrive and a 256-bin histogram over it is added to record by record
+// (add_to_otsu_histogram, the binning of otsu_threshold), so the threshold
+// is exactly reconstruct_detection_preview's. Then each layer of cells is
+// thresholded into the mask, which is need_mask_from_low_resolution(preview,
+// ..., margin 0)'s, cell for cell. Distributed, rank 0 reconstructs and
+// broadcasts Otsu's threshold and then each layer of cells. A budget below
+// detection_fixed_bytes is refused (Error LimitExceeded) before any work.
 struct DetectionMaskOptions {
   DetectionRule rule;
   unsigned margin_voxels = 2;                             // as reconstruct_detection_preview's
@@ -81,8 +85,18 @@ struct DetectionMask {
   float threshold = 0.0F;       // applied
   double seconds = 0.0;
   std::uint64_t peak_preview_bytes = 0;  // held at once: ring, cell layers, Otsu's samples, the need mask
-  std::uint64_t spilled_bytes = 0;       // cell layers written to the temporary file
+  std::uint64_t spilled_bytes = 0;       // cell layers and Otsu's samples written to temporary files
 };
+
+// What detect_need_mask holds whatever its budget (the ring, the slice
+// buffers, the packed need mask), in bytes.
+std::uint64_t detection_fixed_bytes(const VolumeGrid& full, const DetectionMaskOptions& detection);
+// The most bytes detect_need_mask can write to temporary files: the cell
+// layers and Otsu's samples beyond its budget, and the thinned scan's
+// filtered rows beyond options.filtered_rows_memory_limit
+// (filtered_rows_disk_bound). For the disk check before a run.
+std::uint64_t detection_temp_bytes(const ScanGeometry& geometry, const FdkOptions& options, const VolumeGrid& full,
+                                   const DetectionMaskOptions& detection);
 
 DetectionMask detect_need_mask(ProjectionSource& projections, const ScanGeometry& geometry, const FdkOptions& options,
                                const VolumeGrid& full, const DetectionMaskOptions& detection);
