@@ -140,35 +140,60 @@ std::size_t mutate_decoded_block(std::uint8_t* f, std::size_t size, std::size_t 
   const std::uint32_t stored = get<std::uint32_t>(e + 20);
   const std::uint32_t elements = get<std::uint32_t>(e + 16);
   const std::uint8_t stream = e[28], codec = e[29];
-  if (at < header_size || at > v.offset || stored > v.offset - at || stored <= frame || codec > 2) return 0;
+  if (at < header_size || at > v.offset || stored > v.offset - at || stored <= frame || codec > 4) return 0;
   const std::size_t width = stream_width(stream, index[9]);
-  const std::uint64_t decoded_size = std::uint64_t{elements} * width;
+  std::uint64_t decoded_size = std::uint64_t{elements} * width;
   if (decoded_size == 0 || decoded_size > (1u << 20)) return 0;
+  const std::uint8_t* payload = f + at + frame;
+  const std::uint32_t payload_size = stored - static_cast<std::uint32_t>(frame);
+  // Codecs 3 and 4 (spec §7.2, §7.3): a codec header, then one zstd frame
+  // of residuals or of a mask and values. The header is kept (or, for a
+  // constant brick of codec 4, which is only a header, mutated itself); the
+  // frame's content is mutated, any length: the reader must check it against
+  // the header and the element count, which stays.
+  const std::size_t codec_header = codec == 3 ? 24 : codec == 4 ? 4 : 0;
+  if (payload_size < codec_header) return 0;
+  if (codec == 4 && payload_size == codec_header) {
+    std::vector<std::uint8_t> header(payload, payload + codec_header);
+    LLVMFuzzerMutate(header.data(), codec_header, codec_header);
+    std::memcpy(f + at + frame, header.data(), codec_header);
+    reseal(f, size);
+    return size;
+  }
+  if (codec >= 3) {
+    const unsigned long long content_size =
+        ZSTD_getFrameContentSize(payload + codec_header, payload_size - codec_header);
+    if (content_size == ZSTD_CONTENTSIZE_ERROR || content_size == ZSTD_CONTENTSIZE_UNKNOWN || content_size == 0 ||
+        content_size > (2u << 20))
+      return 0;
+    decoded_size = content_size;
+  }
   // Codec 2's content is the byte planes: mutating them is as good as
   // mutating the elements, and it is encoded back as it was.
   std::vector<std::uint8_t> content(decoded_size + 256);
-  const std::uint8_t* payload = f + at + frame;
-  const std::uint32_t payload_size = stored - static_cast<std::uint32_t>(frame);
   if (codec == 0) {
     if (payload_size != decoded_size) return 0;
     std::memcpy(content.data(), payload, payload_size);
   } else {
-    const std::size_t got = ZSTD_decompress(content.data(), decoded_size, payload, payload_size);
+    const std::size_t got =
+        ZSTD_decompress(content.data(), decoded_size, payload + codec_header, payload_size - codec_header);
     if (ZSTD_isError(got) || got != decoded_size) return 0;
   }
   // Elements stay whole: the mutated size is a multiple of the width (the
   // metadata, of width 1, may grow or shrink).
   std::size_t n = LLVMFuzzerMutate(content.data(), decoded_size, content.size());
-  n -= n % width;
+  if (codec < 3) n -= n % width;
   if (n == 0) return 0;
   std::vector<std::uint8_t> encoded(frame);
+  encoded.insert(encoded.end(), payload, payload + codec_header);
   if (codec == 0) {
     encoded.insert(encoded.end(), content.begin(), content.begin() + static_cast<std::ptrdiff_t>(n));
   } else {
-    encoded.resize(frame + ZSTD_compressBound(n));
-    const std::size_t z = ZSTD_compress(encoded.data() + frame, encoded.size() - frame, content.data(), n, 1);
+    const std::size_t before = encoded.size();
+    encoded.resize(before + ZSTD_compressBound(n));
+    const std::size_t z = ZSTD_compress(encoded.data() + before, encoded.size() - before, content.data(), n, 1);
     if (ZSTD_isError(z)) return 0;
-    encoded.resize(frame + z);
+    encoded.resize(before + z);
   }
   if (frame) std::memcpy(encoded.data(), f + at, frame);  // resealed below
   const std::int64_t delta = static_cast<std::int64_t>(encoded.size()) - stored;
@@ -180,7 +205,7 @@ std::size_t mutate_decoded_block(std::uint8_t* f, std::size_t size, std::size_t 
   for (std::uint32_t k = 0; k < v.count; ++k) {
     std::uint8_t* ek = new_index + v.table + std::uint64_t{k} * v.entry;
     if (k == b) {
-      put<std::uint32_t>(ek + 16, static_cast<std::uint32_t>(n / width));
+      if (codec < 3) put<std::uint32_t>(ek + 16, static_cast<std::uint32_t>(n / width));
       put<std::uint32_t>(ek + 20, static_cast<std::uint32_t>(encoded.size()));
     } else if (get<std::uint64_t>(ek) > at) {
       put<std::uint64_t>(ek, get<std::uint64_t>(ek) + delta);
