@@ -2,6 +2,7 @@
 
 #include <cstring>
 
+#include "box_output.hpp"
 #include "ivol/error.hpp"
 #include "tree_verify.hpp"
 #include "tree_walk.hpp"
@@ -13,6 +14,9 @@ struct MemoryAccess {
   const Octree& tree;
   std::uint64_t node_word(std::uint64_t i) const { return tree.node_word(i); }
   std::uint32_t value_bits(std::uint64_t i) const { return tree.value_bits(i); }
+  void values8(std::uint64_t i, std::uint32_t* bits) const {
+    for (unsigned c = 0; c < 8; ++c) bits[c] = tree.value_bits(i + c);
+  }
   const Error* known_failure(std::uint8_t, std::uint64_t) const { return nullptr; }  // nothing fails in memory
 };
 
@@ -51,10 +55,9 @@ std::vector<float> Octree::read_box(const Box& box, unsigned lod) const {
   std::vector<float> out(box.voxel_count());
   MemoryAccess access{*this};
   const detail::LevelRanges ranges(layout_);
-  detail::walk_box(access, layout_, ranges, box, lod, [&](const Box& region, std::uint32_t bits) {
-    const auto v = static_cast<float>(layout_.physical(decode_value(layout_.encoding, bits)));
-    detail::fill_region(out.data(), box, region, v);
-  });
+  detail::walk_box(access, layout_, ranges, box, lod, detail::box_output(out.data(), box, [this](std::uint32_t bits) {
+                     return static_cast<float>(layout_.physical(decode_value(layout_.encoding, bits)));
+                   }));
   return out;
 }
 

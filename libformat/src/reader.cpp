@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "box_output.hpp"
 #include "brick_grid.hpp"
 #include "grid_copy.hpp"
 #include "ivol/error.hpp"
@@ -270,23 +271,22 @@ std::vector<float> Reader::read_box(const Box& box, unsigned lod, std::vector<Da
   if (encoding_width(v.encoding) == 2) {
     // Physical values of all 65536 codes, once per call: cheaper than
     // decoding each voxel when the box is large.
-    const std::vector<float> table = box.voxel_count() >= 65536 ? physical_table(v) : std::vector<float>();
-    detail::walk_box(
-        access, v, impl_->ranges, box, lod,
-        [&](const Box& region, std::uint32_t bits) {
-          const float value =
-              table.empty() ? static_cast<float>(v.physical(decode_value(v.encoding, bits))) : table[bits & 0xFFFFu];
-          detail::fill_region(out.data(), box, region, value);
-        },
-        log ? &*log : nullptr);
-    return out;
+    if (box.voxel_count() >= 65536) {
+      const std::vector<float> table = physical_table(v);
+      const float* physical = table.data();
+      detail::walk_box(
+          access, v, impl_->ranges, box, lod,
+          detail::box_output(out.data(), box, [physical](std::uint32_t bits) { return physical[bits & 0xFFFFu]; }),
+          log ? &*log : nullptr);
+      return out;
+    }
   }
-  detail::walk_box(
-      access, v, impl_->ranges, box, lod,
-      [&](const Box& region, std::uint32_t bits) {
-        detail::fill_region(out.data(), box, region, static_cast<float>(v.physical(decode_value(v.encoding, bits))));
-      },
-      log ? &*log : nullptr);
+  detail::walk_box(access, v, impl_->ranges, box, lod,
+                   detail::box_output(out.data(), box,
+                                      [&v](std::uint32_t bits) {
+                                        return static_cast<float>(v.physical(decode_value(v.encoding, bits)));
+                                      }),
+                   log ? &*log : nullptr);
   return out;
 }
 
@@ -313,16 +313,16 @@ std::vector<std::uint8_t> Reader::read_box_bits(const Box& box, unsigned lod, st
     return out;
   }
   detail::ImplAccess access{impl_.get()};
-  detail::walk_box(
-      access, v, impl_->ranges, box, lod,
-      [&](const Box& region, std::uint32_t bits) {
-        if (width == 2)
-          detail::fill_region(reinterpret_cast<std::uint16_t*>(out.data()), box, region,
-                              static_cast<std::uint16_t>(bits));
-        else
-          detail::fill_region(reinterpret_cast<std::uint32_t*>(out.data()), box, region, bits);
-      },
-      log ? &*log : nullptr);
+  if (width == 2)
+    detail::walk_box(access, v, impl_->ranges, box, lod,
+                     detail::box_output(reinterpret_cast<std::uint16_t*>(out.data()), box,
+                                        [](std::uint32_t bits) { return static_cast<std::uint16_t>(bits); }),
+                     log ? &*log : nullptr);
+  else
+    detail::walk_box(
+        access, v, impl_->ranges, box, lod,
+        detail::box_output(reinterpret_cast<std::uint32_t*>(out.data()), box, [](std::uint32_t bits) { return bits; }),
+        log ? &*log : nullptr);
   return out;
 }
 

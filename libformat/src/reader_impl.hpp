@@ -44,6 +44,7 @@ struct Reader::Impl {
   };
   std::vector<Hint> hint[6];
   std::size_t last_level[6] = {0, 0, 0, 0, 0, 0};  // the hint that served the last lookup
+  std::size_t width_[6] = {0, 0, 0, 0, 0, 0};      // bytes of an element of each stream, looked up once
 
   Impl(const std::string& path, const ReaderOptions& options)
       : file(path),
@@ -59,6 +60,7 @@ struct Reader::Impl {
         return info.blocks[a].first_element < info.blocks[b].first_element;
       });
     for (auto& h : hint) h.assign(info.layout.depth + 1, Hint{});
+    for (std::uint8_t s = 1; s < 6; ++s) width_[s] = detail::stream_width(s, info.layout.encoding);
     if (info.salvage) {
       // Checked when salvaged; none survived: the defaults (info.salvage says so).
       if (!salvaged_metadata.empty()) metadata = Metadata::parse(salvaged_metadata);
@@ -160,7 +162,7 @@ struct Reader::Impl {
   // Pointer to element `element` of `stream` in a decoded block, which stays
   // alive until the next call.
   const std::uint8_t* element(std::uint8_t stream, std::uint64_t element) {
-    const std::size_t width = detail::stream_width(stream, info.layout.encoding);
+    const std::size_t width = width_[stream];
     const Hint& last = hint[stream][last_level[stream]];
     if (last.data && element - last.first < last.count) return last.data->data() + (element - last.first) * width;
     for (std::size_t l = 0; l < hint[stream].size(); ++l) {
@@ -222,9 +224,24 @@ struct Reader::Impl {
 
   std::uint64_t node_word(std::uint64_t index) { return layout::load<std::uint64_t>(element(2, index)); }
 
+  // The eight values from `index` on (the children of one node), from one
+  // decoded block where they lie in one, else one by one.
+  void values8(std::uint64_t index, std::uint32_t* bits) {
+    std::uint64_t available = 0;
+    const std::uint8_t* p = elements(3, index, &available);
+    if (available < 8) {
+      for (unsigned c = 0; c < 8; ++c) bits[c] = value_bits(index + c);
+      return;
+    }
+    if (width_[3] == 4)
+      for (unsigned c = 0; c < 8; ++c) bits[c] = layout::load<std::uint32_t>(p + 4 * c);
+    else
+      for (unsigned c = 0; c < 8; ++c) bits[c] = layout::load<std::uint16_t>(p + 2 * c);
+  }
+
   std::uint32_t value_bits(std::uint64_t index) {
     const std::uint8_t* p = element(3, index);
-    if (info.layout.encoding == ValueEncoding::Float32) return layout::load<std::uint32_t>(p);
+    if (width_[3] == 4) return layout::load<std::uint32_t>(p);
     return layout::load<std::uint16_t>(p);
   }
 
@@ -254,6 +271,7 @@ struct ImplAccess {
   Reader::Impl* impl;
   std::uint64_t node_word(std::uint64_t i) const { return impl->node_word(i); }
   std::uint32_t value_bits(std::uint64_t i) const { return impl->value_bits(i); }
+  void values8(std::uint64_t i, std::uint32_t* bits) const { impl->values8(i, bits); }
   const Error* known_failure(std::uint8_t stream, std::uint64_t i) const { return impl->known_failure(stream, i); }
 };
 

@@ -6,13 +6,15 @@
 #include <cstdint>
 #include <cstdlib>
 #include <string>
-#include <unordered_map>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "ivol/error.hpp"
 #include "ivol/geometry.hpp"
 #include "ivol/octree.hpp"
 #include "ivol/reader.hpp"
+#include "salvage_log.hpp"
 
 namespace ivol::detail {
 
@@ -27,7 +29,24 @@ struct LevelRanges {
   }
 };
 
-inline unsigned popcount8(unsigned v) { return static_cast<unsigned>(__builtin_popcount(v & 0xFFu)); }
+// Without -mpopcnt, __builtin_popcount is a call into libgcc: on a walk
+// that meets every node, a measurable share of the read.
+inline unsigned popcount8(unsigned v) {
+  v &= 0xFFu;
+  v = v - ((v >> 1) & 0x55u);
+  v = (v & 0x33u) + ((v >> 2) & 0x33u);
+  return (v + (v >> 4)) & 0x0Fu;
+}
+
+// A sink with octet(x, y, z, bits): takes the eight voxels of a 2x2x2 cube
+// at (x, y, z) that lies wholly inside the box, bits[c] for child c (spec
+// §8.3: c = dx | dy << 1 | dz << 2), in one call.
+template <class Sink, class = void>
+struct TakesOctets : std::false_type {};
+template <class Sink>
+struct TakesOctets<Sink,
+                   std::void_t<decltype(std::declval<Sink&>().octet(0u, 0u, 0u, std::declval<const std::uint32_t*>()))>>
+    : std::true_type {};
 
 // Rules a reader checks for every inner node it visits (§8.3, §8.4).
 inline void check_node_word(const VolumeLayout& layout, const LevelRanges& ranges, unsigned level, std::uint64_t index,
@@ -69,91 +88,16 @@ std::uint32_t lookup_bits(Access& access, const VolumeLayout& layout, const Leve
 
 // Calls sink(region, bits) for every leaf (or node of the target level) that
 // meets `box`, with `region` the part of the box it covers, in the
-// coordinates of level of detail `lod`.
-// Where a salvaging walk met damage: the region it filled from a coarser
-// level instead.
-// Regions are merged per cause (the message names the damaged block or the
-// missing run of elements) where their union is a box, so that a walk in
-// Morton order lists a damaged block's region as a few boxes, not voxel by
-// voxel; every listed box is exactly what was filled. At most kMaxEntries
-// entries: the rest go into one last entry, the box around them.
-struct SalvageLog {
-  static constexpr std::size_t kMaxEntries = 1000;
-  std::vector<DamagedRegion>& out;
-  std::vector<DamagedRegion> entries = {};
-  std::vector<bool> live = {};
-  std::unordered_map<std::string, std::vector<std::size_t>> open = {};  // live entries of each cause
-  std::size_t live_count = 0;
-  std::size_t overflow = SIZE_MAX;
-
-  static bool joins(const Box& a, const Box& b, Box& joined) {
-    int differing = -1;
-    for (int axis = 0; axis < 3; ++axis) {
-      if (a.lo[axis] == b.lo[axis] && a.hi[axis] == b.hi[axis]) continue;
-      if (differing >= 0) return false;
-      if (a.hi[axis] != b.lo[axis] && b.hi[axis] != a.lo[axis]) return false;
-      differing = axis;
-    }
-    joined = a;
-    if (differing >= 0) {
-      joined.lo[differing] = std::min(a.lo[differing], b.lo[differing]);
-      joined.hi[differing] = std::max(a.hi[differing], b.hi[differing]);
-    }
-    return true;
-  }
-
-  void add(const Box& region, unsigned level, const std::string& message) {
-    auto& mine = open[message];
-    Box box = region;
-    unsigned lowest = level;
-    Box joined;
-    while (!mine.empty() && joins(entries[mine.back()].region, box, joined)) {
-      box = joined;
-      lowest = std::min(lowest, entries[mine.back()].level);
-      live[mine.back()] = false;
-      --live_count;
-      mine.pop_back();
-    }
-    if (live_count >= kMaxEntries) {
-      if (overflow == SIZE_MAX) {
-        overflow = entries.size();
-        entries.push_back({box, lowest, "further damage, not listed one by one (the box around it)"});
-        live.push_back(true);
-        return;
-      }
-      DamagedRegion& r = entries[overflow];
-      for (int a = 0; a < 3; ++a) {
-        r.region.lo[a] = std::min(r.region.lo[a], box.lo[a]);
-        r.region.hi[a] = std::max(r.region.hi[a], box.hi[a]);
-      }
-      r.level = std::min(r.level, lowest);
-      return;
-    }
-    mine.push_back(entries.size());
-    entries.push_back({box, lowest, message});
-    live.push_back(true);
-    ++live_count;
-  }
-
-  // Hands the entries to the caller's list, in the order they were met.
-  void flush() {
-    for (std::size_t i = 0; i < entries.size(); ++i)
-      if (live[i]) out.push_back(std::move(entries[i]));
-    entries.clear();
-    live.clear();
-    open.clear();
-    live_count = 0;
-    overflow = SIZE_MAX;
-  }
-  ~SalvageLog() { flush(); }
-};
-
-// Calls sink(region, bits) for every leaf (or node of the target level) that
-// meets `box`, with `region` the part of the box it covers, in the
 // coordinates of level of detail `lod`. With `salvage`, a node or value that
 // cannot be read (damaged block, broken rule) does not stop the walk: the
 // region takes the value of the nearest readable ancestor (its average), and
 // the damage is logged.
+// Where a node's cube lies wholly inside the box (and no salvage), its
+// subtree is descended without frames or box clipping (the dense path: a
+// whole or large read of a scan, whose leaves are mostly single voxels), in
+// the same order and with the same checks; `Access::values8` hands over the
+// eight values of a level-(target-1) node at once, and a sink that takes
+// octets writes them as one 2x2x2 cube.
 template <class Access, class Sink>
 void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ranges, const Box& box, unsigned lod,
               Sink&& sink, SalvageLog* salvage = nullptr) {
@@ -202,6 +146,39 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
       return fallback;
     }
   };
+  // The dense path: the subtree of the inner node `inner` at `level`, whose
+  // cube at (x, y, z) lies wholly inside the box.
+  auto dense = [&](auto& self, unsigned level, std::uint64_t inner, std::uint32_t x, std::uint32_t y,
+                   std::uint32_t z) -> void {
+    const std::uint64_t word = access.node_word(inner);
+    check_node_word(layout, ranges, level, inner, word);
+    check_order(level, inner, word);
+    const std::uint64_t values = 1 + 8 * inner;
+    if (level + 1 == target) {
+      std::uint32_t bits[8];
+      access.values8(values, bits);
+      if constexpr (TakesOctets<std::remove_reference_t<Sink>>::value) {
+        sink.octet(x, y, z, bits);
+      } else {
+        for (unsigned c = 0; c < 8; ++c) {
+          const std::uint32_t at[3] = {x + (c & 1u), y + ((c >> 1) & 1u), z + ((c >> 2) & 1u)};
+          sink(Box{{at[0], at[1], at[2]}, {at[0] + 1, at[1] + 1, at[2] + 1}}, bits[c]);
+        }
+      }
+      return;
+    }
+    const unsigned mask = child_mask(word);
+    std::uint64_t next_inner = first_inner_child(word);
+    const std::uint32_t half = std::uint32_t{1} << (target - level - 1);
+    for (unsigned c = 0; c < 8; ++c) {
+      const std::uint32_t cx = x + ((c & 1u) ? half : 0), cy = y + ((c & 2u) ? half : 0),
+                          cz = z + ((c & 4u) ? half : 0);
+      if ((mask >> c) & 1u)
+        self(self, level + 1, next_inner++, cx, cy, cz);
+      else
+        sink(Box{{cx, cy, cz}, {cx + half, cy + half, cz + half}}, access.value_bits(values + c));
+    }
+  };
   std::vector<Frame> stack;
   stack.push_back({0, 0, 0, 0, 0, layout.inner_count[0] ? 0 : kNoInner, 0});
   while (!stack.empty()) {
@@ -222,6 +199,12 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
       region.hi[a] = static_cast<std::uint32_t>(hi);
     }
     if (!meets) continue;
+    if (!salvage && f.inner != kNoInner && f.level < target && region.lo[0] == origin[0] && region.lo[1] == origin[1] &&
+        region.lo[2] == origin[2] && region.hi[0] - origin[0] == side && region.hi[1] - origin[1] == side &&
+        region.hi[2] - origin[2] == side) {
+      dense(dense, f.level, f.inner, region.lo[0], region.lo[1], region.lo[2]);
+      continue;
+    }
     if (f.inner == kNoInner || f.level == target) {
       sink(region, value_or(f.value_index, f.fallback, region, f.level));
       continue;
