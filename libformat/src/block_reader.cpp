@@ -31,6 +31,14 @@ std::string block_part(const std::string& path, const BlockInfo& block, std::siz
          "): ";
 }
 
+// Codec 2's byte planes (plane p holds byte p of every element) back into
+// `n` elements of Width bytes.
+template <std::size_t Width>
+void unshuffle(const std::uint8_t* planes, std::size_t n, std::uint8_t* elements) {
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t p = 0; p < Width; ++p) elements[i * Width + p] = planes[p * n + i];
+}
+
 }  // namespace
 
 void check_block_crc(RandomAccessFile& file, const BlockInfo& block, std::size_t index) {
@@ -149,8 +157,18 @@ std::vector<std::uint8_t> decode_stored_block(const std::string& path, const Blo
   if (block.codec == 2 && width > 1) {  // byte planes back into elements
     std::vector<std::uint8_t> elements(decoded_size);
     const std::size_t n = block.element_count;
-    for (std::size_t p = 0; p < width; ++p)
-      for (std::size_t i = 0; i < n; ++i) elements[i * width + p] = decoded[p * n + i];
+    // Element by element, the width known to the compiler, which then
+    // interleaves the planes in vector registers (a plane at a time writes
+    // one byte in every `width`).
+    if (width == 2)
+      unshuffle<2>(decoded.data(), n, elements.data());
+    else if (width == 4)
+      unshuffle<4>(decoded.data(), n, elements.data());
+    else if (width == 8)
+      unshuffle<8>(decoded.data(), n, elements.data());
+    else
+      for (std::size_t p = 0; p < width; ++p)
+        for (std::size_t i = 0; i < n; ++i) elements[i * width + p] = decoded[p * n + i];
     return elements;
   }
   return decoded;

@@ -193,6 +193,22 @@ void Reader::Impl::plan_box(const Box& box, unsigned lod) {
         detail::check_node_word(v, ranges, l, n.inner, word);
         const unsigned mask = child_mask(word);
         const std::uint64_t first = first_inner_child(word);
+        if (l + 1 == target) {
+          // The children are values, eight in a row: where the node's cube
+          // lies inside the box, the blocks of the first and the last (a
+          // large read meets millions of such nodes).
+          const std::uint64_t side = 2 * half;
+          const std::uint64_t at[3] = {n.i * side, n.j * side, n.k * side};
+          bool inside = true;
+          for (int a = 0; a < 3; ++a) inside = inside && at[a] >= box.lo[a] && at[a] + side <= box.hi[a];
+          if (inside) {
+            for (const std::uint64_t value : {1 + 8 * n.inner, 8 + 8 * n.inner}) {
+              const std::size_t b = block_holding(3, value);
+              if (blocks.empty() || blocks.back() != b) blocks.push_back(b);
+            }
+            continue;
+          }
+        }
         for (unsigned c = 0; c < 8; ++c) {
           const std::uint32_t ci = 2 * n.i + (c & 1u), cj = 2 * n.j + ((c >> 1) & 1u), ck = 2 * n.k + ((c >> 2) & 1u);
           const std::uint64_t origin[3] = {ci * half, cj * half, ck * half};
@@ -202,6 +218,9 @@ void Reader::Impl::plan_box(const Box& box, unsigned lod) {
           const bool inner = (mask >> c) & 1u;
           if (inner && l + 1 < target) {
             const std::uint64_t index = first + detail::popcount8(mask & ((1u << c) - 1u));
+            // More nodes than a plan follows: the walk reads the blocks
+            // as it meets them (and the plan holds no list of millions).
+            if (next.size() == kMaxPlannedNodes) return;
             next.push_back({index, ci, cj, ck});
             const std::size_t b = block_holding(2, index);
             if (blocks.empty() || blocks.back() != b) blocks.push_back(b);
@@ -211,7 +230,6 @@ void Reader::Impl::plan_box(const Box& box, unsigned lod) {
           }
         }
       }
-      if (next.size() > kMaxPlannedNodes) return;
       load_blocks(std::move(blocks));
       blocks.clear();
       level = std::move(next);
