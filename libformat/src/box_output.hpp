@@ -19,19 +19,20 @@ class BoxOutput {
   // A leaf, or the part of it inside the box: one value over `region`.
   void operator()(const Box& region, std::uint32_t bits) const { fill_region(out_, box_, region, convert_(bits)); }
 
-  // The 2x2x2 voxels of one node at (x, y, z), wholly inside the box; bits[c]
+  // The 2x2x2 voxels of one node at (x, y, z), wholly inside the box; bits(c)
   // for child c = dx | dy << 1 | dz << 2 (spec §8.3).
-  void octet(std::uint32_t x, std::uint32_t y, std::uint32_t z, const std::uint32_t* bits) const {
+  template <class Bits>
+  void octet(std::uint32_t x, std::uint32_t y, std::uint32_t z, Bits bits) const {
     T* p = out_ + ((std::uint64_t{z - box_.lo[2]} * ny_ + (y - box_.lo[1])) * nx_ + (x - box_.lo[0]));
     const std::uint64_t plane = nx_ * ny_;
-    p[0] = convert_(bits[0]);
-    p[1] = convert_(bits[1]);
-    p[nx_] = convert_(bits[2]);
-    p[nx_ + 1] = convert_(bits[3]);
-    p[plane] = convert_(bits[4]);
-    p[plane + 1] = convert_(bits[5]);
-    p[plane + nx_] = convert_(bits[6]);
-    p[plane + nx_ + 1] = convert_(bits[7]);
+    p[0] = convert_(bits(0));
+    p[1] = convert_(bits(1));
+    p[nx_] = convert_(bits(2));
+    p[nx_ + 1] = convert_(bits(3));
+    p[plane] = convert_(bits(4));
+    p[plane + 1] = convert_(bits(5));
+    p[plane + nx_] = convert_(bits(6));
+    p[plane + nx_ + 1] = convert_(bits(7));
   }
 
  private:

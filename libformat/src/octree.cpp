@@ -14,6 +14,9 @@ struct MemoryAccess {
   const Octree& tree;
   std::uint64_t node_word(std::uint64_t i) const { return tree.node_word(i); }
   std::uint32_t value_bits(std::uint64_t i) const { return tree.value_bits(i); }
+  // The walk's runs: none (the lookups above are as cheap in memory).
+  const std::uint8_t* run(std::uint8_t, std::uint64_t, std::uint64_t) const { return nullptr; }
+  std::size_t value_width() const { return encoding_width(tree.layout().encoding); }
   void values8(std::uint64_t i, std::uint32_t* bits) const {
     for (unsigned c = 0; c < 8; ++c) bits[c] = tree.value_bits(i + c);
   }

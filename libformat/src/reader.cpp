@@ -245,18 +245,24 @@ double Reader::voxel_value(std::uint32_t x, std::uint32_t y, std::uint32_t z, un
 
 std::vector<float> Reader::read_box(const Box& box, unsigned lod, std::vector<DamagedRegion>* damaged) {
   impl_->check_box(box, lod);
-  const VolumeLayout& v = impl_->info.layout;
   std::vector<float> out = output_for<float>(box);
+  read_box_into(box, out.data(), lod, damaged);
+  return out;
+}
+
+void Reader::read_box_into(const Box& box, float* out, unsigned lod, std::vector<DamagedRegion>* damaged) {
+  impl_->check_box(box, lod);
+  const VolumeLayout& v = impl_->info.layout;
   if (detail::grid_copies(*impl_, lod) && !damaged) {
     if (encoding_width(v.encoding) == 2) {
       const std::vector<float> table = physical_table(v);
-      detail::copy_grid(*impl_, box, out.data(), [&](std::uint32_t bits) { return table[bits]; });
+      detail::copy_grid(*impl_, box, out, [&](std::uint32_t bits) { return table[bits]; });
     } else {
-      detail::copy_grid(*impl_, box, out.data(), [&](std::uint32_t bits) {
+      detail::copy_grid(*impl_, box, out, [&](std::uint32_t bits) {
         return static_cast<float>(v.physical(decode_value(v.encoding, bits)));
       });
     }
-    return out;
+    return;
   }
   if (!impl_->grid || lod == 0) impl_->plan_box(box, lod);
   std::optional<detail::SalvageLog> log;
@@ -265,10 +271,26 @@ std::vector<float> Reader::read_box(const Box& box, unsigned lod, std::vector<Da
     const std::vector<std::uint32_t> bits = grid_bits(*impl_, box, lod, log ? &*log : nullptr);
     for (std::size_t i = 0; i < bits.size(); ++i)
       out[i] = static_cast<float>(v.physical(decode_value(v.encoding, bits[i])));
-    return out;
+    return;
   }
   detail::ImplAccess access{impl_.get()};
-  if (encoding_width(v.encoding) == 2) {
+  if (v.encoding == ValueEncoding::UInt16) {
+    // decode_value of a uint16 code is the code: converted inline, cheaper
+    // than a lookup in a 256 KiB table at every voxel.
+    // The scale and offset copied: read through `v` they are reloaded after
+    // every store to the output, which might alias them.
+    const double scale = v.value_scale, offset = v.value_offset;
+    const bool identity = scale == 1.0 && offset == 0.0;  // VolumeLayout::physical's rule
+    detail::walk_box(access, v, impl_->ranges, box, lod,
+                     detail::box_output(out, box,
+                                        [scale, offset, identity](std::uint32_t bits) {
+                                          const auto code = static_cast<double>(bits & 0xFFFFu);
+                                          return static_cast<float>(identity ? code : offset + scale * code);
+                                        }),
+                     log ? &*log : nullptr);
+    return;
+  }
+  if (v.encoding == ValueEncoding::Binary16) {
     // Physical values of all 65536 codes, once per call: cheaper than
     // decoding each voxel when the box is large.
     if (box.voxel_count() >= 65536) {
@@ -276,18 +298,17 @@ std::vector<float> Reader::read_box(const Box& box, unsigned lod, std::vector<Da
       const float* physical = table.data();
       detail::walk_box(
           access, v, impl_->ranges, box, lod,
-          detail::box_output(out.data(), box, [physical](std::uint32_t bits) { return physical[bits & 0xFFFFu]; }),
+          detail::box_output(out, box, [physical](std::uint32_t bits) { return physical[bits & 0xFFFFu]; }),
           log ? &*log : nullptr);
-      return out;
+      return;
     }
   }
   detail::walk_box(access, v, impl_->ranges, box, lod,
-                   detail::box_output(out.data(), box,
+                   detail::box_output(out, box,
                                       [&v](std::uint32_t bits) {
                                         return static_cast<float>(v.physical(decode_value(v.encoding, bits)));
                                       }),
                    log ? &*log : nullptr);
-  return out;
 }
 
 std::vector<std::uint8_t> Reader::read_box_bits(const Box& box, unsigned lod, std::vector<DamagedRegion>* damaged) {

@@ -162,9 +162,16 @@ struct Reader::Impl {
   // Pointer to element `element` of `stream` in a decoded block, which stays
   // alive until the next call.
   const std::uint8_t* element(std::uint8_t stream, std::uint64_t element) {
-    const std::size_t width = width_[stream];
     const Hint& last = hint[stream][last_level[stream]];
-    if (last.data && element - last.first < last.count) return last.data->data() + (element - last.first) * width;
+    if (last.data && element - last.first < last.count)
+      return last.data->data() + (element - last.first) * width_[stream];
+    return element_elsewhere(stream, element);
+  }
+
+  // element() outside the block of the last lookup: out of line, so that
+  // element() itself inlines into a walk's every step.
+  [[gnu::noinline]] const std::uint8_t* element_elsewhere(std::uint8_t stream, std::uint64_t element) {
+    const std::size_t width = width_[stream];
     for (std::size_t l = 0; l < hint[stream].size(); ++l) {
       const Hint& h = hint[stream][l];
       if (h.data && element - h.first < h.count) {
@@ -224,6 +231,14 @@ struct Reader::Impl {
 
   std::uint64_t node_word(std::uint64_t index) { return layout::load<std::uint64_t>(element(2, index)); }
 
+  // `count` elements of `stream` from `index` on where one decoded block
+  // holds them all, else null; valid until the next lookup (tree_walk.hpp).
+  const std::uint8_t* run(std::uint8_t stream, std::uint64_t index, std::uint64_t count) {
+    std::uint64_t available = 0;
+    const std::uint8_t* p = elements(stream, index, &available);
+    return available < count ? nullptr : p;
+  }
+
   // The eight values from `index` on (the children of one node), from one
   // decoded block where they lie in one, else one by one.
   void values8(std::uint64_t index, std::uint32_t* bits) {
@@ -272,6 +287,10 @@ struct ImplAccess {
   std::uint64_t node_word(std::uint64_t i) const { return impl->node_word(i); }
   std::uint32_t value_bits(std::uint64_t i) const { return impl->value_bits(i); }
   void values8(std::uint64_t i, std::uint32_t* bits) const { impl->values8(i, bits); }
+  const std::uint8_t* run(std::uint8_t stream, std::uint64_t i, std::uint64_t count) const {
+    return impl->run(stream, i, count);
+  }
+  std::size_t value_width() const { return impl->width_[3]; }
   const Error* known_failure(std::uint8_t stream, std::uint64_t i) const { return impl->known_failure(stream, i); }
 };
 

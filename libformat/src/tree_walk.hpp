@@ -14,6 +14,7 @@
 #include "ivol/geometry.hpp"
 #include "ivol/octree.hpp"
 #include "ivol/reader.hpp"
+#include "layout.hpp"
 #include "salvage_log.hpp"
 
 namespace ivol::detail {
@@ -39,18 +40,34 @@ inline unsigned popcount8(unsigned v) {
 }
 
 // A sink with octet(x, y, z, bits): takes the eight voxels of a 2x2x2 cube
-// at (x, y, z) that lies wholly inside the box, bits[c] for child c (spec
+// at (x, y, z) that lies wholly inside the box, bits(c) for child c (spec
 // §8.3: c = dx | dy << 1 | dz << 2), in one call.
 template <class Sink, class = void>
 struct TakesOctets : std::false_type {};
 template <class Sink>
-struct TakesOctets<Sink,
-                   std::void_t<decltype(std::declval<Sink&>().octet(0u, 0u, 0u, std::declval<const std::uint32_t*>()))>>
+struct TakesOctets<
+    Sink, std::void_t<decltype(std::declval<Sink&>().octet(0u, 0u, 0u, std::declval<std::uint32_t (*)(unsigned)>()))>>
     : std::true_type {};
 
-// Rules a reader checks for every inner node it visits (§8.3, §8.4).
-inline void check_node_word(const VolumeLayout& layout, const LevelRanges& ranges, unsigned level, std::uint64_t index,
-                            std::uint64_t word) {
+// Hands a 2x2x2 cube to the sink, bits(c) for child c: in one call where
+// the sink takes octets, else voxel by voxel.
+template <class Sink, class Bits>
+void put_octet(Sink& sink, std::uint32_t x, std::uint32_t y, std::uint32_t z, Bits bits) {
+  if constexpr (TakesOctets<Sink>::value) {
+    sink.octet(x, y, z, bits);
+  } else {
+    for (unsigned c = 0; c < 8; ++c) {
+      const std::uint32_t at[3] = {x + (c & 1u), y + ((c >> 1) & 1u), z + ((c >> 2) & 1u)};
+      sink(Box{{at[0], at[1], at[2]}, {at[0] + 1, at[1] + 1, at[2] + 1}}, bits(c));
+    }
+  }
+}
+
+// Why a node word breaks the rules of check_node_word: out of line, so that
+// the check itself, met for every node a read visits, stays small enough to
+// inline.
+[[gnu::noinline, gnu::cold]] inline void fail_node_word(const VolumeLayout& layout, const LevelRanges& ranges,
+                                                        unsigned level, std::uint64_t index, std::uint64_t word) {
   const unsigned mask = child_mask(word);
   const std::uint64_t first = first_inner_child(word);
   auto fail = [&](const std::string& what) {
@@ -62,10 +79,19 @@ inline void check_node_word(const VolumeLayout& layout, const LevelRanges& range
     fail("child_mask is not 0 at level D-1, whose children are single voxels");
   const std::uint64_t lo = ranges.first_inner[level + 1];
   const std::uint64_t hi = ranges.first_inner[level + 2];
-  if (first < lo || first > hi || first + popcount8(mask) > hi)
-    fail("first_inner_child " + std::to_string(first) + " with " + std::to_string(popcount8(mask)) +
-         " inner children lies outside level " + std::to_string(level + 1) + "'s nodes [" + std::to_string(lo) + ", " +
-         std::to_string(hi) + ")");
+  fail("first_inner_child " + std::to_string(first) + " with " + std::to_string(popcount8(mask)) +
+       " inner children lies outside level " + std::to_string(level + 1) + "'s nodes [" + std::to_string(lo) + ", " +
+       std::to_string(hi) + ")");
+}
+
+// Rules a reader checks for every inner node it visits (§8.3, §8.4).
+inline void check_node_word(const VolumeLayout& layout, const LevelRanges& ranges, unsigned level, std::uint64_t index,
+                            std::uint64_t word) {
+  const unsigned mask = child_mask(word);
+  const std::uint64_t first = first_inner_child(word);
+  if (level + 1 > layout.depth || (level + 1 == layout.depth && mask != 0) || first < ranges.first_inner[level + 1] ||
+      first > ranges.first_inner[level + 2] || first + popcount8(mask) > ranges.first_inner[level + 2])
+    fail_node_word(layout, ranges, level, index, word);
 }
 
 template <class Access>
@@ -98,6 +124,14 @@ std::uint32_t lookup_bits(Access& access, const VolumeLayout& layout, const Leve
 // the same order and with the same checks; `Access::values8` hands over the
 // eight values of a level-(target-1) node at once, and a sink that takes
 // octets writes them as one 2x2x2 cube.
+[[gnu::noinline, gnu::cold]] inline void fail_order(unsigned level, std::uint64_t index, std::uint64_t first,
+                                                    std::uint64_t required, bool exact) {
+  throw Error(ErrorClass::Malformed, "node " + std::to_string(index) + " (level " + std::to_string(level) +
+                                         "): first_inner_child is " + std::to_string(first) +
+                                         ", breadth-first order requires " + (exact ? "" : "at least ") +
+                                         std::to_string(required));
+}
+
 template <class Access, class Sink>
 void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ranges, const Box& box, unsigned lod,
               Sink&& sink, SalvageLog* salvage = nullptr) {
@@ -115,10 +149,7 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
   auto check_order = [&](unsigned level, std::uint64_t index, std::uint64_t word) {
     const std::uint64_t first = first_inner_child(word);
     if (exact ? first != next_child[level] : first < next_child[level])
-      throw Error(ErrorClass::Malformed, "node " + std::to_string(index) + " (level " + std::to_string(level) +
-                                             "): first_inner_child is " + std::to_string(first) +
-                                             ", breadth-first order requires " + (exact ? "" : "at least ") +
-                                             std::to_string(next_child[level]));
+      fail_order(level, index, first, next_child[level], exact);
     next_child[level] = first + popcount8(child_mask(word));
   };
   struct Frame {
@@ -157,18 +188,65 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
     if (level + 1 == target) {
       std::uint32_t bits[8];
       access.values8(values, bits);
-      if constexpr (TakesOctets<std::remove_reference_t<Sink>>::value) {
-        sink.octet(x, y, z, bits);
-      } else {
-        for (unsigned c = 0; c < 8; ++c) {
-          const std::uint32_t at[3] = {x + (c & 1u), y + ((c >> 1) & 1u), z + ((c >> 2) & 1u)};
-          sink(Box{{at[0], at[1], at[2]}, {at[0] + 1, at[1] + 1, at[2] + 1}}, bits[c]);
-        }
-      }
+      put_octet(sink, x, y, z, [&bits](unsigned c) { return bits[c]; });
       return;
     }
     const unsigned mask = child_mask(word);
     std::uint64_t next_inner = first_inner_child(word);
+    if (level + 2 == target && mask != 0) {
+      // A cube of 4^3 voxels: its inner children's node words are
+      // consecutive, and so are their 8 values each. Each taken as one run
+      // from its decoded block (where it lies in one) rather than looked up
+      // node by node; every word is still checked, in the same order,
+      // before any of their values is read. A run's bytes stay valid only
+      // until the next lookup, which may load a block and let another go:
+      // nothing else is looked up while one is in use.
+      const unsigned count = popcount8(mask);
+      const std::uint8_t* words = access.run(2, next_inner, count);
+      std::uint64_t child_words[8];
+      for (unsigned k = 0; k < count; ++k) {
+        const std::uint64_t child = next_inner + k;
+        child_words[k] = words ? ivol::layout::load<std::uint64_t>(words + 8 * k) : access.node_word(child);
+        check_node_word(layout, ranges, level + 1, child, child_words[k]);
+        check_order(level + 1, child, child_words[k]);
+      }
+      auto corner = [&](unsigned c, std::uint32_t* at) {
+        at[0] = x + ((c & 1u) ? 2 : 0);
+        at[1] = y + ((c & 2u) ? 2 : 0);
+        at[2] = z + ((c & 4u) ? 2 : 0);
+      };
+      for (unsigned c = 0; c < 8; ++c) {  // the leaves among the children: 2^3 voxels each
+        if ((mask >> c) & 1u) continue;
+        std::uint32_t at[3];
+        corner(c, at);
+        sink(Box{{at[0], at[1], at[2]}, {at[0] + 2, at[1] + 2, at[2] + 2}}, access.value_bits(values + c));
+      }
+      const std::size_t width = access.value_width();
+      const std::uint8_t* leaves = access.run(3, 1 + 8 * next_inner, 8 * std::uint64_t{count});
+      unsigned k = 0;
+      for (unsigned c = 0; c < 8; ++c) {
+        if (!((mask >> c) & 1u)) continue;
+        std::uint32_t at[3];
+        corner(c, at);
+        const std::uint64_t child_values = 1 + 8 * (next_inner + k);
+        const std::uint8_t* run = leaves ? leaves + 8 * k * width : nullptr;
+        ++k;
+        // Read straight from the decoded block: values copied into an
+        // array first cost a store-forwarding stall at every node.
+        if (!run) {
+          std::uint32_t bits[8];
+          access.values8(child_values, bits);
+          put_octet(sink, at[0], at[1], at[2], [&bits](unsigned v) { return bits[v]; });
+        } else if (width == 2) {
+          put_octet(sink, at[0], at[1], at[2],
+                    [run](unsigned v) { return std::uint32_t{ivol::layout::load<std::uint16_t>(run + 2 * v)}; });
+        } else {
+          put_octet(sink, at[0], at[1], at[2],
+                    [run](unsigned v) { return ivol::layout::load<std::uint32_t>(run + 4 * v); });
+        }
+      }
+      return;
+    }
     const std::uint32_t half = std::uint32_t{1} << (target - level - 1);
     for (unsigned c = 0; c < 8; ++c) {
       const std::uint32_t cx = x + ((c & 1u) ? half : 0), cy = y + ((c & 2u) ? half : 0),
