@@ -6,16 +6,11 @@
 # structure's value window stays within its share (thinner slabs, the same
 # values). IVOL_TEST_ROOT points the /proc and /sys reads at a fake tree.
 set -u
+cli_dir=$(cd "$(dirname "$0")" && pwd)
 : "${IVOL:?set IVOL to the ivol binary}"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-passed=0
-failed=0
-check() {  # check NAME CONDITION-COMMAND...
-  local name=$1
-  shift
-  if "$@"; then echo "ok   $name"; passed=$((passed + 1)); else echo "FAIL $name"; failed=$((failed + 1)); fi
-}
+source "$cli_dir/cases.sh"  # check NAME CONDITION-COMMAND...
 memory() { /usr/bin/python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['memory'][sys.argv[2]])" "$1" "$2"; }
 top() { /usr/bin/python3 -c "import json,sys; print(json.load(open(sys.argv[1]))[sys.argv[2]])" "$1" "$2"; }
 
@@ -113,5 +108,4 @@ check window-wide-over-thin-budget [ "$(memory "$work/wide.json" value_window_by
 "$IVOL" -q extract "$work/thin.ivol" --box 0,0,0,64,64,64 --type f32 -o "$work/thin.raw"
 check window-same-values cmp "$work/wide.raw" "$work/thin.raw"
 
-echo "$passed passed, $failed failed"
-[ "$failed" -eq 0 ]
+finish

@@ -5,17 +5,12 @@
 # (--json temp_bytes) stays within 1.2x the file, lossless or coarsened; and
 # where it went does not change a byte of the file.
 set -u
+cli_dir=$(cd "$(dirname "$0")" && pwd)
 : "${IVOL:?set IVOL to the ivol binary}"
 here=$(cd "$(dirname "$0")" && pwd)
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-passed=0
-failed=0
-check() {  # check NAME CONDITION-COMMAND...
-  local name=$1
-  shift
-  if "$@"; then echo "ok   $name"; passed=$((passed + 1)); else echo "FAIL $name"; failed=$((failed + 1)); fi
-}
+source "$cli_dir/cases.sh"  # check NAME CONDITION-COMMAND...
 field() { /usr/bin/python3 -c "import json,sys; print(json.load(open(sys.argv[1]))[sys.argv[2]])" "$1" "$2"; }
 within() { /usr/bin/python3 -c "import sys; t, f = int(sys.argv[1]), int(sys.argv[2]); sys.exit(0 if 0 < t <= 1.2 * f else 1)" "$1" "$2"; }
 empty() { [ -z "$(ls -A "$1")" ]; }
@@ -60,5 +55,4 @@ check recon-temp-bytes-within-1.2x within "$(field "$work/r.json" temp_bytes)" "
 check recon-structure-temp-bytes-within-1.2x within "$(field "$work/s.json" temp_bytes)" "$(field "$work/s.json" file_bytes)"
 check recon-temp-dir-left-empty empty "$work/opt"
 
-echo "$passed passed, $failed failed"
-[ "$failed" -eq 0 ]
+finish
