@@ -99,6 +99,16 @@ costs() {
     "($((100 * bytes / size)) %, at most $max_percent %)"
   [ "$requests" -le "$max_requests" ] && [ $((100 * bytes)) -le $((max_percent * size)) ]
 }
+# The open: the file's first 16 KiB, the footer with the 16 KiB before it
+# (this file's index of 4 KiB among them), nothing more: 32,800 bytes in 2
+# requests (107,372 when each end was a 64 KiB page).
+open_costs() {
+  start_server
+  "$IVOL" info "$url/truth.ivol" >/dev/null || return 1
+  echo "open: $(counted truth.ivol requests) requests, $(counted truth.ivol bytes) bytes"
+  [ "$(counted truth.ivol requests)" -le 2 ] && [ "$(counted truth.ivol bytes)" -le 40000 ]
+}
+check "open-reads-both-ends-exactly" open_costs
 check "bricked-z-slice-requests-and-bytes" costs truth.ivol 0,0,80,160,160,81 4 25
 check "bricked-x-slice-requests-and-bytes" costs truth.ivol 80,0,0,81,160,160 30 25
 check "bricked-box-requests-and-bytes" costs truth.ivol 47,51,60,111,115,124 13 26
