@@ -176,9 +176,16 @@ class StructureReader {
     // The CRC first, a chunk at a time; then the fixed part and the level
     // table, and the block table entry by entry: what is held is bounded by
     // the entries the index really has, not by its claimed size.
-    // A remote file: a larger index in one exact request (a claimed size
-    // beyond kIndexPrefetchMost goes by pages, as read).
-    if (info_.index_size <= kIndexPrefetchMost) file_.prefetch({{info_.index_offset, info_.index_size}});
+    // A remote file: a larger index in one request, with the kIndexGuess
+    // bytes before it, where a writer that learns the metadata last puts it
+    // (and the last, small blocks a read would otherwise fetch one by one);
+    // a claimed size beyond kIndexPrefetchMost goes by pages, as read.
+    // (An index of at most kIndexGuess came with the footer.)
+    if (info_.index_size > kIndexGuess && info_.index_size <= kIndexPrefetchMost) {
+      const std::uint64_t from = std::max<std::uint64_t>(
+          info_.header_size, info_.index_offset - std::min<std::uint64_t>(info_.index_offset, kIndexGuess));
+      file_.prefetch({{from, info_.index_offset + info_.index_size - from}});
+    }
     const std::uint32_t actual = crc32c_of_range(file_, info_.index_offset, info_.index_size);
     if (actual != index_crc_)
       fail(ErrorClass::Checksum, "index",
