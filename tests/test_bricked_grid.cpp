@@ -145,8 +145,8 @@ TEST(BrickedGrid, ReadsLargerThanTheCacheArePlannedAFewLayersAtATime) {
     Box box;
     std::uint64_t bricks;
   };
-  for (const Case& c : {Case{slice_box(d, Axis::Y, 10), 5 * 6}, Case{full_box(d), 5 * 3 * 6},
-                        Case{slice_box(d, Axis::X, 20), 3 * 6}}) {
+  for (const Case& c :
+       {Case{slice_box(d, Axis::Y, 10), 5 * 6}, Case{full_box(d), 5 * 3 * 6}, Case{slice_box(d, Axis::X, 20), 3 * 6}}) {
     Reader r(path, small);
     r.reset_io_stats();
     EXPECT_EQ(bits_of(r, c.box), crop(v, d, c.box)) << c.box.to_string();
