@@ -132,6 +132,28 @@ TEST(BrickedGrid, EveryVoxelsBitsComeBackThroughBoxesSlicesAndVoxels) {
     }
 }
 
+// A read plans as many layers of bricks as half the block cache holds
+// (grid_copy.hpp): with a cache of a few bricks the plans cover a layer or
+// two at a time, and every brick is still decoded once, its bits the source's.
+TEST(BrickedGrid, ReadsLargerThanTheCacheArePlannedAFewLayersAtATime) {
+  const Dims d{37, 21, 45};  // bricks of 8^3: 5 x 3 x 6
+  const auto v = make_volume(d, ValueEncoding::UInt16, 3, 0.0003f);
+  const std::string path = write("bricked-cache.ivol", d, v, ValueEncoding::UInt16, 3);
+  ReaderOptions small;
+  small.cache_bytes = 24u << 10;  // 24 bricks of 1 KiB: two layers of a y slice's 5 a plan, one of the box's 15
+  struct Case {
+    Box box;
+    std::uint64_t bricks;
+  };
+  for (const Case& c :
+       {Case{slice_box(d, Axis::Y, 10), 5 * 6}, Case{full_box(d), 5 * 3 * 6}, Case{slice_box(d, Axis::X, 20), 3 * 6}}) {
+    Reader r(path, small);
+    r.reset_io_stats();
+    EXPECT_EQ(bits_of(r, c.box), crop(v, d, c.box)) << c.box.to_string();
+    EXPECT_EQ(r.io_stats().blocks_decoded, c.bricks) << c.box.to_string() << ": every brick decoded once";
+  }
+}
+
 TEST(BrickedGrid, LevelsOfDetailAreTheMeansOfSpec12_3) {
   const Dims d{19, 30, 11};
   const auto v = make_volume(d, ValueEncoding::UInt16, 9);

@@ -1,8 +1,9 @@
 // Reading a box of a regular or bricked grid (spec §8A.1, §8A.4) at full
-// resolution by copying rows of decoded blocks straight into the output: a
-// layer of bricks is fetched and decoded together (on several threads,
-// fetch_plan.cpp), then each of its rows is converted and copied in one
-// loop, instead of looking every voxel up on its own. Internal to libformat.
+// resolution by copying rows of decoded blocks straight into the output:
+// the bricks of the box (as many layers of them as half the block cache
+// holds) are fetched and decoded together (on several threads,
+// fetch_plan.cpp), then each row is converted and copied in one loop,
+// instead of looking every voxel up on its own. Internal to libformat.
 #pragma once
 
 #include <algorithm>
@@ -51,12 +52,26 @@ void copy_grid(Reader::Impl& impl, const Box& box, T* out, Convert&& convert) {
   }
   const unsigned b = v.cell_log2;
   const BrickGrid bricks(v.dims, b);
-  for (std::uint32_t k = box.lo[2] >> b; k <= (box.hi[2] - 1) >> b; ++k) {
+  // Layers of bricks planned together, as many as half the block cache
+  // holds decoded: a y or x slice meets one layer after another, and one
+  // plan of them all lets the byte source merge their ranges into a few
+  // requests (a request a layer when each was planned alone), while a read
+  // larger than the cache still goes a few layers at a time, each decoded
+  // once.
+  const std::uint32_t k_first = box.lo[2] >> b, k_last = (box.hi[2] - 1) >> b;
+  const std::uint64_t bricks_a_layer =
+      std::uint64_t{((box.hi[0] - 1) >> b) - (box.lo[0] >> b) + 1} * (((box.hi[1] - 1) >> b) - (box.lo[1] >> b) + 1);
+  const std::uint64_t layer_bytes = bricks_a_layer * (std::uint64_t{width} << (3 * b));
+  const std::uint64_t layers_a_plan = std::max<std::uint64_t>(1, impl.cache.capacity() / 2 / layer_bytes);
+  for (std::uint32_t k = k_first; k <= k_last; ++k) {
     const std::uint64_t z0 = std::max<std::uint64_t>(box.lo[2], std::uint64_t{k} << b);
     const std::uint64_t z1 = std::min<std::uint64_t>(box.hi[2], (std::uint64_t{k} + 1) << b);
-    impl.plan_box(Box{{box.lo[0], box.lo[1], static_cast<std::uint32_t>(z0)},
-                      {box.hi[0], box.hi[1], static_cast<std::uint32_t>(z1)}},
-                  0);
+    if ((k - k_first) % layers_a_plan == 0) {
+      const std::uint64_t plan_end = std::min<std::uint64_t>(box.hi[2], (std::uint64_t{k} + layers_a_plan) << b);
+      impl.plan_box(Box{{box.lo[0], box.lo[1], static_cast<std::uint32_t>(z0)},
+                        {box.hi[0], box.hi[1], static_cast<std::uint32_t>(plan_end)}},
+                    0);
+    }
     for (std::uint32_t j = box.lo[1] >> b; j <= (box.hi[1] - 1) >> b; ++j)
       for (std::uint32_t i = box.lo[0] >> b; i <= (box.hi[0] - 1) >> b; ++i) {
         const Dims e = bricks.extent(i, j, k);

@@ -66,6 +66,10 @@ struct Reader::Impl {
       if (!salvaged_metadata.empty()) metadata = Metadata::parse(salvaged_metadata);
     } else {
       try {
+        // Exactly its bytes over HTTP, not the pages around it (a writer
+        // that learns the metadata last puts it before the index).
+        const BlockInfo& m = info.blocks[stream_blocks[1].front()];
+        file.prefetch({{m.file_offset, m.stored_size}});
         const auto text = block(stream_blocks[1].front());
         metadata = Metadata::parse(std::string(text->begin(), text->end()));
       } catch (const Error& e) {

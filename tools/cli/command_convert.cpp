@@ -159,8 +159,9 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember({"auto", "octree", "bricked"}))
       ->capture_default_str();
   into->add_option("--brick", s->brick,
-                   "Bricked grid: voxels per brick side, 4 to 128, a power of two (32: smallest file; 16: a slice of "
-                   "a remote file reads half the bytes, the file about 4 % larger)")
+                   "Bricked grid: voxels per brick side, 4 to 128, a power of two (32: smallest file; 16: a slice "
+                   "reads about half the bytes, the file at 512^3 1.6 % larger with every voxel kept, 6-7 % at object "
+                   "fidelity)")
       ->check(CLI::IsMember({4u, 8u, 16u, 32u, 64u, 128u}))
       ->capture_default_str();
   into->add_option("--zstd-level", s->zstd_level,
