@@ -14,7 +14,7 @@ flags="-std=c++17 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recov
 libformat=("$root"/libformat/src/*.cpp)
 [ -n "${IVOL_FUZZ_LIBFORMAT:-}" ] && libformat=("$IVOL_FUZZ_LIBFORMAT")
 clang++ $flags -DIVOL_VERSION_STRING='"fuzz"' -I"$root/libformat/include" -I"$root/libformat/src" \
-  -I"$root/tools/convert" "$root"/tools/convert/{vdb_io,dense_volume,volume_metadata,staged_file,exactness}.cpp \
+  -I"$root/tools/convert" "$root"/tools/convert/{vdb_io,dense_volume,volume_metadata,staged_file,exactness,raw_io}.cpp \
   "$root/tests/fuzz/fuzz_vdb.cpp" "${libformat[@]}" -lzstd -lopenvdb -ltbb -lImath-3_1 -o "$out/fuzz_vdb"
 cp -n "$root"/tests/fuzz/regressions/vdb/* "$out/corpus-vdb/"
 [ -n "${IVOL_FUZZ_BUILD_ONLY:-}" ] && exit 0

@@ -31,12 +31,17 @@ class VdbSink final : public convert::SlabWriter {
     half_ = shape.type == convert::SampleType::Float16;
     type_ = shape.type;
     volume_.type = convert::SampleType::Float32;
-    // The whole volume is held as float32, and once more as the floats
-    // write_vdb builds the grid from.
+    // The whole volume is held as float32, and beside it the tree
+    // write_vdb builds from it, and one slice as read, copied and converted
+    // (write()): weighed before anything is read, so that a grid beyond
+    // --memory is a refusal naming its size, not an allocation that fails
+    // (or a process killed) halfway.
     const std::string what = path + ": an OpenVDB grid of " + convert::dims_text(shape.dims);
+    const double slice = static_cast<double>(shape.dims[0]) * shape.dims[1] *
+                         (2.0 * convert::sample_size(shape.type) + sizeof(float));
+    convert::require_within_budget(convert::vdb_output_bytes(shape.dims) + slice, convert::memory_budget(memory_bytes),
+                                   what + " (written whole: the volume as float32 and the grid's tree)");
     const std::uint64_t bytes = convert::slab_bytes(shape.dims, shape.dims[2], convert::SampleType::Float32, what);
-    convert::require_within_budget(convert::checked_mul(bytes, 2, what), convert::memory_budget(memory_bytes),
-                                   what + " (OpenVDB grids are written whole)");
     convert::checked_resize(volume_.data, bytes, what);
   }
   void write(const void* samples, std::uint32_t count) override {

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "hdf5_support.hpp"
+#include "sizes.hpp"
 #include "ivol/error.hpp"
 #include "staged_file.hpp"
 #include "volume_metadata.hpp"
@@ -347,6 +348,10 @@ void require_filters(hid_t dataset, const std::string& context) {
 
 namespace {
 
+// What the reader may allocate when given no budget: the child's default
+// (kDefaultChildMemory of tools/isolated).
+constexpr std::uint64_t kReaderMemoryWithoutBudget = std::uint64_t{1} << 30;
+
 // Reads a dataset slab by slab with hyperslab selections.
 class Hdf5SlabReader final : public SlabReader {
  public:
@@ -365,7 +370,8 @@ class Hdf5SlabReader final : public SlabReader {
     const std::string& dataset_name = dataset_name_;
     context_ = where(path, dataset_name);
     const Handle access = hdf5::access_caching_one_image(
-        file_.get(), dataset_name.c_str(), static_cast<std::size_t>((memory_bytes ? memory_bytes : 1ull << 30) / 4));
+        file_.get(), dataset_name.c_str(),
+        static_cast<std::size_t>((memory_bytes ? memory_bytes : kReaderMemoryWithoutBudget) / 4));
     dataset_ = Handle(H5Dopen2(file_.get(), dataset_name.c_str(), access.get()), H5Dclose);
     if (!dataset_.valid())
       throw Error(ErrorClass::InvalidArgument,
@@ -385,6 +391,7 @@ class Hdf5SlabReader final : public SlabReader {
     Handle file_type(H5Dget_type(dataset_.get()), H5Tclose);
     mapping_ = map_sample_type(file_type.get(), context_);
     require_filters(dataset_.get(), context_);
+    require_chunk_within(memory_bytes ? memory_bytes : kReaderMemoryWithoutBudget, file_type.get());
     shape_.dims = {static_cast<std::uint32_t>(shape[2]), static_cast<std::uint32_t>(shape[1]),
                    static_cast<std::uint32_t>(shape[0])};
     shape_.type = mapping_.sample;
@@ -398,15 +405,18 @@ class Hdf5SlabReader final : public SlabReader {
   }
 
   void read(std::uint32_t z0, std::uint32_t count, void* out) override {
-    QuietHdf5Errors quiet;
-    const hsize_t start[3] = {z0, 0, 0};
-    const hsize_t extent[3] = {count, shape_.dims[1], shape_.dims[0]};
-    H5Sselect_hyperslab(space_.get(), H5S_SELECT_SET, start, nullptr, extent, nullptr);
-    Handle memory(H5Screate_simple(3, extent, nullptr), H5Sclose);
-    if (H5Dread(dataset_.get(), mapping_.memory_type.get(), memory.get(), space_.get(), H5P_DEFAULT, out) < 0)
-      throw Error(hdf5::out_of_memory() ? ErrorClass::LimitExceeded : ErrorClass::Malformed,
-                  context_ + ": cannot read slices " + std::to_string(z0) + " .. " + std::to_string(z0 + count) +
-                      hdf5_reason());
+    read_box({z0, 0, 0}, {count, shape_.dims[1], shape_.dims[0]}, out,
+             "slices " + std::to_string(z0) + " .. " + std::to_string(z0 + count));
+  }
+
+  // A hyperslab of whole rows of one slice. Chunks that reach past the band
+  // (taller, or deeper than one slice) are inflated again for the next band
+  // or slice unless the chunk cache still holds them: slower, never more
+  // memory than the cache and one chunk.
+  bool reads_rows() const override { return true; }
+  void read_rows(std::uint32_t z, std::uint32_t y0, std::uint32_t rows, void* out) override {
+    read_box({z, y0, 0}, {1, rows, shape_.dims[0]}, out,
+             "slice " + std::to_string(z) + " rows " + std::to_string(y0) + " .. " + std::to_string(y0 + rows));
   }
 
  private:
@@ -416,6 +426,38 @@ class Hdf5SlabReader final : public SlabReader {
   Handle dataset_;
   Handle space_;
   SampleMapping mapping_;
+
+  // libhdf5 inflates a filtered chunk whole, whatever part of it is read,
+  // with the stored chunk beside it (at worst as large): a chunk beyond what
+  // the process may allocate is refused by its size before the read that
+  // would fail (a 4x4x4 dataset in one 2 GiB gzip chunk; a 16384^2 slice in
+  // one chunk under --memory 16). Unfiltered chunks are read in place.
+  void require_chunk_within(std::uint64_t allowance, hid_t file_type) const {
+    Handle plist(H5Dget_create_plist(dataset_.get()), H5Pclose);
+    if (H5Pget_layout(plist.get()) != H5D_CHUNKED || H5Pget_nfilters(plist.get()) <= 0) return;
+    hsize_t chunk[3] = {0, 0, 0};
+    if (H5Pget_chunk(plist.get(), 3, chunk) != 3) return;
+    const double bytes = static_cast<double>(chunk[0]) * static_cast<double>(chunk[1]) *
+                         static_cast<double>(chunk[2]) * static_cast<double>(H5Tget_size(file_type));
+    if (2 * bytes <= static_cast<double>(allowance)) return;
+    throw Error(ErrorClass::LimitExceeded,
+                context_ + ": a chunk of " + std::to_string(chunk[0]) + "x" + std::to_string(chunk[1]) + "x" +
+                    std::to_string(chunk[2]) + " (z, y, x) is " + mib_text(bytes) +
+                    " inflated, and libhdf5 inflates a chunk whole beside the stored one: more than the " +
+                    mib_text(allowance) + " its process may allocate (" +
+                    memory_option_for(static_cast<std::uint64_t>(std::min(2 * bytes, 1.8e19))) + " allows it)");
+  }
+
+  // start and extent in the dataset's axis order (z, y, x).
+  void read_box(const std::array<hsize_t, 3>& start, const std::array<hsize_t, 3>& extent, void* out,
+                const std::string& what) {
+    QuietHdf5Errors quiet;
+    H5Sselect_hyperslab(space_.get(), H5S_SELECT_SET, start.data(), nullptr, extent.data(), nullptr);
+    Handle memory(H5Screate_simple(3, extent.data(), nullptr), H5Sclose);
+    if (H5Dread(dataset_.get(), mapping_.memory_type.get(), memory.get(), space_.get(), H5P_DEFAULT, out) < 0)
+      throw Error(hdf5::out_of_memory() ? ErrorClass::LimitExceeded : ErrorClass::Malformed,
+                  context_ + ": cannot read " + what + hdf5_reason());
+  }
 };
 
 }  // namespace

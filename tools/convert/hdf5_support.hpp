@@ -68,6 +68,14 @@ class QuietErrors {
 // holds it; so the cache is sized to hold the chunks one image (the last two
 // axes) touches, up to kMostChunkCache. Larger chunks are still read, at that
 // cost. Returns a dataset access property list for H5Dopen2.
+// The preemption weight stays HDF5's default, 0.75: at 1.0, libhdf5 1.10
+// evicts only chunks read whole until its first pass has walked the whole
+// list, and then stops, so chunks read in part (deeper than the slices a
+// read takes, or taller than its band of rows) were never evicted and the
+// cache grew past its size to every chunk of an image (30 MB under a 3 MiB
+// cache: bands of rows then failed in the child's memory limit, by chunk
+// shape rather than by size).
+constexpr double kChunkPreemption = 0.75;
 constexpr std::size_t kMostChunkCache = std::size_t{256} << 20;
 
 inline Handle access_caching_one_image(hid_t file, const char* name, std::size_t most = kMostChunkCache) {
@@ -88,7 +96,7 @@ inline Handle access_caching_one_image(hid_t file, const char* name, std::size_t
     if (chunk[a] > 0) bytes *= std::ceil(static_cast<double>(shape[a]) / static_cast<double>(chunk[a]));
   const double cache = std::clamp(bytes, double{1 << 20},
                                   std::max(double{1 << 20}, static_cast<double>(std::min(most, kMostChunkCache))));
-  H5Pset_chunk_cache(access.get(), 12421, static_cast<std::size_t>(cache), 1.0);
+  H5Pset_chunk_cache(access.get(), 12421, static_cast<std::size_t>(cache), kChunkPreemption);
   return access;
 }
 

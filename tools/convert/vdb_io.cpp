@@ -185,6 +185,27 @@ class CheckedArchive final : public openvdb::io::Archive {
 
 }  // namespace
 
+double vdb_output_bytes(const Dims& dims) {
+  using Leaf = openvdb::FloatTree::LeafNodeType;
+  using Upper = openvdb::FloatTree::RootNodeType::ChildNodeType;
+  using Lower = Upper::ChildNodeType;
+  constexpr double kAllocationOverhead = 16;  // glibc's header per block
+  auto nodes = [&](openvdb::Index log2_side) {
+    double count = 1;
+    for (std::uint32_t extent : dims) count *= std::ceil(static_cast<double>(extent) / double(1u << log2_side));
+    return count;
+  };
+  // A leaf is an object and its buffer; copyFromDense keeps a block record
+  // (a box, the leaf's pointer, a tile value) for each until it inserts them.
+  const double leaf = sizeof(Leaf) + Leaf::SIZE * sizeof(float) + 2 * kAllocationOverhead +
+                      sizeof(openvdb::CoordBBox) + sizeof(void*) + sizeof(std::pair<float, bool>);
+  const double tree = nodes(Leaf::TOTAL) * leaf + nodes(Lower::TOTAL) * (sizeof(Lower) + kAllocationOverhead) +
+                      nodes(Upper::TOTAL) * (sizeof(Upper) + kAllocationOverhead + 64 /* the root's map entry */);
+  double voxels = 1;
+  for (std::uint32_t extent : dims) voxels *= extent;
+  return voxels * sizeof(float) + tree;
+}
+
 VdbVolume read_vdb(const std::string& path, const std::string& grid_name, std::uint64_t memory_bytes) {
   openvdb::initialize();
   openvdb::io::File file(path);
@@ -273,13 +294,20 @@ LossTally write_vdb(const DenseVolume& volume, const std::string& path, float ba
         throw Error(ErrorClass::InvalidArgument, context + ": the voxel size must be positive and finite");
 
   openvdb::initialize();
-  std::vector<float> values = volume.to_float();
+  // A float32 volume is used where it lies (its bytes come from operator
+  // new, aligned for float): a copy would add 4 bytes a voxel to what
+  // vdb_output_bytes counts.
+  std::vector<float> converted;
+  if (volume.type != SampleType::Float32) converted = volume.to_float();
+  const float* values =
+      converted.empty() ? reinterpret_cast<const float*>(volume.data.data()) : converted.data();
+  const std::uint64_t voxel_count = volume.voxel_count();
   const openvdb::CoordBBox box(openvdb::Coord(0, 0, 0), openvdb::Coord(static_cast<int>(volume.dims[0]) - 1,
                                                                        static_cast<int>(volume.dims[1]) - 1,
                                                                        static_cast<int>(volume.dims[2]) - 1));
   openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(background);
   {
-    const DenseFloats dense(box, values.data());
+    const DenseFloats dense(box, const_cast<float*>(values));  // copyFromDense only reads it
     openvdb::tools::copyFromDense(dense, *grid, /*tolerance=*/0.0f);
   }
   // copyFromDense compares values, not bits, and takes a NaN for the
@@ -313,7 +341,7 @@ LossTally write_vdb(const DenseVolume& volume, const std::string& path, float ba
       }
     });
   }
-  if (half) tally_encoding(ValueEncoding::Binary16, values.data(), values.size(), loss);
+  if (half) tally_encoding(ValueEncoding::Binary16, values, voxel_count, loss);
   if (check) check(loss);
 
   openvdb::math::Transform::Ptr transform = openvdb::math::Transform::createLinearTransform(1.0);
@@ -323,7 +351,7 @@ LossTally write_vdb(const DenseVolume& volume, const std::string& path, float ba
   }
   grid->setTransform(transform);
   grid->setName(grid_name);
-  const bool fog = background == 0.0f && std::all_of(values.begin(), values.end(),
+  const bool fog = background == 0.0f && std::all_of(values, values + voxel_count,
                                                      [](float value) { return value >= 0.0f && value <= 1.0f; });
   grid->setGridClass(fog ? openvdb::GRID_FOG_VOLUME : openvdb::GRID_UNKNOWN);
   grid->setCreator("ivol");
@@ -333,7 +361,7 @@ LossTally write_vdb(const DenseVolume& volume, const std::string& path, float ba
   for (const auto& [key, text] : texts)
     if (!text->empty()) grid->insertMeta(key, openvdb::StringMetadata(*text));
   grid->setSaveFloatAsHalf(half);
-  values = {};
+  converted = {};
 
   StagedFile staged(path);
   std::ofstream stream(staged.temp_path(), std::ios::binary | std::ios::trunc);

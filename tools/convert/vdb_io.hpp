@@ -89,6 +89,13 @@ std::unique_ptr<SlabReader> open_vdb_slabs_in_process(const std::string& path, c
 // is compared with the volume bit for bit (and with `half`, every value with
 // its binary16 rounding): `check`, when given, sees what would change and
 // throws to refuse; the result says the same.
+// What write_vdb holds at its peak for a volume of `dims` given as float32:
+// the volume itself and the tree copyFromDense builds before pruning, every
+// 8^3 block a leaf (a volume without a voxel at the background), 4.3 bytes
+// a voxel besides the volume's 4. Other sample types are converted to a
+// float32 copy first, 4 bytes a voxel more.
+double vdb_output_bytes(const Dims& dims);
+
 LossTally write_vdb(const DenseVolume& volume, const std::string& path, float background,
                     const std::string& grid_name = "density", bool half = true,
                     const std::function<void(const LossTally&)>& check = {});

@@ -10,6 +10,7 @@ namespace {
 
 constexpr char kOpen = 'o';
 constexpr char kRead = 'r';
+constexpr char kReadRows = 'b';
 
 void put_shape(WireWriter& out, const DenseVolume& shape) {
   out.put(shape.dims).put(shape.type).put(shape.voxel_size).put(shape.origin).put_string(shape.unit);
@@ -50,6 +51,10 @@ std::size_t slab_size(const DenseVolume& shape, std::uint32_t count) {
   return std::size_t{count} * shape.dims[0] * shape.dims[1] * sample_size(shape.type);
 }
 
+std::size_t rows_size(const DenseVolume& shape, std::uint32_t rows) {
+  return std::size_t{rows} * shape.dims[0] * sample_size(shape.type);
+}
+
 }  // namespace
 
 WorkerHandler slab_worker_handler(std::string_view parameters, SlabOpener open, const char* reader_name) {
@@ -67,14 +72,27 @@ WorkerHandler slab_worker_handler(std::string_view parameters, SlabOpener open, 
       *reader = open(path, name, memory_bytes, info);
       WireWriter reply;
       put_shape(reply, (*reader)->shape());
+      reply.put((*reader)->reads_rows());
       out.reply = std::move(reply.bytes()) + info.bytes();
       return;
     }
-    if (operation != kRead || !*reader)
+    const bool rows = operation == kReadRows && *reader && (*reader)->reads_rows();
+    if ((operation != kRead && !rows) || !*reader)
       throw Error(ErrorClass::InvalidArgument, what + ": unexpected request " + std::string(1, operation));
+    const DenseVolume& shape = (*reader)->shape();
+    if (rows) {
+      const auto z = in.get<std::uint32_t>();
+      const auto y0 = in.get<std::uint32_t>();
+      const auto count = in.get<std::uint32_t>();
+      if (z >= shape.dims[2] || y0 > shape.dims[1] || count > shape.dims[1] - y0)
+        throw Error(ErrorClass::InvalidArgument, what + ": rows outside the volume");
+      out.bulk.resize(rows_size(shape, count));
+      (*reader)->read_rows(z, y0, count, out.bulk.data());
+      return;
+    }
     const auto z0 = in.get<std::uint32_t>();
     const auto count = in.get<std::uint32_t>();
-    out.bulk.resize(slab_size((*reader)->shape(), count));
+    out.bulk.resize(slab_size(shape, count));
     (*reader)->read(z0, count, out.bulk.data());
   };
 }
@@ -86,6 +104,7 @@ IsolatedSlabReader::IsolatedSlabReader(const SlabWorkerSpec& spec,
   request.put(kOpen);
   WireReader reply(worker_.call(request.bytes(), spec.opening));
   get_shape(reply, shape_);
+  reads_rows_ = reply.get<bool>();
   const std::string named = read_info(reply);
   if (!named.empty()) volume_ = named;
 }
@@ -96,6 +115,15 @@ void IsolatedSlabReader::read(std::uint32_t z0, std::uint32_t count, void* out) 
   worker_.call(request.bytes(),
                "reading slices " + std::to_string(z0) + " .. " + std::to_string(z0 + count) + " of " + volume_, out,
                slab_size(shape_, count));
+}
+
+void IsolatedSlabReader::read_rows(std::uint32_t z, std::uint32_t y0, std::uint32_t rows, void* out) {
+  WireWriter request;
+  request.put(kReadRows).put(z).put(y0).put(rows);
+  worker_.call(request.bytes(),
+               "reading slice " + std::to_string(z) + " rows " + std::to_string(y0) + " .. " +
+                   std::to_string(y0 + rows) + " of " + volume_,
+               out, rows_size(shape_, rows));
 }
 
 }  // namespace ivol::convert

@@ -2,8 +2,9 @@
 // why): the protocol every such reader speaks, whichever library opens the
 // file (libhdf5's datasets, libopenvdb's grids). The parent sends the file,
 // the name of the volume in it and the budget the in-process reader weighs
-// sizes against; the child opens it, replies with the shape and what the
-// library says about the source, then serves slabs of slices.
+// sizes against; the child opens it, replies with the shape, whether it
+// reads by rows and what the library says about the source, then serves
+// slabs of slices or bands of rows of one slice.
 #pragma once
 
 #include <cstdint>
@@ -49,8 +50,13 @@ class IsolatedSlabReader final : public SlabReader {
  public:
   IsolatedSlabReader(const SlabWorkerSpec& spec, const std::function<std::string(WireReader&)>& read_info);
   void read(std::uint32_t z0, std::uint32_t count, void* out) override;
+  // By rows where the child's reader reads by rows (its reply to opening
+  // says so).
+  bool reads_rows() const override { return reads_rows_; }
+  void read_rows(std::uint32_t z, std::uint32_t y0, std::uint32_t rows, void* out) override;
 
  private:
+  bool reads_rows_ = false;
   std::string volume_;
   IsolatedWorker worker_;
 };

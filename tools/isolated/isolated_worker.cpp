@@ -1,6 +1,7 @@
 #include "isolated_worker.hpp"
 
 #include <fcntl.h>
+#include <malloc.h>
 #include <sys/prctl.h>
 #include <sys/resource.h>
 #include <sys/socket.h>
@@ -101,6 +102,12 @@ std::uint64_t resident_bytes() {
   return resident * static_cast<std::uint64_t>(sysconf(_SC_PAGESIZE));
 }
 
+// What the library holds of its own, whatever the request: libhdf5's
+// metadata cache (2 MiB to start) and free lists, filter plugins mapped on
+// first use (blosc and its codecs). Without it, a budget of a few MiB left
+// less than a MiB to spare in reading bands of rows of a 15 MB slice.
+constexpr std::uint64_t kLibraryReserve = std::uint64_t{16} << 20;
+
 // The soft limit only: the next request may need more and raises it again.
 void limit_address_space(std::uint64_t bytes) {
   rlimit limit{};
@@ -111,12 +118,25 @@ void limit_address_space(std::uint64_t bytes) {
 
 [[noreturn]] void serve(int fd, const WorkerHandler& handler, std::uint64_t memory_limit) {
   const bool limited = address_space_is_ours();
+  if (limited) {
+    // The limit is what the library may hold now, so what is freed must
+    // leave the address space: glibc otherwise raises its mmap threshold to
+    // the largest block freed (up to 32 MiB) and serves the next ones from
+    // a heap it keeps, and a limit that was enough for one request was not
+    // for the next of the same size.
+    mallopt(M_MMAP_THRESHOLD, 128 * 1024);
+    mallopt(M_TRIM_THRESHOLD, 128 * 1024);
+  }
   const std::uint64_t inherited = limited ? address_space_bytes() : 0;
   std::string request;
   WorkerReply out;
   std::uint64_t bulk_expected = 0;
   while (receive_all(fd, &bulk_expected, sizeof bulk_expected) && receive_text(fd, request)) {
-    if (limited) limit_address_space(inherited + memory_limit + 2 * bulk_expected);
+    // A reply larger than this one still held would count against this
+    // request's limit, which allows only for its own (the last band of
+    // rows of a slice is shorter than the others).
+    if (out.bulk.capacity() > bulk_expected) std::vector<char>().swap(out.bulk);
+    if (limited) limit_address_space(inherited + memory_limit + kLibraryReserve + 2 * bulk_expected);
     out.reply.clear();
     out.bulk.clear();
     std::uint8_t error_class = 0;

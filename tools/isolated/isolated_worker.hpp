@@ -73,7 +73,8 @@ class IsolatedWorker {
   // `parameters`. `subject` names what it works on, for messages (the
   // file's path); `library` names what runs there ("libhdf5"). The child
   // may allocate `memory_limit` bytes (0: kDefaultChildMemory) beyond what
-  // it inherited, plus twice each request's bulk reply (RLIMIT_AS, set
+  // it inherited, plus 16 MiB for the library's own tables and plugins and
+  // twice each request's bulk reply (RLIMIT_AS, set
   // before each request; not in sanitizer builds or under valgrind, whose
   // own reservations it would count). An allocation refused there is
   // ivol::Error(LimitExceeded) naming the file and the limit.
