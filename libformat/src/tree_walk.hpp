@@ -152,7 +152,8 @@ class NodeNumbering {
     for (std::size_t l = level; l < next_child.size(); ++l) next_child[l] = first_node[l] = first_child[l] = kUnknown;
   }
 
-  void check(unsigned level, std::uint64_t index, std::uint64_t word) {
+  // Inlined: met at every node a walk visits.
+  [[gnu::always_inline]] void check(unsigned level, std::uint64_t index, std::uint64_t word) {
     const std::uint64_t first = first_inner_child(word);
     std::uint64_t& next = next_child[level];
     if (next == kUnknown) {

@@ -16,7 +16,11 @@
 //   detail of a grid one double per output voxel of one output layer;
 // - decoded blocks up to ReaderOptions::cache_bytes, or the one block in use
 //   when it is larger: a block is at most 64 MiB decoded, and its stored
-//   size is bounded by its decoded size before it is read (spec §7);
+//   size is bounded by its decoded size before it is read (spec §7); a
+//   whole level of an octree read on several threads (ReaderOptions::
+//   threads) holds a quarter of that budget (at most 32 MiB) shared, plus
+//   each thread's block in use at each level, and takes fewer threads, or
+//   reads on one thread as other reads do, where these would not fit;
 // - for a salvaging read, at most SalvageLog's 1000 DamagedRegion entries.
 // Time follows from the voxels asked for (for a level of detail of a grid,
 // the full-resolution voxels under it, at most grid_lod_voxels) and the
