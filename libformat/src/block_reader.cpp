@@ -88,64 +88,88 @@ std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const Bl
 std::vector<std::uint8_t> decode_stored_block(const std::string& path, const BlockInfo& block, std::size_t index,
                                               std::size_t width, bool framed, const std::optional<Dims>& brick,
                                               std::vector<std::uint8_t> stored) {
+  std::vector<std::uint8_t> decoded(std::size_t{block.element_count} * width);
+  decode_stored_into(path, block, index, width, framed, brick, stored.data(), stored.size(), decoded.data());
+  return decoded;
+}
+
+void decode_stored_into(const std::string& path, const BlockInfo& block, std::size_t index, std::size_t width,
+                        bool framed, const std::optional<Dims>& brick, const std::uint8_t* stored,
+                        std::size_t stored_size, std::uint8_t* out) {
   const std::string part = block_part(path, block, index);
-  const std::uint32_t actual = crc32c(stored.data(), stored.size());
+  const std::uint32_t actual = crc32c(stored, stored_size);
   if (actual != block.crc) throw Error(ErrorClass::Checksum, part + crc_text(actual, block.crc));
   if (framed) {  // spec §7.1: the block header repeats the index entry; the payload follows it
-    check_block_header(stored.data(), stored.size(), block, part);
-    stored.erase(stored.begin(), stored.begin() + 32);
+    check_block_header(stored, stored_size, block, part);
+    stored += 32;
+    stored_size -= 32;
   }
   const std::size_t decoded_size = std::size_t{block.element_count} * width;
-  if (block.codec == 0) return stored;
+  if (block.codec == 0) {  // the index checked the size (spec §7)
+    if (stored_size != decoded_size)
+      throw Error(ErrorClass::Malformed, part + "codec 0 stores " + std::to_string(stored_size) + " bytes, not " +
+                                             std::to_string(decoded_size));
+    std::memcpy(out, stored, decoded_size);
+    return;
+  }
   if (block.codec == 3) {  // spec §7.2: a brick of 16-bit values
     if (!brick || width != 2 || std::uint64_t{(*brick)[0]} * (*brick)[1] * (*brick)[2] != block.element_count)
       throw Error(ErrorClass::Malformed,
                   part + "codec 3 is only for a values block holding one brick of 16-bit values");
-    std::vector<std::uint8_t> decoded(decoded_size);
     std::vector<std::uint16_t> values(block.element_count);
     try {
-      decode_predicted(stored.data(), stored.size(), *brick, values.data());
+      decode_predicted(stored, stored_size, *brick, values.data());
     } catch (const Error& e) {
       throw Error(e.error_class(), part + e.what());
     }
-    for (std::size_t i = 0; i < values.size(); ++i) layout::store<std::uint16_t>(decoded.data() + 2 * i, values[i]);
-    return decoded;
+    for (std::size_t i = 0; i < values.size(); ++i) layout::store<std::uint16_t>(out + 2 * i, values[i]);
+    return;
   }
   if (block.codec == 4) {  // spec §7.3: a brick (or a run of bricks) of 16-bit values, the background masked
     if (!brick || width != 2)
       throw Error(ErrorClass::Malformed, part + "codec 4 is only for a values block holding bricks of 16-bit values");
-    std::vector<std::uint8_t> decoded(decoded_size);
     std::vector<std::uint16_t> values(block.element_count);
     try {
-      decode_masked(stored.data(), stored.size(), values.size(), values.data());
+      decode_masked(stored, stored_size, values.size(), values.data());
     } catch (const Error& e) {
       throw Error(e.error_class(), part + e.what());
     }
-    for (std::size_t i = 0; i < values.size(); ++i) layout::store<std::uint16_t>(decoded.data() + 2 * i, values[i]);
-    return decoded;
+    for (std::size_t i = 0; i < values.size(); ++i) layout::store<std::uint16_t>(out + 2 * i, values[i]);
+    return;
   }
   if (block.codec != 1 && block.codec != 2)
     throw Error(ErrorClass::UnsupportedFeature, part + "codec " + std::to_string(block.codec) + " is not known");
 
-  if (stored.size() < 4 || std::memcmp(stored.data(), kZstdMagic, 4) != 0)
+  if (stored_size < 4 || std::memcmp(stored, kZstdMagic, 4) != 0)
     throw Error(ErrorClass::Malformed, part + "the stored bytes are not a zstd frame");
-  const unsigned long long content = ZSTD_getFrameContentSize(stored.data(), stored.size());
+  const unsigned long long content = ZSTD_getFrameContentSize(stored, stored_size);
   if (content == ZSTD_CONTENTSIZE_UNKNOWN)
     throw Error(ErrorClass::Malformed, part + "the zstd frame does not carry Frame_Content_Size");
   if (content == ZSTD_CONTENTSIZE_ERROR) throw Error(ErrorClass::Malformed, part + "the zstd frame header is invalid");
   if (content != decoded_size)
     throw Error(ErrorClass::Malformed, part + "the zstd frame holds " + std::to_string(content) +
                                            " bytes, the index says " + std::to_string(decoded_size));
-  if (ZSTD_getDictID_fromFrame(stored.data(), stored.size()) != 0)
+  if (ZSTD_getDictID_fromFrame(stored, stored_size) != 0)
     throw Error(ErrorClass::Malformed, part + "the zstd frame needs a dictionary");
-  const std::size_t frame_size = ZSTD_findFrameCompressedSize(stored.data(), stored.size());
-  if (ZSTD_isError(frame_size) || frame_size != stored.size())
+  const std::size_t frame_size = ZSTD_findFrameCompressedSize(stored, stored_size);
+  if (ZSTD_isError(frame_size) || frame_size != stored_size)
     throw Error(ErrorClass::Malformed, part + "the stored bytes are not exactly one complete zstd frame");
 
   thread_local std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> context(ZSTD_createDCtx(), ZSTD_freeDCtx);
-  std::vector<std::uint8_t> decoded(decoded_size);
-  const std::size_t got =
-      ZSTD_decompressDCtx(context.get(), decoded.data(), decoded.size(), stored.data(), stored.size());
+  const bool planes = block.codec == 2 && width > 1;
+  // Byte planes are decompressed into a buffer this thread keeps (up to a
+  // few MiB, the size of a typical block), then regrouped into `out`: a
+  // buffer allocated per block costs its page faults every time.
+  constexpr std::size_t kKeptPlanes = 8u << 20;
+  thread_local std::vector<std::uint8_t> kept_planes;
+  std::vector<std::uint8_t> own_planes;
+  std::uint8_t* target = out;
+  if (planes) {
+    std::vector<std::uint8_t>& buffer = decoded_size <= kKeptPlanes ? kept_planes : own_planes;
+    if (buffer.size() < decoded_size) buffer.resize(decoded_size);
+    target = buffer.data();
+  }
+  const std::size_t got = ZSTD_decompressDCtx(context.get(), target, decoded_size, stored, stored_size);
   if (ZSTD_isError(got)) {
     if (ZSTD_getErrorCode(got) == ZSTD_error_checksum_wrong)
       throw Error(ErrorClass::Checksum, part + "the zstd content checksum does not match");
@@ -154,24 +178,20 @@ std::vector<std::uint8_t> decode_stored_block(const std::string& path, const Blo
   if (got != decoded_size)
     throw Error(ErrorClass::Malformed,
                 part + "decoded to " + std::to_string(got) + " bytes, expected " + std::to_string(decoded_size));
-  if (block.codec == 2 && width > 1) {  // byte planes back into elements
-    std::vector<std::uint8_t> elements(decoded_size);
-    const std::size_t n = block.element_count;
-    // Element by element, the width known to the compiler, which then
-    // interleaves the planes in vector registers (a plane at a time writes
-    // one byte in every `width`).
-    if (width == 2)
-      unshuffle<2>(decoded.data(), n, elements.data());
-    else if (width == 4)
-      unshuffle<4>(decoded.data(), n, elements.data());
-    else if (width == 8)
-      unshuffle<8>(decoded.data(), n, elements.data());
-    else
-      for (std::size_t p = 0; p < width; ++p)
-        for (std::size_t i = 0; i < n; ++i) elements[i * width + p] = decoded[p * n + i];
-    return elements;
-  }
-  return decoded;
+  if (!planes) return;
+  const std::size_t n = block.element_count;
+  // Element by element, the width known to the compiler, which then
+  // interleaves the planes in vector registers (a plane at a time writes
+  // one byte in every `width`).
+  if (width == 2)
+    unshuffle<2>(target, n, out);
+  else if (width == 4)
+    unshuffle<4>(target, n, out);
+  else if (width == 8)
+    unshuffle<8>(target, n, out);
+  else
+    for (std::size_t p = 0; p < width; ++p)
+      for (std::size_t i = 0; i < n; ++i) out[i * width + p] = target[p * n + i];
 }
 
 BlockData BlockCache::find(std::size_t block) {

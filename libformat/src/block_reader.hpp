@@ -30,6 +30,11 @@ std::vector<std::uint8_t> read_and_decode_block(RandomAccessFile& file, const Bl
 std::vector<std::uint8_t> decode_stored_block(const std::string& path, const BlockInfo& block, std::size_t index,
                                               std::size_t width, bool framed, const std::optional<Dims>& brick,
                                               std::vector<std::uint8_t> stored);
+// The same into `out` (element_count * width bytes) from `stored_size`
+// stored bytes at `stored`: no buffer allocated per block.
+void decode_stored_into(const std::string& path, const BlockInfo& block, std::size_t index, std::size_t width,
+                        bool framed, const std::optional<Dims>& brick, const std::uint8_t* stored,
+                        std::size_t stored_size, std::uint8_t* out);
 // Checks block `index`'s CRC a chunk at a time (Error(Checksum) if it fails),
 // holding 1 MiB whatever its stored size.
 void check_block_crc(RandomAccessFile& file, const BlockInfo& block, std::size_t index);

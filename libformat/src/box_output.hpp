@@ -4,7 +4,9 @@
 #pragma once
 
 #include <cstdint>
+#include <type_traits>
 
+#include "cube_writers.hpp"
 #include "ivol/geometry.hpp"
 #include "tree_walk.hpp"
 
@@ -13,8 +15,8 @@ namespace ivol::detail {
 template <class T, class Convert>
 class BoxOutput {
  public:
-  BoxOutput(T* out, const Box& box, Convert convert)
-      : out_(out), box_(box), nx_(box.hi[0] - box.lo[0]), ny_(box.hi[1] - box.lo[1]), convert_(convert) {}
+  BoxOutput(T* out, const Box& box, Convert convert, CubeWriter cube = nullptr)
+      : out_(out), box_(box), nx_(box.hi[0] - box.lo[0]), ny_(box.hi[1] - box.lo[1]), convert_(convert), cube_(cube) {}
 
   // A leaf, or the part of it inside the box: one value over `region`.
   void operator()(const Box& region, std::uint32_t bits) const { fill_region(out_, box_, region, convert_(bits)); }
@@ -35,16 +37,32 @@ class BoxOutput {
     p[plane + nx_ + 1] = convert_(bits(7));
   }
 
+  // The 4^3 voxels of a node two levels above the target at (x, y, z),
+  // wholly inside the box, from its eight children's 64 stored values in a
+  // row: false where this output has no vector writer (cube_writers.hpp),
+  // which must convert as `convert` does.
+  bool cube(std::uint32_t x, std::uint32_t y, std::uint32_t z, const std::uint8_t* values) const {
+    if constexpr (std::is_same_v<T, float>) {
+      if (!cube_) return false;
+      cube_(values, out_ + ((std::uint64_t{z - box_.lo[2]} * ny_ + (y - box_.lo[1])) * nx_ + (x - box_.lo[0])), nx_,
+            nx_ * ny_);
+      return true;
+    } else {
+      return false;
+    }
+  }
+
  private:
   T* out_;
   Box box_;
   std::uint64_t nx_, ny_;
   Convert convert_;
+  CubeWriter cube_;
 };
 
 template <class T, class Convert>
-BoxOutput<T, Convert> box_output(T* out, const Box& box, Convert convert) {
-  return BoxOutput<T, Convert>(out, box, convert);
+BoxOutput<T, Convert> box_output(T* out, const Box& box, Convert convert, CubeWriter cube = nullptr) {
+  return BoxOutput<T, Convert>(out, box, convert, cube);
 }
 
 }  // namespace ivol::detail

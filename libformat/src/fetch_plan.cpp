@@ -25,10 +25,10 @@ constexpr std::size_t kMaxPlannedNodes = std::size_t{1} << 21;
 // Stored bytes fetched and decoded at a time.
 constexpr std::uint64_t kChunkBytes = 16u << 20;
 
-unsigned decode_threads(std::size_t blocks, std::uint64_t bytes) {
+unsigned decode_threads(std::size_t blocks, std::uint64_t bytes, unsigned configured) {
   if (blocks < 2 || bytes < kParallelBytes) return 1;
-  const unsigned hardware = std::max(1u, std::thread::hardware_concurrency());
-  return static_cast<unsigned>(std::min<std::size_t>({blocks, hardware, 8}));
+  const unsigned hardware = configured ? configured : std::min(8u, std::max(1u, std::thread::hardware_concurrency()));
+  return static_cast<unsigned>(std::min<std::size_t>(blocks, hardware));
 }
 
 }  // namespace
@@ -97,7 +97,7 @@ void Reader::Impl::load_chunk(const std::vector<std::size_t>& todo) {
       }
     }
   };
-  const unsigned threads = decode_threads(todo.size(), decoded);
+  const unsigned threads = decode_threads(todo.size(), decoded, this->threads);
   std::vector<std::thread> pool;
   for (unsigned t = 1; t < threads; ++t) pool.emplace_back(work);
   work();

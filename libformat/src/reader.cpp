@@ -7,6 +7,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "box_output.hpp"
@@ -16,6 +17,7 @@
 #include "layout.hpp"
 #include "reader_impl.hpp"
 #include "tree_walk.hpp"
+#include "whole_level.hpp"
 
 namespace ivol {
 
@@ -264,7 +266,9 @@ void Reader::read_box_into(const Box& box, float* out, unsigned lod, std::vector
     }
     return;
   }
-  if (!impl_->grid || lod == 0) impl_->plan_box(box, lod);
+  const unsigned whole_level = damaged ? 0 : detail::whole_level_threads(*impl_, box, lod);
+  if (!impl_->grid && !whole_level) impl_->plan_box(box, lod);
+  if (impl_->grid && lod == 0) impl_->plan_box(box, lod);
   std::optional<detail::SalvageLog> log;
   if (damaged) log.emplace(detail::SalvageLog{*damaged});
   if (impl_->grid) {
@@ -273,7 +277,16 @@ void Reader::read_box_into(const Box& box, float* out, unsigned lod, std::vector
       out[i] = static_cast<float>(v.physical(decode_value(v.encoding, bits[i])));
     return;
   }
-  detail::ImplAccess access{impl_.get()};
+  // The octree: a whole level on several threads, else the one-thread walk.
+  auto walk = [&](auto convert, detail::CubeWriter cube = nullptr) {
+    auto sink = detail::box_output(out, box, convert, cube);
+    if (whole_level) {
+      detail::read_whole_level(*impl_, lod, sink, whole_level);
+      return;
+    }
+    detail::ImplAccess access{impl_.get()};
+    detail::walk_box(access, v, impl_->ranges, box, lod, sink, log ? &*log : nullptr);
+  };
   if (v.encoding == ValueEncoding::UInt16) {
     // decode_value of a uint16 code is the code: converted inline, cheaper
     // than a lookup in a 256 KiB table at every voxel.
@@ -281,70 +294,72 @@ void Reader::read_box_into(const Box& box, float* out, unsigned lod, std::vector
     // every store to the output, which might alias them.
     const double scale = v.value_scale, offset = v.value_offset;
     const bool identity = scale == 1.0 && offset == 0.0;  // VolumeLayout::physical's rule
-    detail::walk_box(access, v, impl_->ranges, box, lod,
-                     detail::box_output(out, box,
-                                        [scale, offset, identity](std::uint32_t bits) {
-                                          const auto code = static_cast<double>(bits & 0xFFFFu);
-                                          return static_cast<float>(identity ? code : offset + scale * code);
-                                        }),
-                     log ? &*log : nullptr);
+    walk(
+        [scale, offset, identity](std::uint32_t bits) {
+          const auto code = static_cast<double>(bits & 0xFFFFu);
+          return static_cast<float>(identity ? code : offset + scale * code);
+        },
+        identity ? detail::uint16_cube_writer() : nullptr);
     return;
   }
-  if (v.encoding == ValueEncoding::Binary16) {
+  if (v.encoding == ValueEncoding::Binary16 && box.voxel_count() >= 65536) {
     // Physical values of all 65536 codes, once per call: cheaper than
     // decoding each voxel when the box is large.
-    if (box.voxel_count() >= 65536) {
-      const std::vector<float> table = physical_table(v);
-      const float* physical = table.data();
-      detail::walk_box(
-          access, v, impl_->ranges, box, lod,
-          detail::box_output(out, box, [physical](std::uint32_t bits) { return physical[bits & 0xFFFFu]; }),
-          log ? &*log : nullptr);
-      return;
-    }
+    const std::vector<float> table = physical_table(v);
+    const float* physical = table.data();
+    const bool identity = v.value_scale == 1.0 && v.value_offset == 0.0;  // VolumeLayout::physical's rule
+    walk([physical](std::uint32_t bits) { return physical[bits & 0xFFFFu]; },
+         identity ? detail::binary16_cube_writer() : nullptr);
+    return;
   }
-  detail::walk_box(access, v, impl_->ranges, box, lod,
-                   detail::box_output(out, box,
-                                      [&v](std::uint32_t bits) {
-                                        return static_cast<float>(v.physical(decode_value(v.encoding, bits)));
-                                      }),
-                   log ? &*log : nullptr);
+  walk([&v](std::uint32_t bits) { return static_cast<float>(v.physical(decode_value(v.encoding, bits))); });
 }
 
 std::vector<std::uint8_t> Reader::read_box_bits(const Box& box, unsigned lod, std::vector<DamagedRegion>* damaged) {
   impl_->check_box(box, lod);
+  std::vector<std::uint8_t> out = output_for<std::uint8_t>(box, encoding_width(impl_->info.layout.encoding));
+  read_box_bits_into(box, out.data(), lod, damaged);
+  return out;
+}
+
+void Reader::read_box_bits_into(const Box& box, void* out_bytes, unsigned lod, std::vector<DamagedRegion>* damaged) {
+  impl_->check_box(box, lod);
   const VolumeLayout& v = impl_->info.layout;
   const std::size_t width = encoding_width(v.encoding);
-  std::vector<std::uint8_t> out = output_for<std::uint8_t>(box, width);
+  auto* out = static_cast<std::uint8_t*>(out_bytes);
   if (detail::grid_copies(*impl_, lod) && !damaged) {
     if (width == 2)
-      detail::copy_grid(*impl_, box, reinterpret_cast<std::uint16_t*>(out.data()),
+      detail::copy_grid(*impl_, box, reinterpret_cast<std::uint16_t*>(out),
                         [](std::uint32_t bits) { return static_cast<std::uint16_t>(bits); });
     else
-      detail::copy_grid(*impl_, box, reinterpret_cast<std::uint32_t*>(out.data()),
+      detail::copy_grid(*impl_, box, reinterpret_cast<std::uint32_t*>(out),
                         [](std::uint32_t bits) { return bits; });
-    return out;
+    return;
   }
-  if (!impl_->grid || lod == 0) impl_->plan_box(box, lod);
+  const unsigned whole_level = damaged ? 0 : detail::whole_level_threads(*impl_, box, lod);
+  if (!impl_->grid && !whole_level) impl_->plan_box(box, lod);
+  if (impl_->grid && lod == 0) impl_->plan_box(box, lod);
   std::optional<detail::SalvageLog> log;
   if (damaged) log.emplace(detail::SalvageLog{*damaged});
   if (impl_->grid) {
     const std::vector<std::uint32_t> bits = grid_bits(*impl_, box, lod, log ? &*log : nullptr);
-    for (std::size_t i = 0; i < bits.size(); ++i) std::memcpy(out.data() + i * width, &bits[i], width);
-    return out;
+    for (std::size_t i = 0; i < bits.size(); ++i) std::memcpy(out + i * width, &bits[i], width);
+    return;
   }
-  detail::ImplAccess access{impl_.get()};
+  auto walk = [&](auto* typed) {
+    using T = std::remove_pointer_t<decltype(typed)>;
+    auto sink = detail::box_output(typed, box, [](std::uint32_t bits) { return static_cast<T>(bits); });
+    if (whole_level) {
+      detail::read_whole_level(*impl_, lod, sink, whole_level);
+      return;
+    }
+    detail::ImplAccess access{impl_.get()};
+    detail::walk_box(access, v, impl_->ranges, box, lod, sink, log ? &*log : nullptr);
+  };
   if (width == 2)
-    detail::walk_box(access, v, impl_->ranges, box, lod,
-                     detail::box_output(reinterpret_cast<std::uint16_t*>(out.data()), box,
-                                        [](std::uint32_t bits) { return static_cast<std::uint16_t>(bits); }),
-                     log ? &*log : nullptr);
+    walk(reinterpret_cast<std::uint16_t*>(out));
   else
-    detail::walk_box(
-        access, v, impl_->ranges, box, lod,
-        detail::box_output(reinterpret_cast<std::uint32_t*>(out.data()), box, [](std::uint32_t bits) { return bits; }),
-        log ? &*log : nullptr);
-  return out;
+    walk(reinterpret_cast<std::uint32_t*>(out));
 }
 
 void Reader::visit_leaves(const Box& box, unsigned lod, const std::function<void(const Box&, double)>& visit) {

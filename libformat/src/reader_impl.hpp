@@ -26,6 +26,7 @@ struct Reader::Impl {
   detail::BlockCache cache;
   IoStats stats;
   std::uint64_t grid_lod_voxels = 0;                // ReaderOptions::grid_lod_voxels
+  unsigned threads = 0;                             // ReaderOptions::threads
   std::uint64_t bytes_baseline = 0;                 // file.bytes_read at the last reset
   std::uint64_t requests_baseline = 0;              // file.requests() at the last reset
   std::uint64_t fetched_baseline = 0;               // file.bytes_fetched() at the last reset
@@ -51,7 +52,8 @@ struct Reader::Impl {
         info(detail::read_or_salvage(file, options.salvage, salvaged_metadata)),
         ranges(info.layout),
         cache(options.cache_bytes),
-        grid_lod_voxels(options.grid_lod_voxels) {
+        grid_lod_voxels(options.grid_lod_voxels),
+        threads(options.threads) {
     for (std::size_t b = 0; b < info.blocks.size(); ++b)
       if (detail::is_known_stream(info.blocks[b].stream, info.layout.kind))
         stream_blocks[info.blocks[b].stream].push_back(b);

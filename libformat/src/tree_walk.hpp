@@ -49,6 +49,14 @@ struct TakesOctets<
     Sink, std::void_t<decltype(std::declval<Sink&>().octet(0u, 0u, 0u, std::declval<std::uint32_t (*)(unsigned)>()))>>
     : std::true_type {};
 
+// A sink with cube(x, y, z, values): takes a 4^3 cube's 64 stored values
+// (its eight children's, in child order) at once, where it can.
+template <class Sink, class = void>
+struct TakesCubes : std::false_type {};
+template <class Sink>
+struct TakesCubes<Sink, std::void_t<decltype(std::declval<const Sink&>().cube(
+                            0u, 0u, 0u, static_cast<const std::uint8_t*>(nullptr)))>> : std::true_type {};
+
 // Hands a 2x2x2 cube to the sink, bits(c) for child c: in one call where
 // the sink takes octets, else voxel by voxel.
 template <class Sink, class Bits>
@@ -112,6 +120,166 @@ std::uint32_t lookup_bits(Access& access, const VolumeLayout& layout, const Leve
   return access.value_bits(value_index);
 }
 
+[[gnu::noinline, gnu::cold]] inline void fail_order(unsigned level, std::uint64_t index, std::uint64_t first,
+                                                    std::uint64_t required, bool exact) {
+  throw Error(ErrorClass::Malformed, "node " + std::to_string(index) + " (level " + std::to_string(level) +
+                                         "): first_inner_child is " + std::to_string(first) +
+                                         ", breadth-first order requires " + (exact ? "" : "at least ") +
+                                         std::to_string(required));
+}
+
+
+// The running counts of the node numbering (spec §8.3, §8.4) for the levels
+// a walk descends: in octant order, the nodes of a level come in
+// breadth-first order, so each node's children follow those of the node of
+// its level met before it (a DAG, nodes sharing children, breaks this), and
+// a read of a whole level meets every node: each first_inner_child is then
+// exactly the running count (`exact`), and the counts add up to the level
+// table's. A walk of one subtree (a parallel whole read) starts with the
+// counts unknown: it records the first node it meets at each level, and the
+// caller chains the subtrees' counts in order.
+class NodeNumbering {
+ public:
+  static constexpr std::uint64_t kUnknown = ~std::uint64_t{0};
+
+  NodeNumbering(const LevelRanges& ranges, unsigned target, bool exact)
+      : exact(exact), next_child(target), first_node(target, kUnknown), first_child(target, kUnknown) {
+    for (unsigned l = 0; l < target; ++l) next_child[l] = ranges.first_inner[l + 1];
+  }
+
+  // Counts unknown from `level` down, for a walk of a subtree rooted there.
+  void start_subtree(unsigned level) {
+    for (std::size_t l = level; l < next_child.size(); ++l) next_child[l] = first_node[l] = first_child[l] = kUnknown;
+  }
+
+  // Inlined: met at every node a walk visits.
+  [[gnu::always_inline]] void check(unsigned level, std::uint64_t index, std::uint64_t word) {
+    const std::uint64_t first = first_inner_child(word);
+    std::uint64_t& next = next_child[level];
+    if (next == kUnknown) {
+      first_node[level] = index;
+      first_child[level] = first;
+    } else if (exact ? first != next : first < next) {
+      fail_order(level, index, first, next, exact);
+    }
+    next = first + popcount8(child_mask(word));
+  }
+
+  // The level table's counts against those the walk met (a whole level).
+  void check_totals(const VolumeLayout& layout, const LevelRanges& ranges) const {
+    for (unsigned l = 0; l < next_child.size(); ++l)
+      if (next_child[l] != ranges.first_inner[l + 2])
+        throw Error(ErrorClass::Malformed, "level table: inner_count[" + std::to_string(l + 1) + "] is " +
+                                               std::to_string(layout.inner_count[l + 1]) +
+                                               " but the child masks of level " + std::to_string(l) + " name " +
+                                               std::to_string(next_child[l] - ranges.first_inner[l + 1]));
+  }
+
+  bool exact;
+  std::vector<std::uint64_t> next_child;   // per level l: the first_inner_child the next node of l must have
+  std::vector<std::uint64_t> first_node;   // per level: the first node met when the count started unknown
+  std::vector<std::uint64_t> first_child;  // and its first_inner_child
+};
+
+// The dense path: the subtree of the inner node `inner` at `level`, whose
+// cube at (x, y, z) lies wholly inside the box, descended without frames or
+// box clipping, in octant order, every node word checked (§8.3, §8.4).
+// `Access::values8` hands over the eight values of a level-(target-1) node
+// at once, and a sink that takes octets writes them as one 2x2x2 cube.
+template <class Access, class Sink>
+struct DenseDescent {
+  Access& access;
+  const VolumeLayout& layout;
+  const LevelRanges& ranges;
+  unsigned target;
+  Sink& sink;
+  NodeNumbering& numbering;
+
+  void operator()(unsigned level, std::uint64_t inner, std::uint32_t x, std::uint32_t y, std::uint32_t z) const {
+    const std::uint64_t word = access.node_word(inner);
+    check_node_word(layout, ranges, level, inner, word);
+    numbering.check(level, inner, word);
+    const std::uint64_t values = 1 + 8 * inner;
+    if (level + 1 == target) {
+      std::uint32_t bits[8];
+      access.values8(values, bits);
+      put_octet(sink, x, y, z, [&bits](unsigned c) { return bits[c]; });
+      return;
+    }
+    const unsigned mask = child_mask(word);
+    std::uint64_t next_inner = first_inner_child(word);
+    if (level + 2 == target && mask != 0) {
+      cube4(level, mask, values, next_inner, x, y, z);
+      return;
+    }
+    const std::uint32_t half = std::uint32_t{1} << (target - level - 1);
+    for (unsigned c = 0; c < 8; ++c) {
+      const std::uint32_t cx = x + ((c & 1u) ? half : 0), cy = y + ((c & 2u) ? half : 0),
+                          cz = z + ((c & 4u) ? half : 0);
+      if ((mask >> c) & 1u)
+        (*this)(level + 1, next_inner++, cx, cy, cz);
+      else
+        sink(Box{{cx, cy, cz}, {cx + half, cy + half, cz + half}}, access.value_bits(values + c));
+    }
+  }
+
+  // A cube of 4^3 voxels: its inner children's node words are consecutive,
+  // and so are their 8 values each. Each taken as one run from its decoded
+  // block (where it lies in one) rather than looked up node by node; every
+  // word is still checked, in the same order, before any of their values is
+  // read. A run's bytes stay valid only until the next lookup, which may
+  // load a block and let another go: nothing else is looked up while one is
+  // in use.
+  void cube4(unsigned level, unsigned mask, std::uint64_t values, std::uint64_t next_inner, std::uint32_t x,
+             std::uint32_t y, std::uint32_t z) const {
+    const unsigned count = popcount8(mask);
+    const std::uint8_t* words = access.run(2, next_inner, count);
+    std::uint64_t child_words[8];
+    for (unsigned k = 0; k < count; ++k) {
+      const std::uint64_t child = next_inner + k;
+      child_words[k] = words ? ivol::layout::load<std::uint64_t>(words + 8 * k) : access.node_word(child);
+      check_node_word(layout, ranges, level + 1, child, child_words[k]);
+      numbering.check(level + 1, child, child_words[k]);
+    }
+    auto corner = [&](unsigned c, std::uint32_t* at) {
+      at[0] = x + ((c & 1u) ? 2 : 0);
+      at[1] = y + ((c & 2u) ? 2 : 0);
+      at[2] = z + ((c & 4u) ? 2 : 0);
+    };
+    for (unsigned c = 0; c < 8; ++c) {  // the leaves among the children: 2^3 voxels each
+      if ((mask >> c) & 1u) continue;
+      std::uint32_t at[3];
+      corner(c, at);
+      sink(Box{{at[0], at[1], at[2]}, {at[0] + 2, at[1] + 2, at[2] + 2}}, access.value_bits(values + c));
+    }
+    const std::size_t width = access.value_width();
+    const std::uint8_t* leaves = access.run(3, 1 + 8 * next_inner, 8 * std::uint64_t{count});
+    if constexpr (TakesCubes<std::remove_const_t<Sink>>::value)
+      if (count == 8 && leaves && width == 2 && sink.cube(x, y, z, leaves)) return;
+    unsigned k = 0;
+    for (unsigned c = 0; c < 8; ++c) {
+      if (!((mask >> c) & 1u)) continue;
+      std::uint32_t at[3];
+      corner(c, at);
+      const std::uint64_t child_values = 1 + 8 * (next_inner + k);
+      const std::uint8_t* run = leaves ? leaves + 8 * k * width : nullptr;
+      ++k;
+      // Read straight from the decoded block: values copied into an
+      // array first cost a store-forwarding stall at every node.
+      if (!run) {
+        std::uint32_t bits[8];
+        access.values8(child_values, bits);
+        put_octet(sink, at[0], at[1], at[2], [&bits](unsigned v) { return bits[v]; });
+      } else if (width == 2) {
+        put_octet(sink, at[0], at[1], at[2],
+                  [run](unsigned v) { return std::uint32_t{ivol::layout::load<std::uint16_t>(run + 2 * v)}; });
+      } else {
+        put_octet(sink, at[0], at[1], at[2], [run](unsigned v) { return ivol::layout::load<std::uint32_t>(run + 4 * v); });
+      }
+    }
+  }
+};
+
 // Calls sink(region, bits) for every leaf (or node of the target level) that
 // meets `box`, with `region` the part of the box it covers, in the
 // coordinates of level of detail `lod`. With `salvage`, a node or value that
@@ -124,34 +292,12 @@ std::uint32_t lookup_bits(Access& access, const VolumeLayout& layout, const Leve
 // the same order and with the same checks; `Access::values8` hands over the
 // eight values of a level-(target-1) node at once, and a sink that takes
 // octets writes them as one 2x2x2 cube.
-[[gnu::noinline, gnu::cold]] inline void fail_order(unsigned level, std::uint64_t index, std::uint64_t first,
-                                                    std::uint64_t required, bool exact) {
-  throw Error(ErrorClass::Malformed, "node " + std::to_string(index) + " (level " + std::to_string(level) +
-                                         "): first_inner_child is " + std::to_string(first) +
-                                         ", breadth-first order requires " + (exact ? "" : "at least ") +
-                                         std::to_string(required));
-}
-
 template <class Access, class Sink>
 void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ranges, const Box& box, unsigned lod,
               Sink&& sink, SalvageLog* salvage = nullptr) {
   const unsigned target = layout.depth - lod;
-  // Node numbering (spec §8.3, §8.4) for the levels the walk descends: in
-  // octant order, the nodes of a level come in breadth-first order, so each
-  // node's children follow those of the node of its level met before it
-  // (a DAG, nodes sharing children, breaks this), and a read of a whole
-  // level meets every node: each first_inner_child is then exactly the
-  // running count, and the counts add up to the level table's.
   const Box whole = full_box(layout.dims, lod);
-  bool exact = whole.lo == box.lo && whole.hi == box.hi;
-  std::vector<std::uint64_t> next_child(target);
-  for (unsigned l = 0; l < target; ++l) next_child[l] = ranges.first_inner[l + 1];
-  auto check_order = [&](unsigned level, std::uint64_t index, std::uint64_t word) {
-    const std::uint64_t first = first_inner_child(word);
-    if (exact ? first != next_child[level] : first < next_child[level])
-      fail_order(level, index, first, next_child[level], exact);
-    next_child[level] = first + popcount8(child_mask(word));
-  };
+  NodeNumbering numbering(ranges, target, whole.lo == box.lo && whole.hi == box.hi);
   struct Frame {
     unsigned level;
     std::uint32_t i, j, k;
@@ -161,7 +307,7 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
   };
   auto log = [&](const Box& region, unsigned level, const Error& e) {
     salvage->add(region, level, e.what());
-    exact = false;  // a skipped subtree's children are not counted
+    numbering.exact = false;  // a skipped subtree's children are not counted
   };
   // A value, or in salvage mode the fallback when it cannot be read.
   auto value_or = [&](std::uint64_t index, std::uint32_t fallback, const Box& region, unsigned level) {
@@ -177,86 +323,7 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
       return fallback;
     }
   };
-  // The dense path: the subtree of the inner node `inner` at `level`, whose
-  // cube at (x, y, z) lies wholly inside the box.
-  auto dense = [&](auto& self, unsigned level, std::uint64_t inner, std::uint32_t x, std::uint32_t y,
-                   std::uint32_t z) -> void {
-    const std::uint64_t word = access.node_word(inner);
-    check_node_word(layout, ranges, level, inner, word);
-    check_order(level, inner, word);
-    const std::uint64_t values = 1 + 8 * inner;
-    if (level + 1 == target) {
-      std::uint32_t bits[8];
-      access.values8(values, bits);
-      put_octet(sink, x, y, z, [&bits](unsigned c) { return bits[c]; });
-      return;
-    }
-    const unsigned mask = child_mask(word);
-    std::uint64_t next_inner = first_inner_child(word);
-    if (level + 2 == target && mask != 0) {
-      // A cube of 4^3 voxels: its inner children's node words are
-      // consecutive, and so are their 8 values each. Each taken as one run
-      // from its decoded block (where it lies in one) rather than looked up
-      // node by node; every word is still checked, in the same order,
-      // before any of their values is read. A run's bytes stay valid only
-      // until the next lookup, which may load a block and let another go:
-      // nothing else is looked up while one is in use.
-      const unsigned count = popcount8(mask);
-      const std::uint8_t* words = access.run(2, next_inner, count);
-      std::uint64_t child_words[8];
-      for (unsigned k = 0; k < count; ++k) {
-        const std::uint64_t child = next_inner + k;
-        child_words[k] = words ? ivol::layout::load<std::uint64_t>(words + 8 * k) : access.node_word(child);
-        check_node_word(layout, ranges, level + 1, child, child_words[k]);
-        check_order(level + 1, child, child_words[k]);
-      }
-      auto corner = [&](unsigned c, std::uint32_t* at) {
-        at[0] = x + ((c & 1u) ? 2 : 0);
-        at[1] = y + ((c & 2u) ? 2 : 0);
-        at[2] = z + ((c & 4u) ? 2 : 0);
-      };
-      for (unsigned c = 0; c < 8; ++c) {  // the leaves among the children: 2^3 voxels each
-        if ((mask >> c) & 1u) continue;
-        std::uint32_t at[3];
-        corner(c, at);
-        sink(Box{{at[0], at[1], at[2]}, {at[0] + 2, at[1] + 2, at[2] + 2}}, access.value_bits(values + c));
-      }
-      const std::size_t width = access.value_width();
-      const std::uint8_t* leaves = access.run(3, 1 + 8 * next_inner, 8 * std::uint64_t{count});
-      unsigned k = 0;
-      for (unsigned c = 0; c < 8; ++c) {
-        if (!((mask >> c) & 1u)) continue;
-        std::uint32_t at[3];
-        corner(c, at);
-        const std::uint64_t child_values = 1 + 8 * (next_inner + k);
-        const std::uint8_t* run = leaves ? leaves + 8 * k * width : nullptr;
-        ++k;
-        // Read straight from the decoded block: values copied into an
-        // array first cost a store-forwarding stall at every node.
-        if (!run) {
-          std::uint32_t bits[8];
-          access.values8(child_values, bits);
-          put_octet(sink, at[0], at[1], at[2], [&bits](unsigned v) { return bits[v]; });
-        } else if (width == 2) {
-          put_octet(sink, at[0], at[1], at[2],
-                    [run](unsigned v) { return std::uint32_t{ivol::layout::load<std::uint16_t>(run + 2 * v)}; });
-        } else {
-          put_octet(sink, at[0], at[1], at[2],
-                    [run](unsigned v) { return ivol::layout::load<std::uint32_t>(run + 4 * v); });
-        }
-      }
-      return;
-    }
-    const std::uint32_t half = std::uint32_t{1} << (target - level - 1);
-    for (unsigned c = 0; c < 8; ++c) {
-      const std::uint32_t cx = x + ((c & 1u) ? half : 0), cy = y + ((c & 2u) ? half : 0),
-                          cz = z + ((c & 4u) ? half : 0);
-      if ((mask >> c) & 1u)
-        self(self, level + 1, next_inner++, cx, cy, cz);
-      else
-        sink(Box{{cx, cy, cz}, {cx + half, cy + half, cz + half}}, access.value_bits(values + c));
-    }
-  };
+  const DenseDescent<Access, std::remove_reference_t<Sink>> dense{access, layout, ranges, target, sink, numbering};
   std::vector<Frame> stack;
   stack.push_back({0, 0, 0, 0, 0, layout.inner_count[0] ? 0 : kNoInner, 0});
   while (!stack.empty()) {
@@ -280,7 +347,7 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
     if (!salvage && f.inner != kNoInner && f.level < target && region.lo[0] == origin[0] && region.lo[1] == origin[1] &&
         region.lo[2] == origin[2] && region.hi[0] - origin[0] == side && region.hi[1] - origin[1] == side &&
         region.hi[2] - origin[2] == side) {
-      dense(dense, f.level, f.inner, region.lo[0], region.lo[1], region.lo[2]);
+      dense(f.level, f.inner, region.lo[0], region.lo[1], region.lo[2]);
       continue;
     }
     if (f.inner == kNoInner || f.level == target) {
@@ -300,7 +367,7 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
     try {
       word = access.node_word(f.inner);
       check_node_word(layout, ranges, f.level, f.inner, word);
-      check_order(f.level, f.inner, word);
+      numbering.check(f.level, f.inner, word);
     } catch (const Error& e) {
       if (!salvage) throw;
       log(region, f.level, e);
@@ -335,13 +402,7 @@ void walk_box(Access& access, const VolumeLayout& layout, const LevelRanges& ran
                        1 + 8 * f.inner + cu, child_inner, own});
     }
   }
-  if (!exact) return;
-  for (unsigned l = 0; l < target; ++l)
-    if (next_child[l] != ranges.first_inner[l + 2])
-      throw Error(ErrorClass::Malformed, "level table: inner_count[" + std::to_string(l + 1) + "] is " +
-                                             std::to_string(layout.inner_count[l + 1]) +
-                                             " but the child masks of level " + std::to_string(l) + " name " +
-                                             std::to_string(next_child[l] - ranges.first_inner[l + 1]));
+  if (numbering.exact) numbering.check_totals(layout, ranges);
 }
 
 // Writes `bits` (width bytes each) or physical floats into a [z][y][x] buffer

@@ -157,15 +157,30 @@ class PyReader {
   // as a uint8 array the Python half views with the encoding's dtype.
   py::object read_bits(const std::array<std::uint32_t, 3>& lo, const std::array<std::uint32_t, 3>& hi, unsigned lod,
                        bool salvage) {
-    std::vector<std::uint8_t> bits;
     std::vector<ivol::DamagedRegion> damaged;
-    {
-      py::gil_scoped_release release;
-      std::lock_guard<std::mutex> lock(mutex_);
-      bits = reader_->read_box_bits(make_box(lo, hi), lod, salvage ? &damaged : nullptr);
+    py::array array;
+    if (within_level(lo, hi, lod)) {
+      // Into numpy's own array, as read() does: no zeroed vector first.
+      const std::uint64_t bytes = std::uint64_t{hi[0] - lo[0]} * (hi[1] - lo[1]) * (hi[2] - lo[2]) *
+                                  ivol::encoding_width(reader_->layout().encoding);
+      py::array_t<std::uint8_t> out(static_cast<py::ssize_t>(bytes));
+      std::uint8_t* data = out.mutable_data();
+      {
+        py::gil_scoped_release release;
+        std::lock_guard<std::mutex> lock(mutex_);
+        reader_->read_box_bits_into(make_box(lo, hi), data, lod, salvage ? &damaged : nullptr);
+      }
+      array = std::move(out);
+    } else {
+      std::vector<std::uint8_t> bits;
+      {
+        py::gil_scoped_release release;
+        std::lock_guard<std::mutex> lock(mutex_);
+        bits = reader_->read_box_bits(make_box(lo, hi), lod, salvage ? &damaged : nullptr);
+      }
+      const auto n = static_cast<py::ssize_t>(bits.size());
+      array = owning_array(std::move(bits), {n}, py::dtype::of<std::uint8_t>());
     }
-    const auto n = static_cast<py::ssize_t>(bits.size());
-    py::array array = owning_array(std::move(bits), {n}, py::dtype::of<std::uint8_t>());
     if (!salvage) return std::move(array);
     return py::make_tuple(array, damaged_list(damaged));
   }

@@ -233,5 +233,61 @@ class WriteStructure(unittest.TestCase):
                 ivol.write_structure(out, a.astype(np.float64), np.ones((2, 2, 2), bool), factor=8)
 
 
+class WholeReads(unittest.TestCase):
+    """The whole volume, read on several threads with vector conversions
+    (libformat's whole_level.hpp, cube_writers.hpp), and f.stored read into
+    numpy's own array."""
+
+    def test_every_binary16_code(self):
+        rng = np.random.default_rng(5)
+        codes = rng.permutation(np.arange(65536, dtype=np.uint32)).astype(np.uint16)
+        a = codes.view(np.float16).reshape(32, 32, 64)
+        # binary16 to float32 exactly; a NaN keeps its payload and is quieted.
+        h = codes.astype(np.uint32)
+        sign, exponent, mantissa = (h & 0x8000) << 16, (h >> 10) & 0x1F, h & 0x3FF
+        expected = a.astype(np.float32).view(np.uint32).reshape(-1).copy()
+        nan = (exponent == 31) & (mantissa != 0)
+        expected[nan] = sign[nan] | 0x7F800000 | 0x400000 | (mantissa[nan] << 13)
+        with tempfile.TemporaryDirectory() as d:
+            path = os.path.join(d, "codes.ivol")
+            ivol.write(path, a)
+            f = ivol.open(path)
+            self.assertEqual(f.encoding, "binary16")
+            whole = f[:]
+            self.assertTrue(np.array_equal(whole.view(np.uint32).reshape(-1), expected))
+            walked, damaged = f.read_salvaged()
+            self.assertEqual(damaged, [])
+            self.assertTrue(same_bits(whole, walked))
+            # ivol.write stores a signalling NaN quieted (its payload kept).
+            written = np.where(nan, h | 0x200, h).astype(np.uint16).reshape(a.shape)
+            stored = f.stored[...]
+            self.assertEqual(stored.dtype, np.float16)
+            self.assertTrue(np.array_equal(stored.view(np.uint16), written))
+            part = f.stored[3:29, 1:, 5:60]
+            self.assertTrue(np.array_equal(part.view(np.uint16), written[3:29, 1:, 5:60]))
+
+    def test_damaged_block_raises(self):
+        rng = np.random.default_rng(6)
+        a = rng.integers(0, 4000, size=(64, 64, 64)).astype(np.uint16)
+        with tempfile.TemporaryDirectory() as d:
+            path = os.path.join(d, "noise.ivol")
+            ivol.write(path, a)
+            self.assertTrue(np.array_equal(ivol.open(path)[:], a.astype(np.float32)))
+            with open(path, "r+b") as out:  # a byte in the middle: inside the deepest level's values
+                size = os.path.getsize(path)
+                out.seek(size // 2)
+                byte = out.read(1)
+                out.seek(size // 2)
+                out.write(bytes([byte[0] ^ 0x55]))
+            f = ivol.open(path)
+            for read in (lambda: f[:], lambda: f.stored[...], lambda: f[:]):
+                with self.assertRaises(ivol.ChecksumError) as caught:
+                    read()
+                self.assertIn("block ", str(caught.exception))
+            salvaged, damaged = f.read_salvaged()
+            self.assertGreater(len(damaged), 0)
+            self.assertEqual(salvaged.shape, a.shape)
+
+
 if __name__ == "__main__":
     unittest.main(verbosity=1)

@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstring>
 #include <random>
 #include <stdexcept>
@@ -247,6 +248,47 @@ std::vector<HostileFile> catalogue() {
       {"rectilinear_2p29", "a valid rectilinear grid of 2^29 voxels per side, one cell", false},
       {"salvage_zeroed", "160^3 noise with 40 % of its blocks zeroed (for extract --salvage)", false},
   };
+}
+
+void write_full_octree(const std::string& path, unsigned shared_from) {
+  // Depth 6: levels 0..5 inner (8^l nodes each), level 6 the voxels.
+  Container c;
+  c.depth = 6;
+  c.dims[0] = c.dims[1] = c.dims[2] = 64;
+  std::vector<std::uint64_t> first_inner(8, 0);
+  for (unsigned l = 0; l <= 6; ++l) {
+    c.inner_count.push_back(l < 6 ? std::uint64_t{1} << (3 * l) : 0);
+    first_inner[l + 1] = first_inner[l] + c.inner_count[l];
+  }
+  c.blocks.push_back(metadata_block(kMetadata));
+  for (unsigned l = 0; l < 6; ++l) {
+    std::vector<std::uint64_t> words(c.inner_count[l]);
+    for (std::uint64_t p = 0; p < words.size(); ++p) {
+      const std::uint64_t mask = l + 1 == 6 ? 0 : 0xFF;
+      std::uint64_t first = l + 1 == 6 ? first_inner[6] : first_inner[l + 1] + 8 * p;
+      // Level-4 nodes shared_from .. 15 (of the second subtree of level 3)
+      // name the children of the node before them, and so on.
+      if (shared_from && l == 4 && p >= shared_from && p < 16) first -= 8;
+      words[p] = (mask << 56) | first;
+    }
+    // Blocks of 64 node words: a subtree's nodes span several.
+    for (std::uint64_t at = 0; at < words.size(); at += 64) {
+      const auto n = static_cast<std::uint32_t>(std::min<std::uint64_t>(64, words.size() - at));
+      c.blocks.push_back(encoded(2, static_cast<std::uint8_t>(l), first_inner[l] + at, n, 8, words.data() + at));
+    }
+  }
+  std::uint64_t first_value = 0;
+  for (unsigned l = 0; l <= 6; ++l) {
+    const std::uint64_t count = l == 0 ? 1 : 8 * c.inner_count[l - 1];
+    std::vector<float> values(count);
+    for (std::uint64_t i = 0; i < count; ++i) values[i] = static_cast<float>(first_value + i);
+    for (std::uint64_t at = 0; at < count; at += 1000) {
+      const auto n = static_cast<std::uint32_t>(std::min<std::uint64_t>(1000, count - at));
+      c.blocks.push_back(encoded(3, static_cast<std::uint8_t>(l), first_value + at, n, 4, values.data() + at));
+    }
+    first_value += count;
+  }
+  c.write(path);
 }
 
 void write(const std::string& name, const std::string& path) {

@@ -33,4 +33,14 @@ std::string deep_metadata(std::size_t depth, bool arrays);
 // A valid 1x1x1 float32 octree file with this metadata text.
 void write_one_voxel(const std::string& metadata, const std::string& path);
 
+// A full octree of 64^3 float32 voxels (every voxel a leaf, each value its
+// index in the values stream), in small blocks. With `shared_from` (8 ..
+// 15), level-4 nodes shared_from .. 15 (the second subtree of level 3) each
+// name the level-5 children of the node before them: every node word passes
+// its own checks, only the breadth-first numbering (spec §8.3) is broken.
+// From 8, each subtree of level 3 is numbered consistently within itself
+// and the break lies between two of them; from 9, within one. 0: a valid
+// file.
+void write_full_octree(const std::string& path, unsigned shared_from);
+
 }  // namespace ivol::test::hostile

@@ -16,7 +16,11 @@
 //   detail of a grid one double per output voxel of one output layer;
 // - decoded blocks up to ReaderOptions::cache_bytes, or the one block in use
 //   when it is larger: a block is at most 64 MiB decoded, and its stored
-//   size is bounded by its decoded size before it is read (spec §7);
+//   size is bounded by its decoded size before it is read (spec §7); a
+//   whole level of an octree read on several threads (ReaderOptions::
+//   threads) holds a quarter of that budget (at most 32 MiB) shared, plus
+//   each thread's block in use at each level, and takes fewer threads, or
+//   reads on one thread as other reads do, where these would not fit;
 // - for a salvaging read, at most SalvageLog's 1000 DamagedRegion entries.
 // Time follows from the voxels asked for (for a level of detail of a grid,
 // the full-resolution voxels under it, at most grid_lod_voxels) and the
@@ -53,6 +57,10 @@ struct ReaderOptions {
   // A file whose index is sound is read as without this option (except that
   // a damaged metadata block gives default metadata instead of an error).
   bool salvage = false;
+  // Threads a whole-volume (whole level) read of an octree decodes and walks
+  // on; 0: the hardware's, at most 8. Other reads decode their blocks on as
+  // many (fetch planning) and walk them on the caller's thread.
+  unsigned threads = 0;
 };
 
 // What a salvaging open found (FileInfo::salvage).
@@ -169,6 +177,10 @@ class Reader {
   // Stored bits of `box`, encoding_width() bytes per voxel, little-endian.
   std::vector<std::uint8_t> read_box_bits(const Box& box, unsigned lod = 0,
                                           std::vector<DamagedRegion>* damaged = nullptr);
+  // The same into the caller's `out`, box.voxel_count() * encoding_width()
+  // bytes (numpy's array for the Python package's f.stored[...]); `out`
+  // aligned for the encoding's width.
+  void read_box_bits_into(const Box& box, void* out, unsigned lod = 0, std::vector<DamagedRegion>* damaged = nullptr);
   std::vector<float> read_slice(Axis axis, std::uint32_t index);
   // The whole volume at 1/2^lod resolution (spec §12.3).
   std::vector<float> read_lod(unsigned lod);
