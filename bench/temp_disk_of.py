@@ -32,6 +32,16 @@ def children(pid):
 def sample():
     unnamed = named = 0
     seen = set()
+    # Named files first: an O_TMPFILE given a name by linkat (the writer's
+    # output) still reads "#inode (deleted)" through its descriptor.
+    for root, _, files in os.walk(directory):
+        for name in files:
+            try:
+                st = os.stat(os.path.join(root, name))
+            except OSError:
+                continue
+            seen.add((st.st_dev, st.st_ino))
+            named += st.st_blocks * 512
     for pid in [child.pid] + children(child.pid):
         try:
             fds = os.listdir(f"/proc/{pid}/fd")
@@ -49,12 +59,6 @@ def sample():
                 continue
             seen.add((st.st_dev, st.st_ino))
             unnamed += st.st_blocks * 512
-    for root, _, files in os.walk(directory):
-        for name in files:
-            try:
-                named += os.stat(os.path.join(root, name)).st_blocks * 512
-            except OSError:
-                pass
     return unnamed, named
 
 
