@@ -76,8 +76,7 @@ std::uint32_t BrickList::shape_code(const Brick& b) {
   const auto found = shape_codes_.find(key);
   if (found != shape_codes_.end()) return found->second;
   const auto code = static_cast<std::uint32_t>(kCubeCodes + shapes_.size());
-  if (code > kMaxShapeCode)
-    throw Error(ErrorClass::LimitExceeded, "structure: more than 2^24 brick shapes");
+  if (code > kMaxShapeCode) throw Error(ErrorClass::LimitExceeded, "structure: more than 2^24 brick shapes");
   shapes_.push_back(Shape{b.voxel, b.count});
   shape_codes_.emplace(key, code);
   return code;
@@ -122,8 +121,7 @@ void BrickList::sort_by_first_slice() {
 std::uint64_t BrickList::assign_first_values() {
   std::uint64_t next = 0;
   for (PackedBrick& r : records_) {
-    if (next > kFirstValueMask)
-      throw Error(ErrorClass::LimitExceeded, "structure: more than 2^40 values");
+    if (next > kFirstValueMask) throw Error(ErrorClass::LimitExceeded, "structure: more than 2^40 values");
     r.value = (r.value & ~kFirstValueMask) | next;
     next += decode(r).voxel_count();
   }

@@ -115,7 +115,7 @@ class FileOrder {
   std::uint64_t rx_ = 0, ry_ = 0;
   std::uint64_t n_ = 0;
   std::uint32_t brick_ = 0;
-  Brick current_;                      // brick unpacked_, unpacked
+  Brick current_;  // brick unpacked_, unpacked
   std::uint32_t unpacked_ = UINT32_MAX;
   std::uint64_t value_ = 0;
   std::uint32_t z_start_ = 0;

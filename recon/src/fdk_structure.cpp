@@ -395,11 +395,11 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
       if (window_bytes + tasks_bytes <= window.memory_limit) break;
       if (slices == 1) {
         m.problem.grid = nullptr;
-        throw Error(ErrorClass::LimitExceeded,
-                    "FDK: the structure's values and tasks in flight need " +
-                        std::to_string(window_bytes + tasks_bytes) + " bytes with one-slice slabs and the writer's slabs of " +
-                        std::to_string(window.writer_slab_slices) + " slices, over their memory budget of " +
-                        std::to_string(window.memory_limit) + " bytes");
+        throw Error(
+            ErrorClass::LimitExceeded,
+            "FDK: the structure's values and tasks in flight need " + std::to_string(window_bytes + tasks_bytes) +
+                " bytes with one-slice slabs and the writer's slabs of " + std::to_string(window.writer_slab_slices) +
+                " slices, over their memory budget of " + std::to_string(window.memory_limit) + " bytes");
       }
       slices = std::max<std::uint32_t>(1, slices / 2);
       slab_of = SlabOf{slices, (grid.size[2] + slices - 1) / slices};

@@ -342,8 +342,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
     std::cerr << std::fixed << std::setprecision(1) << "ivol recon: preview " << found.seconds << " s (held "
               << human_bytes(found.preview_bytes) << ", spilled " << human_bytes(found.preview_spilled_bytes)
               << "); structure generated in " << generating << " s: " << structure->bricks().size() << " bricks ("
-              << human_bytes(structure->bricks().memory_bytes()) << "), " << structure->voxel_count()
-              << " voxels\n";
+              << human_bytes(structure->bricks().memory_bytes()) << "), " << structure->voxel_count() << " voxels\n";
 
   metadata.provenance["reconstruction"]["structure"] = {
       {"kind", s.structure},

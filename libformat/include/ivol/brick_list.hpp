@@ -16,8 +16,8 @@
 #include <cstddef>
 #include <cstdint>
 #include <iterator>
-#include <optional>
 #include <map>
+#include <optional>
 #include <vector>
 
 #include "ivol/geometry.hpp"
@@ -41,7 +41,7 @@ static_assert(sizeof(PackedBrick) == 16, "a brick record is 16 bytes");
 
 class BrickList {
  public:
-  static constexpr unsigned kAxisBits = 21;       // volumes up to 2,097,152 voxels along an axis
+  static constexpr unsigned kAxisBits = 21;        // volumes up to 2,097,152 voxels along an axis
   static constexpr unsigned kFirstValueBits = 40;  // up to 2^40 values (10,000³ is 10^12)
   static constexpr std::uint32_t kCubeCodes = 64;
 
@@ -79,7 +79,10 @@ class BrickList {
     const_iterator(const BrickList* list, std::size_t n) : list_(list), n_(n) {}
     Brick operator*() const { return (*list_)[n_]; }
     const_iterator& operator++() { return ++n_, *this; }
-    const_iterator operator++(int) { const_iterator was = *this; return ++n_, was; }
+    const_iterator operator++(int) {
+      const_iterator was = *this;
+      return ++n_, was;
+    }
     bool operator==(const const_iterator& o) const { return n_ == o.n_; }
     bool operator!=(const const_iterator& o) const { return n_ != o.n_; }
 
