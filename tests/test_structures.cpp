@@ -7,6 +7,7 @@
 #include <random>
 
 #include "ivol/check.hpp"
+#include "ivol/error.hpp"
 #include "ivol/reader.hpp"
 #include "ivol/structures.hpp"
 #include "test_support.hpp"
@@ -204,6 +205,60 @@ TEST(Generation, SameStructureWithAnyThreadCount) {
     EXPECT_EQ(a->bricks()[n].count, b->bricks()[n].count);
   }
   EXPECT_EQ(a->memory().total(), b->memory().total());
+}
+
+}  // namespace
+
+namespace {
+
+// A brick given field by field comes back field by field, whether it is
+// packed as a clipped cube or through the shape table; 16 bytes a brick
+// (issue 23: 48 before).
+TEST(BrickList, EveryBrickComesBackAsGiven) {
+  const Dims dims{96, 90, 77};
+  BrickList list(dims);
+  std::vector<Brick> given;
+  std::mt19937_64 rng(23);
+  for (int n = 0; n < 4000; ++n) {
+    Brick b;
+    for (int a = 0; a < 3; ++a) b.origin[a] = static_cast<std::uint32_t>(rng() % dims[a]);
+    const unsigned kind = rng() % 3;
+    const std::uint32_t side = 1U << (rng() % 7);
+    for (int a = 0; a < 3; ++a) {
+      const std::uint32_t extent = std::min(side, dims[a] - b.origin[a]);
+      const std::uint32_t any = 1 + static_cast<std::uint32_t>(rng() % 5);
+      b.voxel[a] = kind == 0 ? 1 : kind == 1 ? extent : any;  // fine cube, coarse cube, anything
+      b.count[a] = kind == 0 ? extent : kind == 1 ? 1 : 1 + static_cast<std::uint32_t>(rng() % 9);
+    }
+    list.push_back(b);
+    given.push_back(b);
+  }
+  const std::uint64_t total = list.assign_first_values();
+  ASSERT_EQ(list.size(), given.size());
+  std::uint64_t next = 0;
+  for (std::size_t n = 0; n < given.size(); ++n) {
+    const Brick b = list[n];
+    EXPECT_EQ(b.origin, given[n].origin) << n;
+    EXPECT_EQ(b.voxel, given[n].voxel) << n;
+    EXPECT_EQ(b.count, given[n].count) << n;
+    EXPECT_EQ(b.first_value, next) << n;
+    next += given[n].voxel_count();
+  }
+  EXPECT_EQ(total, next);
+}
+
+TEST(BrickList, AnOctreeTakesSixteenBytesABrick) {
+  std::mt19937_64 rng(5);
+  const NeedMask mask = random_mask({96, 90, 77}, 4, rng, 0.05);
+  const auto octree = generate_structure(StructureKind::Octree, mask);
+  ASSERT_GT(octree->bricks().size(), 1000U);
+  EXPECT_EQ(octree->bricks().memory_bytes(), 16 * octree->bricks().size());
+}
+
+TEST(BrickList, RefusesAxesLongerThanTheOriginBits) {
+  EXPECT_THROW(BrickList({(1U << 21) + 1, 4, 4}), Error);
+  EXPECT_THROW(BrickList({4, 4, (1U << 21) + 1}), Error);
+  EXPECT_NO_THROW(BrickList({1U << 21, 1U << 21, 1U << 21}));
 }
 
 }  // namespace

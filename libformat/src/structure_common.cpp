@@ -39,14 +39,7 @@ constexpr std::uint32_t kTile = 16;  // lookup tiles of 16^3 full-resolution vox
 
 }  // namespace
 
-void VoxelStructure::finish_bricks() {
-  std::uint64_t next = 0;
-  for (Brick& b : bricks_) {
-    b.first_value = next;
-    next += b.voxel_count();
-  }
-  voxel_total_ = next;
-}
+void VoxelStructure::finish_bricks() { voxel_total_ = bricks_.assign_first_values(); }
 
 std::vector<float>& VoxelStructure::values() {
   if (values_.size() != voxel_total_) values_.assign(voxel_total_, 0.0f);

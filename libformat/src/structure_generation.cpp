@@ -4,7 +4,8 @@
 // the octree's subtrees are generated in parallel.
 #include <algorithm>
 #include <atomic>
-#include <numeric>
+#include <optional>
+#include <stdexcept>
 #include <thread>
 
 #include "ivol/error.hpp"
@@ -21,6 +22,7 @@ class RegularStructure final : public VoxelStructure {
  public:
   explicit RegularStructure(const Dims& dims) {
     dims_ = dims;
+    bricks_ = BrickList(dims_);
     bricks_.push_back(Brick{{0, 0, 0}, {1, 1, 1}, {dims[0], dims[1], dims[2]}, 0});
     finish_bricks();
   }
@@ -38,6 +40,7 @@ class RectilinearStructure final : public VoxelStructure {
  public:
   RectilinearStructure(const NeedMask& mask, std::uint32_t max_interval) {
     dims_ = mask.dims;
+    bricks_ = BrickList(dims_);
     std::array<std::vector<Interval>, 3> axes;
     for (int a = 0; a < 3; ++a) {
       axes[a] = intervals(mask, a, max_interval);
@@ -103,6 +106,7 @@ class NestedStructure final : public VoxelStructure {
  public:
   NestedStructure(const NeedMask& mask, std::uint32_t cell) {
     dims_ = mask.dims;
+    bricks_ = BrickList(dims_);
     nested_cell_ = cell;
     const Dims cells{(dims_[0] + cell - 1) / cell, (dims_[1] + cell - 1) / cell, (dims_[2] + cell - 1) / cell};
     cells_ = ivol::voxel_count(cells);
@@ -197,37 +201,11 @@ class NeedPyramid {
   std::vector<Dims> dims_;
 };
 
-// Bricks (and so values) by their first slice, Morton order within one: a
-// reconstruction finishing slabs along z then finds the values it can write
-// and forget next to each other (StructureValueWindow). As a stable sort,
-// but through 4-byte indices and a permutation in place: 8 bytes a brick
-// at most beside the bricks, where std::stable_sort's buffer took 24.
-void sort_by_first_slice(std::vector<Brick>& bricks) {
-  std::vector<std::uint32_t> order(bricks.size());
-  std::iota(order.begin(), order.end(), 0U);
-  std::stable_sort(order.begin(), order.end(),
-                   [&](std::uint32_t a, std::uint32_t b) { return bricks[a].origin[2] < bricks[b].origin[2]; });
-  // Position n takes brick order[n]: follow each cycle once, marking the
-  // positions done by setting order[n] = n.
-  for (std::uint32_t n = 0; n < order.size(); ++n) {
-    if (order[n] == n) continue;
-    const Brick first = bricks[n];
-    std::uint32_t at = n;
-    while (order[at] != n) {
-      const std::uint32_t from = order[at];
-      bricks[at] = bricks[from];
-      order[at] = at;
-      at = from;
-    }
-    bricks[at] = first;
-    order[at] = at;
-  }
-}
-
 class OctreeStructure final : public VoxelStructure {
  public:
   OctreeStructure(const NeedMask& mask, unsigned threads) {
     dims_ = mask.dims;
+    bricks_ = BrickList(dims_);
     layout_.dims = dims_;
     layout_.depth = depth_for(dims_);
     const NeedPyramid pyramid(mask);
@@ -235,7 +213,7 @@ class OctreeStructure final : public VoxelStructure {
     // concatenated in Morton order.
     const unsigned split = std::min(layout_.depth, 2u);
     const std::uint32_t tasks = 1u << (3 * split);
-    std::vector<std::vector<Brick>> parts(tasks);
+    std::vector<std::vector<PackedBrick>> parts(tasks);
     std::vector<std::uint64_t> inner(tasks, 0);
     std::atomic<std::uint32_t> next{0};
     auto work = [&] {
@@ -252,16 +230,19 @@ class OctreeStructure final : public VoxelStructure {
     for (auto& th : pool) th.join();
     inner_nodes_ = count_top(pyramid, 0, 0, 0, 0, split);
     // Each part freed as soon as it is copied: the bricks are held about
-    // once, not twice (48 bytes each; tens of millions at 1152³, issue 23).
+    // once, not twice (16 bytes each; tens of millions at 1152³, issue 23).
     std::size_t total = 0;
     for (const auto& part : parts) total += part.size();
     bricks_.reserve(total);
     for (std::uint32_t t = 0; t < tasks; ++t) {
       inner_nodes_ += inner[t];
-      bricks_.insert(bricks_.end(), parts[t].begin(), parts[t].end());
-      std::vector<Brick>().swap(parts[t]);
+      bricks_.append(parts[t]);
+      std::vector<PackedBrick>().swap(parts[t]);
     }
-    sort_by_first_slice(bricks_);
+    // Bricks (and so values) by their first slice, Morton order within one:
+    // a reconstruction finishing slabs along z then finds the values it can
+    // write and forget next to each other (StructureValueWindow).
+    bricks_.sort_by_first_slice();
     finish_bricks();
   }
   StructureKind kind() const override { return StructureKind::Octree; }
@@ -271,6 +252,13 @@ class OctreeStructure final : public VoxelStructure {
   std::uint64_t inner_nodes() const { return inner_nodes_; }
 
  private:
+  // Every octree brick is a node clipped to the volume: a cube record.
+  PackedBrick cube(const Brick& b) const {
+    const std::optional<PackedBrick> record = bricks_.cube_record(b);
+    if (!record) throw std::logic_error("octree: a brick that is not a clipped node");
+    return *record;
+  }
+
   // Fully needed subtrees up to this side become one brick of fine voxels.
   static constexpr std::uint32_t kMaxFineBrick = 16;
 
@@ -297,16 +285,16 @@ class OctreeStructure final : public VoxelStructure {
   }
 
   void visit(const NeedPyramid& p, unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k,
-             std::vector<Brick>& out, std::uint64_t& inner) const {
+             std::vector<PackedBrick>& out, std::uint64_t& inner) const {
     std::array<std::uint32_t, 3> lo{}, extent{};
     if (weight_extent(level, i, j, k, lo, extent) == 0) return;  // padding
     const std::uint32_t s = side_at(layout_.depth, level);
     if (!p.any(level, i, j, k)) {
-      out.push_back(Brick{lo, extent, {1, 1, 1}, 0});  // one coarse leaf
+      out.push_back(cube(Brick{lo, extent, {1, 1, 1}, 0}));  // one coarse leaf
       return;
     }
     if (s == 1 || (s <= kMaxFineBrick && p.all(level, i, j, k))) {
-      out.push_back(Brick{lo, {1, 1, 1}, extent, 0});
+      out.push_back(cube(Brick{lo, {1, 1, 1}, extent, 0}));
       inner += full_subtree_inner(extent, s);
       return;
     }

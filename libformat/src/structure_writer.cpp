@@ -92,12 +92,16 @@ class FileOrder {
       z_start_ = s_.borders()[2][k];
       return;
     }
-    while (brick_ < bricks.size() && n_ >= bricks[brick_].first_value + bricks[brick_].voxel_count()) ++brick_;
-    if (brick_ >= bricks.size()) {
-      done_ = true;
-      return;
+    // Bricks are unpacked from their records once each, not once a value.
+    for (;; ++brick_) {
+      if (brick_ >= bricks.size()) {
+        done_ = true;
+        return;
+      }
+      if (unpacked_ != brick_) current_ = bricks[brick_], unpacked_ = brick_;
+      if (n_ < current_.first_value + current_.voxel_count()) break;
     }
-    const Brick& b = bricks[brick_];
+    const Brick& b = current_;
     value_ = n_;
     const std::uint64_t k = (n_ - b.first_value) / (std::uint64_t{b.count[0]} * b.count[1]);
     z_start_ = static_cast<std::uint32_t>(b.origin[2] + k * b.voxel[2]);
@@ -111,6 +115,8 @@ class FileOrder {
   std::uint64_t rx_ = 0, ry_ = 0;
   std::uint64_t n_ = 0;
   std::uint32_t brick_ = 0;
+  Brick current_;  // brick unpacked_, unpacked
+  std::uint32_t unpacked_ = UINT32_MAX;
   std::uint64_t value_ = 0;
   std::uint32_t z_start_ = 0;
   bool done_ = false;

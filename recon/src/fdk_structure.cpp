@@ -109,11 +109,23 @@ struct SlabIndex {
   // After slab s is delivered, every voxel starting below complete_below[s]
   // is final.
   std::vector<std::uint32_t> complete_below;
+  // Per slab: its block tasks and its lone voxels, as tasks_of_slab makes
+  // them (it reserves these counts, so the lists take exactly their bytes).
+  std::vector<std::uint64_t> block_count, centre_count, octant_count;
+  std::uint64_t task_bytes(std::size_t s) const;
+  std::uint64_t stacking_peak_bytes = 0;  // the thin bricks' lookup, freed after stacking
+  std::uint64_t bytes() const {
+    std::uint64_t n = bricks.capacity() * sizeof(bricks[0]) + upper.capacity() * 4 + is_upper.capacity() +
+                      (k_low.capacity() + k_high.capacity()) * 8 + (z_low.capacity() + complete_below.capacity()) * 4;
+    for (const auto& list : bricks) n += list.capacity() * 4;
+    n += (block_count.capacity() + centre_count.capacity() + octant_count.capacity()) * 8;
+    return std::max(n, stacking_peak_bytes + (upper.capacity() * 4 + is_upper.capacity()));
+  }
 };
 
 // Pairs thin full-resolution bricks with the one on top of them (bricks are
 // visited bottom first in every structure's order, by their first slice).
-void stack_thin_bricks(const std::vector<Brick>& bricks, SlabIndex& x) {
+void stack_thin_bricks(const BrickList& bricks, SlabIndex& x) {
   x.upper.assign(bricks.size(), kNone);
   x.is_upper.assign(bricks.size(), 0);
   auto key = [](std::uint64_t i, std::uint64_t j, std::uint64_t k) { return (k << 42) | (j << 21) | i; };
@@ -124,6 +136,7 @@ void stack_thin_bricks(const std::vector<Brick>& bricks, SlabIndex& x) {
   thin_at.reserve(static_cast<std::size_t>(std::count_if(bricks.begin(), bricks.end(), thin)));
   for (std::uint32_t n = 0; n < bricks.size(); ++n)
     if (thin(bricks[n])) thin_at.emplace_back(key(bricks[n].origin[0], bricks[n].origin[1], bricks[n].origin[2]), n);
+  x.stacking_peak_bytes = thin_at.capacity() * sizeof(thin_at[0]);
   std::sort(thin_at.begin(), thin_at.end());
   for (std::uint32_t n = 0; n < bricks.size(); ++n) {
     const Brick& b = bricks[n];
@@ -148,7 +161,10 @@ SlabIndex index_slabs(const VoxelStructure& structure, const SlabOf& slab_of) {
   x.k_low.assign(count, 1e300);
   x.k_high.assign(count, -1e300);
   x.z_low.assign(count, UINT32_MAX);
-  const std::vector<Brick>& bricks = structure.bricks();
+  x.block_count.assign(count, 0);
+  x.centre_count.assign(count, 0);
+  x.octant_count.assign(count, 0);
+  const BrickList& bricks = structure.bricks();
   stack_thin_bricks(bricks, x);
   for (std::uint32_t index = 0; index < bricks.size(); ++index) {
     if (x.is_upper[index]) continue;
@@ -161,13 +177,18 @@ SlabIndex index_slabs(const VoxelStructure& structure, const SlabOf& slab_of) {
     };
     if (is_lone(b)) {
       const CoarseTask t = lone_task(b);
-      note(slab_of(t.k), t.k - t.quarter_k, t.k + t.quarter_k, b.origin[2]);
+      const std::size_t s = slab_of(t.k);
+      note(s, t.k - t.quarter_k, t.k + t.quarter_k, b.origin[2]);
+      ++(std::max({b.voxel[0], b.voxel[1], b.voxel[2]}) <= 2 ? x.centre_count : x.octant_count)[s];
       continue;
     }
     const BrickLattice lattice(b);
     for (std::uint32_t mk = 0; mk < lattice.points[2]; mk += kDepth) {
       const double k = lattice.k_of_layer(mk);
-      note(slab_of(k), k, k + (kDepth - 1) * lattice.step[2], lattice.z_of_layer(b, mk));
+      const std::size_t s = slab_of(k);
+      note(s, k, k + (kDepth - 1) * lattice.step[2], lattice.z_of_layer(b, mk));
+      x.block_count[s] += std::uint64_t{(lattice.points[1] + lattice.rows - 1) / lattice.rows} *
+                          ((lattice.points[0] + lattice.run_i - 1) / lattice.run_i);
     }
   }
   x.complete_below.assign(count, structure.dims()[2]);
@@ -181,12 +202,19 @@ SlabIndex index_slabs(const VoxelStructure& structure, const SlabOf& slab_of) {
 
 // A slab's tasks and where their sums go.
 struct SlabTasks {
+  static constexpr std::uint64_t kBlockBytes = sizeof(FineTask) + sizeof(BlockRef);
+  static constexpr std::uint64_t kLoneBytes = sizeof(CoarseTask) + sizeof(std::uint32_t);
   std::vector<FineTask> blocks;
   std::vector<BlockRef> block_refs;
   std::vector<CoarseTask> centres;  // lone voxels up to two wide: one sample
   std::vector<CoarseTask> octants;  // wider lone voxels: eight
   std::vector<std::uint32_t> centre_brick;
   std::vector<std::uint32_t> octant_brick;
+  std::uint64_t bytes() const {
+    return blocks.capacity() * sizeof(FineTask) + block_refs.capacity() * sizeof(BlockRef) +
+           (centres.capacity() + octants.capacity()) * sizeof(CoarseTask) +
+           (centre_brick.capacity() + octant_brick.capacity()) * 4;
+  }
   std::uint64_t samples() const {
     std::uint64_t n = centres.size() + 8 * octants.size();
     for (const FineTask& f : blocks) n += std::uint64_t{f.count & 0xFF} * ((f.count >> 8) & 0xFF) * (f.count >> 16);
@@ -194,10 +222,33 @@ struct SlabTasks {
   }
 };
 
+std::uint64_t SlabIndex::task_bytes(std::size_t s) const {
+  return block_count[s] * SlabTasks::kBlockBytes + (centre_count[s] + octant_count[s]) * SlabTasks::kLoneBytes;
+}
+
+// The most the task lists of the slabs in flight hold at once: a slab being
+// made and one waiting per device, and the one being delivered.
+std::uint64_t tasks_in_flight_peak(const SlabIndex& index, std::size_t devices) {
+  std::vector<std::uint64_t> bytes;
+  for (std::size_t s = 0; s < index.block_count.size(); ++s) bytes.push_back(index.task_bytes(s));
+  const std::size_t in_flight = std::min(bytes.size(), 2 * devices + 1);
+  std::partial_sort(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(in_flight), bytes.end(),
+                    std::greater<>());
+  std::uint64_t sum = 0;
+  for (std::size_t n = 0; n < in_flight; ++n) sum += bytes[n];
+  return sum;
+}
+
 SlabTasks tasks_of_slab(const VoxelStructure& structure, const SlabIndex& index, const SlabOf& slab_of,
                         std::size_t slab) {
   SlabTasks s;
-  const std::vector<Brick>& bricks = structure.bricks();
+  s.blocks.reserve(index.block_count[slab]);
+  s.block_refs.reserve(index.block_count[slab]);
+  s.centres.reserve(index.centre_count[slab]);
+  s.centre_brick.reserve(index.centre_count[slab]);
+  s.octants.reserve(index.octant_count[slab]);
+  s.octant_brick.reserve(index.octant_count[slab]);
+  const BrickList& bricks = structure.bricks();
   for (std::uint32_t n : index.bricks[slab]) {
     const std::uint32_t upper = index.upper[n];
     const Brick b = upper == kNone ? bricks[n] : stacked(bricks[n], bricks[upper]);
@@ -246,7 +297,7 @@ SlabTasks tasks_of_slab(const VoxelStructure& structure, const SlabIndex& index,
 // takes its one sum as it is, a coarse one the mean of its points.
 void deliver(const VoxelStructure& structure, const SlabTasks& t, const std::vector<float>& sums,
              StructureValueWindow& values) {
-  const std::vector<Brick>& bricks = structure.bricks();
+  const BrickList& bricks = structure.bricks();
   for (std::size_t n = 0; n < t.blocks.size(); ++n) {
     const BlockRef& ref = t.block_refs[n];
     const Brick& b = bricks[ref.brick];
@@ -332,6 +383,7 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
   const detail::SlabPlan plan = detail::plan_slabs(m.problem, m.handles, m.options, {0, grid.size[2]});
   std::uint32_t slices = plan.slices;
   std::uint64_t window_bytes = 0;
+  std::uint64_t tasks_bytes = 0;
   SlabOf slab_of{slices, (grid.size[2] + slices - 1) / slices};
   SlabIndex index = index_slabs(structure, slab_of);
   if (window.memory_limit > 0) {
@@ -339,14 +391,15 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
     const detail::ValueWindowModel model(structure);
     while (true) {
       window_bytes = value_window_peak(model, index, window.writer_slab_slices, grid.size[2]);
-      if (window_bytes <= window.memory_limit) break;
+      tasks_bytes = tasks_in_flight_peak(index, m.devices.size());
+      if (window_bytes + tasks_bytes <= window.memory_limit) break;
       if (slices == 1) {
         m.problem.grid = nullptr;
-        throw Error(ErrorClass::LimitExceeded,
-                    "FDK: the structure's values in flight need " + std::to_string(window_bytes) +
-                        " bytes with one-slice slabs and the writer's slabs of " +
-                        std::to_string(window.writer_slab_slices) + " slices, over their memory budget of " +
-                        std::to_string(window.memory_limit) + " bytes");
+        throw Error(
+            ErrorClass::LimitExceeded,
+            "FDK: the structure's values and tasks in flight need " + std::to_string(window_bytes + tasks_bytes) +
+                " bytes with one-slice slabs and the writer's slabs of " + std::to_string(window.writer_slab_slices) +
+                " slices, over their memory budget of " + std::to_string(window.memory_limit) + " bytes");
       }
       slices = std::max<std::uint32_t>(1, slices / 2);
       slab_of = SlabOf{slices, (grid.size[2] + slices - 1) / slices};
@@ -369,6 +422,7 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
   report.slab_count = slab_count;
   report.slab_slices = slices;
   report.value_window_model_bytes = window_bytes;
+  report.slab_tasks_model_bytes = tasks_in_flight_peak(index, m.devices.size());
   report.device_bytes_per_slab = plan.bytes;
   const std::vector<detail::DeviceTimings> before = m.device_timings();
   const double constructor_setup = m.setup_seconds;
@@ -389,6 +443,13 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
   // A slab's tasks are made by the thread that computes it and kept until the
   // slab is delivered, so only the slabs in flight hold task lists.
   std::vector<std::unique_ptr<SlabTasks>> tasks(slab_count);
+  report.slab_index_bytes = index.bytes();
+  std::atomic<std::uint64_t> task_bytes{0}, task_bytes_peak{0};
+  auto note_tasks = [&](std::int64_t change) {
+    const std::uint64_t now = task_bytes += static_cast<std::uint64_t>(change);
+    for (std::uint64_t was = task_bytes_peak.load(); now > was && !task_bytes_peak.compare_exchange_weak(was, now);) {
+    }
+  };
   // What this process backprojected: every slab's samples, or only its own
   // slabs' when distributed (rank 0 delivers the others' too).
   std::atomic<std::uint64_t> own_samples{0};
@@ -398,19 +459,28 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
         m.device_pointers(), slab_count,
         [&](detail::FdkDevice& device, std::size_t s, std::vector<float>& sums) {
           auto made = std::make_unique<SlabTasks>(tasks_of_slab(structure, index, slab_of, s));
+          const auto made_bytes = static_cast<std::int64_t>(made->bytes());
+          note_tasks(made_bytes);
           rows_filtered += m.filter_rows_for(device, bands[s], widest);
           device.reconstruct_tasks(bands[s], made->blocks, {&made->centres, &made->octants}, sums);
           release.done(position[s]);
           own_samples += made->samples();
           // Read by the delivering thread after the slab's hand-over (with an
           // exchange, only rank 0 delivers; the others send the sums).
-          if (!m.options.exchange || m.options.exchange->rank() == 0) tasks[s] = std::move(made);
+          if (!m.options.exchange || m.options.exchange->rank() == 0)
+            tasks[s] = std::move(made);
+          else
+            note_tasks(-made_bytes);
         },
         [&](std::size_t s, std::vector<float>& sums) {
           const auto delivery_start = std::chrono::steady_clock::now();
           std::unique_ptr<SlabTasks> t = std::move(tasks[s]);
-          if (!t) t = std::make_unique<SlabTasks>(tasks_of_slab(structure, index, slab_of, s));
+          if (!t) {
+            t = std::make_unique<SlabTasks>(tasks_of_slab(structure, index, slab_of, s));
+            note_tasks(static_cast<std::int64_t>(t->bytes()));
+          }
           deliver(structure, *t, sums, values);
+          note_tasks(-static_cast<std::int64_t>(t->bytes()));
           t.reset();
           if (progress) progress(index.complete_below[s]);
           delivering += detail::seconds_since(delivery_start);
@@ -423,6 +493,7 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, const 
   m.problem.grid = nullptr;
   m.add_timings_since(before, report.timings);
   report.rows_filtered = rows_filtered.load();
+  report.slab_tasks_peak_bytes = task_bytes_peak.load();
   m.report_filtered_rows(report);
   report.timings.delivery += delivering;
   report.voxel_updates = own_samples.load() * m.geometry.view_count();
@@ -434,7 +505,7 @@ FdkReport FdkReconstructor::reconstruct_structure(const VolumeGrid& grid, VoxelS
   StructureValueWindow window(structure, true);
   const FdkReport report = reconstruct_structure(grid, structure, window, {});
   std::vector<float>& values = structure.values();
-  const std::vector<Brick>& bricks = structure.bricks();
+  const BrickList& bricks = structure.bricks();
   for (std::uint32_t n = 0; n < bricks.size(); ++n)
     for (std::uint64_t v = bricks[n].first_value; v < bricks[n].first_value + bricks[n].voxel_count(); ++v)
       values[v] = window.value(n, v);

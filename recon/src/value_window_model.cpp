@@ -28,7 +28,7 @@ ValueWindowModel::ValueWindowModel(const VoxelStructure& structure) {
   pages_to_.assign(nz + 2, 0);
   tall_from_.assign(nz + 2, 0);
   tall_to_.assign(nz + 2, 0);
-  const std::vector<Brick>& bricks = structure.bricks();
+  const BrickList& bricks = structure.bricks();
   for (const Brick& b : bricks) {
     const auto end =
         static_cast<std::uint32_t>(std::min<std::uint64_t>(nz, b.origin[2] + std::uint64_t{b.voxel[2]} * b.count[2]));

@@ -342,8 +342,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
     std::cerr << std::fixed << std::setprecision(1) << "ivol recon: preview " << found.seconds << " s (held "
               << human_bytes(found.preview_bytes) << ", spilled " << human_bytes(found.preview_spilled_bytes)
               << "); structure generated in " << generating << " s: " << structure->bricks().size() << " bricks ("
-              << human_bytes(structure->bricks().size() * sizeof(Brick)) << "), " << structure->voxel_count()
-              << " voxels\n";
+              << human_bytes(structure->bricks().memory_bytes()) << "), " << structure->voxel_count() << " voxels\n";
 
   metadata.provenance["reconstruction"]["structure"] = {
       {"kind", s.structure},
@@ -369,15 +368,15 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
     mpi->gather(rank_stats(mine, start));
     return kExitOk;
   }
-  // The structure's bricks (and the FDK's and the writer's index of them,
-  // about 13 bytes a brick) now count against --memory: the device slabs on
+  // The structure's bricks (16 bytes each, and the FDK's and the writer's
+  // index of them, about 13 bytes a brick) count against --memory: the device slabs on
   // CPU devices and the writer's slab share what they leave with the
   // filtered rows and the value window, a quarter each but no less than a
   // sixteenth of --memory each (below that, slabs would be too thin to be
   // worth it; the run then goes over --memory, which the notes say). The
   // value window keeps its quarter (the preview's, the preview being done):
   // at 1152³ it needed 125 MiB with one-slice slabs (bench/RESULTS.md).
-  const std::uint64_t structure_held = structure->bricks().size() * (sizeof(Brick) + 13);
+  const std::uint64_t structure_held = structure->bricks().memory_bytes() + structure->bricks().size() * 13;
   const std::uint64_t left = s.memory.bytes > structure_held ? s.memory.bytes - structure_held : 0;
   const std::uint64_t part = std::min(memory_share(s), std::max(left / 4, s.memory.bytes / 16));
   reconstructor.set_cpu_device_memory_limit(part);
@@ -472,7 +471,10 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   report["memory"]["structure_held_bytes"] = structure_held;
   report["memory"]["reconstruction_part_bytes"] = part;
   report["memory"]["writer_slab_budget_bytes"] = part;
-  report["memory"]["structure_bricks_bytes"] = structure->bricks().size() * sizeof(Brick);
+  report["memory"]["structure_bricks_bytes"] = structure->bricks().memory_bytes();
+  report["memory"]["slab_index_bytes"] = fdk.slab_index_bytes;
+  report["memory"]["slab_tasks_peak_bytes"] = fdk.slab_tasks_peak_bytes;
+  report["memory"]["slab_tasks_model_bytes"] = fdk.slab_tasks_model_bytes;
   if (mpi) report["ranks"] = ranks_json(ranks);
   if (s.json) {
     std::cout << report.dump(2) << "\n";

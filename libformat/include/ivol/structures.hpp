@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "ivol/brick_list.hpp"
 #include "ivol/geometry.hpp"
 #include "ivol/octree.hpp"
 #include "ivol/streaming_writer.hpp"
@@ -25,14 +26,6 @@ namespace ivol {
 
 const char* structure_name(StructureKind kind);  // "regular", "rectilinear", "nested", "octree"
 bool parse_structure(const std::string& name, StructureKind& out);
-
-struct Brick {
-  std::array<std::uint32_t, 3> origin{};  // full-resolution voxel of the brick's first corner
-  std::array<std::uint32_t, 3> voxel{};   // edge of one voxel along x, y, z, in full-resolution voxels
-  std::array<std::uint32_t, 3> count{};   // voxels along x, y, z
-  std::uint64_t first_value = 0;          // index of the brick's first value
-  std::uint64_t voxel_count() const { return std::uint64_t{count[0]} * count[1] * count[2]; }
-};
 
 // Bytes the structure needs as the paper stores it: 16-bit values and the
 // structure's own bookkeeping (borders, cell pointers, node words).
@@ -50,7 +43,7 @@ class VoxelStructure {
   virtual StructureMemory memory() const = 0;
 
   const Dims& dims() const { return dims_; }
-  const std::vector<Brick>& bricks() const { return bricks_; }
+  const BrickList& bricks() const { return bricks_; }
   std::uint64_t voxel_count() const { return voxel_total_; }  // values to compute
   // The values, brick after brick (working precision; the format stores 16
   // bits), zero at first. The array is allocated by the first non-const call,
@@ -69,7 +62,7 @@ class VoxelStructure {
  protected:
   void finish_bricks();  // assigns first_value and counts the voxels
   Dims dims_{};
-  std::vector<Brick> bricks_;
+  BrickList bricks_;  // made with dims_ by each structure's constructor
   std::uint64_t voxel_total_ = 0;
 
  public:

@@ -115,6 +115,12 @@ struct FdkReport {
   // The structure path with a value window bound: the most the model of the
   // value window gave for the slabs chosen (0 without a bound).
   std::uint64_t value_window_model_bytes = 0;
+  // The structure path: the index of the bricks by slab (lists, stacking,
+  // and at its peak the thin bricks sorted for stacking), and the most the
+  // task lists of the slabs in flight held at once.
+  std::uint64_t slab_index_bytes = 0;
+  std::uint64_t slab_tasks_peak_bytes = 0;
+  std::uint64_t slab_tasks_model_bytes = 0;  // what the bound counted for them (see ValueWindowBound)
 };
 
 // Receives slices [k_begin, k_end) of the volume, nx·ny·(k_end − k_begin)
@@ -153,10 +159,12 @@ class FdkReconstructor {
   // voxels, 36 per lone voxel), and 4 to 8 bytes per brick.
   //
   // window: with a memory_limit, slabs are cut thinner (halved) until the
-  // values in flight fit it by a model of `values` (its pages and tall
-  // voxels between the writer, `writer_slab_slices` behind in whole writer
-  // slabs, and the slab being delivered); FdkReport::value_window_model_bytes
-  // says what the model gave. When one-slice slabs do not fit either,
+  // values in flight by a model of `values` (its pages and tall voxels
+  // between the writer, `writer_slab_slices` behind in whole writer slabs,
+  // and the slab being delivered) and the task lists of the slabs in flight
+  // (the largest 2 × devices + 1 slabs' lists) fit it together;
+  // FdkReport::value_window_model_bytes and slab_tasks_model_bytes say what
+  // the models gave. When one-slice slabs do not fit either,
   // throws Error(LimitExceeded) naming the bytes needed and the limit.
   using StructureProgress = std::function<void(std::uint32_t z_complete)>;
   struct ValueWindowBound {
