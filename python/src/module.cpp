@@ -361,6 +361,16 @@ py::dict write_volume(const std::string& path, const py::buffer& array, const st
         writer.add_slab(code_values.data());
       } else if (type == Sample::F32) {
         writer.add_slab(reinterpret_cast<const float*>(samples) + first);
+      } else if (type == Sample::F16) {
+        // Bit for bit, not through double: converting a signalling NaN
+        // between float and double quiets it, and the file must keep it.
+        values.resize(n);
+        for (std::uint64_t i = 0; i < n; ++i) {
+          std::uint16_t bits;
+          std::memcpy(&bits, samples + (first + i) * size, 2);
+          values[i] = ivol::binary16_to_float(bits);
+        }
+        writer.add_slab(values.data());
       } else {
         values.resize(n);
         for (std::uint64_t i = 0; i < n; ++i)
