@@ -163,7 +163,10 @@ class PyReader {
       // Into numpy's own array, as read() does: no zeroed vector first.
       const std::uint64_t bytes = std::uint64_t{hi[0] - lo[0]} * (hi[1] - lo[1]) * (hi[2] - lo[2]) *
                                   ivol::encoding_width(reader_->layout().encoding);
-      py::array_t<std::uint8_t> out(static_cast<py::ssize_t>(bytes));
+      // Strides given, not computed by pybind11 2.10 from the dtype's
+      // item size, which it misreads under numpy 2 (see owning_array).
+      py::array_t<std::uint8_t> out(std::vector<py::ssize_t>{static_cast<py::ssize_t>(bytes)},
+                                    std::vector<py::ssize_t>{1});
       std::uint8_t* data = out.mutable_data();
       {
         py::gil_scoped_release release;

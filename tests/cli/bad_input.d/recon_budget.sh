@@ -7,5 +7,5 @@ bad recon-budget-preview-floor 2 "detection preview: its memory budget of 262144
   "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 1024 --voxel 0.02 --structure octree --memory 1 --no-disk-check -o "$out/x.ivol"
 bad recon-budget-preview-floor-sizes 2 "4 slices of 512x512 cells, a need mask of 1 bit per cell: 16777216 bytes" -- \
   "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 1024 --voxel 0.02 --structure octree --memory 1 --no-disk-check -o "$out/x.ivol"
-bad recon-budget-value-window 2 "(limit-exceeded): FDK: the structure's values in flight need 458752 bytes with one-slice slabs and the writer's slabs of 8 slices, over their memory budget of" -- \
+bad recon-budget-value-window 2 "(limit-exceeded): FDK: the structure's values and tasks in flight need 572384 bytes with one-slice slabs and the writer's slabs of 8 slices, over their memory budget of" -- \
   "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 64 --voxel 0.4 --structure octree --memory 1 --device-memory 8 -o "$out/x.ivol"
