@@ -91,6 +91,39 @@ bad phantom-detector       1 "--detector"             -- "$IVOL" phantom thin-pi
 bad slice-index            1 "--index"                -- "$IVOL" slice "$work/v.ivol" --index 99 -o "$out/x.png"
 bad extract-box            1 "box"                    -- "$IVOL" extract "$work/v.ivol" --box 0,0,0,99,99,99 -o "$out/x.raw"
 
+# The row-band parts (row_bands.sh, hdf5_row_bands.sh) run under this cap
+# and check with these two.
+bands_cap=(prlimit --as=209715200)  # 200 MiB: ivol starts in about 150
+[ "${IVOL_SANITIZED:-0}" = 1 ] && bands_cap=()
+
+# bands_ok NAME COMMAND...: COMMAND exits 0 and says it went in bands.
+bands_ok() {
+  local name=$1 log got
+  shift
+  log=$("$@" 2>&1)
+  got=$?
+  if [ "$got" -eq 0 ] && grep -qF "in bands of rows" <<<"$log"; then
+    echo "ok   $name"
+    passed=$((passed + 1))
+  else
+    echo "FAIL $name: exit $got (or not in bands)"; echo "$log" | sed 's/^/    /' | head -10
+    failed=$((failed + 1))
+  fi
+}
+
+# bands_check NAME PYTHON: the check (numpy, tifffile, h5py) prints "same".
+bands_check() {
+  local name=$1 said
+  said=$(/usr/bin/python3 -c "$2" 2>&1)
+  if [ "$said" = same ]; then
+    echo "ok   $name"
+    passed=$((passed + 1))
+  else
+    echo "FAIL $name: $(tail -3 <<<"$said")"
+    failed=$((failed + 1))
+  fi
+}
+
 # More cases, one file per concern (each sources this table's helpers: bad,
 # $work, $out, $IVOL and the inputs above).
 for part in "$(dirname "$0")"/bad_input.d/*.sh; do

@@ -8,37 +8,6 @@
 # writer's own minimum is named.
 h5bands="$work/h5bands"
 mkdir -p "$h5bands"
-h5bands_cap=(prlimit --as=209715200)  # 200 MiB, as row_bands.sh
-[ "${IVOL_SANITIZED:-0}" = 1 ] && h5bands_cap=()
-
-# h5bands_ok NAME COMMAND...: COMMAND exits 0 and says it went in bands.
-h5bands_ok() {
-  local name=$1 log got
-  shift
-  log=$("$@" 2>&1)
-  got=$?
-  if [ "$got" -eq 0 ] && grep -qF "in bands of rows" <<<"$log"; then
-    echo "ok   $name"
-    passed=$((passed + 1))
-  else
-    echo "FAIL $name: exit $got (or not in bands)"; echo "$log" | sed 's/^/    /' | head -10
-    failed=$((failed + 1))
-  fi
-}
-
-# h5bands_check NAME PYTHON: the check prints "same".
-h5bands_check() {
-  local name=$1 said
-  said=$(/usr/bin/python3 -c "$2" 2>&1)
-  if [ "$said" = same ]; then
-    echo "ok   $name"
-    passed=$((passed + 1))
-  else
-    echo "FAIL $name: $(tail -3 <<<"$said")"
-    failed=$((failed + 1))
-  fi
-}
-
 if ! /usr/bin/python3 "$(dirname "${BASH_SOURCE[0]}")/make_row_band_h5.py" "$h5bands"; then
   echo "FAIL h5bands-inputs: cannot make the files (h5py with the blosc plugin)"
   failed=$((failed + 1))
@@ -61,18 +30,18 @@ def after_header(path, marker, dtype, shape):
 
   # Exactness: 3000x2500x3 u16 under --memory 4: bands of 640 rows.
   for layout in contiguous gzip blosc; do
-    h5bands_ok "h5bands-$layout-to-raw" "${h5bands_cap[@]}" "$IVOL" convert "$h5bands/$layout.h5" "$h5bands/$layout.raw" --memory 4
+    bands_ok "h5bands-$layout-to-raw" "${bands_cap[@]}" "$IVOL" convert "$h5bands/$layout.h5" "$h5bands/$layout.raw" --memory 4
   done
   for ext in tif h5 mha nrrd; do
-    h5bands_ok "h5bands-gzip-to-$ext" "${h5bands_cap[@]}" "$IVOL" convert "$h5bands/gzip.h5" "$h5bands/gzip-out.$ext" --memory 4
+    bands_ok "h5bands-gzip-to-$ext" "${bands_cap[@]}" "$IVOL" convert "$h5bands/gzip.h5" "$h5bands/gzip-out.$ext" --memory 4
   done
   # Whole slices within --memory, from chunks deeper than a slice: libhdf5's
   # chunk cache (preemption weight 1.0) never evicted a chunk read in part
   # and grew to every chunk of a slice, 30 MB, past the child's limit.
   for layout in gzip blosc; do
-    bad "h5bands-$layout-slices" 0 "" -- "${h5bands_cap[@]}" "$IVOL" -q convert "$h5bands/$layout.h5" "$h5bands/$layout-slices.raw" --memory 16
+    bad "h5bands-$layout-slices" 0 "" -- "${bands_cap[@]}" "$IVOL" -q convert "$h5bands/$layout.h5" "$h5bands/$layout-slices.raw" --memory 16
   done
-  h5bands_check h5bands-exact "$h5bands_py
+  bands_check h5bands-exact "$h5bands_py
 ok = True
 for layout, raw in (('contiguous', 'contiguous'), ('gzip', 'gzip'), ('blosc', 'blosc'), ('gzip', 'gzip-slices'), ('blosc', 'blosc-slices')):
     v = h5('$h5bands/' + layout + '.h5')
@@ -87,12 +56,12 @@ print('same' if ok else 'differ')"
   # Bounded: 2 slices of 16384^2 u8 (256 MiB each) under --memory 16 in
   # 200 MiB of address space, which one slice would not fit.
   for ext in raw tif h5 mha nrrd; do
-    h5bands_ok "h5bands-big-gzip-to-$ext" "${h5bands_cap[@]}" "$IVOL" convert "$h5bands/big-gzip.h5" "$h5bands/big-out.$ext" --memory 16
+    bands_ok "h5bands-big-gzip-to-$ext" "${bands_cap[@]}" "$IVOL" convert "$h5bands/big-gzip.h5" "$h5bands/big-out.$ext" --memory 16
   done
   for layout in blosc contiguous; do
-    h5bands_ok "h5bands-big-$layout-to-raw" "${h5bands_cap[@]}" "$IVOL" convert "$h5bands/big-$layout.h5" "$h5bands/big-$layout.raw" --memory 16
+    bands_ok "h5bands-big-$layout-to-raw" "${bands_cap[@]}" "$IVOL" convert "$h5bands/big-$layout.h5" "$h5bands/big-$layout.raw" --memory 16
   done
-  h5bands_check h5bands-big-exact "$h5bands_py
+  bands_check h5bands-big-exact "$h5bands_py
 shape = (2, 16384, 16384)
 ok = True
 for name in ('big-out.raw', 'big-blosc.raw', 'big-contiguous.raw'):
@@ -111,7 +80,7 @@ print('same' if ok else 'differ')"
   # A slice in one gzip chunk: libhdf5 inflates it whole, 256 MiB, beside
   # the stored chunk; refused by its size, and the --memory named converts.
   bad h5bands-one-chunk-limit 2 "big-one-chunk.h5: dataset /exchange/data: a chunk of 1x16384x16384 (z, y, x) is 256 MiB inflated, and libhdf5 inflates a chunk whole beside the stored one: more than the 16 MiB its process may allocate (--memory 512 allows it)" -- \
-    "${h5bands_cap[@]}" "$IVOL" convert "$h5bands/big-one-chunk.h5" "$out/x.raw" --memory 16
+    "${bands_cap[@]}" "$IVOL" convert "$h5bands/big-one-chunk.h5" "$out/x.raw" --memory 16
   bad h5bands-one-chunk-class 2 "(limit-exceeded)" -- "$IVOL" convert "$h5bands/big-one-chunk.h5" "$out/x.raw" --memory 16
   bad h5bands-one-chunk-allowed 0 "" -- sh -c "'$IVOL' -q convert '$h5bands/big-one-chunk.h5' '$h5bands/one.raw' --memory 512 && \
     /usr/bin/python3 -c \"$h5bands_py
@@ -120,6 +89,6 @@ import sys; sys.exit(0 if (np.memmap('$h5bands/one.raw', np.uint8, 'r', shape=(1
 
   # Into .ivol the writer takes whole slices, 8 at a time: refused by name.
   bad h5bands-big-to-ivol 2 "more than the 16 MiB this conversion may hold: the .ivol writer takes whole slices" -- \
-    "${h5bands_cap[@]}" "$IVOL" convert "$h5bands/big-gzip.h5" "$out/x.ivol" --memory 16
+    "${bands_cap[@]}" "$IVOL" convert "$h5bands/big-gzip.h5" "$out/x.ivol" --memory 16
 fi
 rm -rf "$h5bands"

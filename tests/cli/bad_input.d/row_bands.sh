@@ -5,37 +5,6 @@
 # limit naming the bytes and the --memory that allows it, which then does.
 bands="$work/bands"
 mkdir -p "$bands"
-bands_cap=(prlimit --as=209715200)  # 200 MiB: ivol starts in about 150
-[ "${IVOL_SANITIZED:-0}" = 1 ] && bands_cap=()
-
-# bands_ok NAME COMMAND...: COMMAND exits 0 and says it went in bands.
-bands_ok() {
-  local name=$1 log got
-  shift
-  log=$("$@" 2>&1)
-  got=$?
-  if [ "$got" -eq 0 ] && grep -qF "in bands of rows" <<<"$log"; then
-    echo "ok   $name"
-    passed=$((passed + 1))
-  else
-    echo "FAIL $name: exit $got (or not in bands)"; echo "$log" | sed 's/^/    /' | head -10
-    failed=$((failed + 1))
-  fi
-}
-
-# bands_check NAME PYTHON: the check (numpy, tifffile, h5py) prints "same".
-bands_check() {
-  local name=$1 said
-  said=$(/usr/bin/python3 -c "$2" 2>&1)
-  if [ "$said" = same ]; then
-    echo "ok   $name"
-    passed=$((passed + 1))
-  else
-    echo "FAIL $name: $said"
-    failed=$((failed + 1))
-  fi
-}
-
 # Exactness: 3000x2500x3 u16 of a hash pattern (15 MB a slice) under
 # --memory 4: bands of 640 rows, the last of each slice 580, so that bands
 # end inside HDF5 chunks' and TIFF strips' rows of the next slice's.
