@@ -22,6 +22,7 @@
 #include "ivol/reader.hpp"
 #include "ivol/streaming_writer.hpp"
 #include "ivol/structures.hpp"
+#include "output_memory.hpp"
 
 namespace py = pybind11;
 
@@ -43,6 +44,38 @@ py::array owning_array(std::vector<T>&& data, const std::vector<py::ssize_t>& sh
   auto* held = new std::vector<T>(std::move(data));
   py::capsule owner(held, [](void* p) { delete static_cast<std::vector<T>*>(p); });
   return py::array(dtype, shape, strides, held->data(), owner);
+}
+
+// An uninitialised C-order array of `shape` and `dtype` (T's size) for a
+// read to fill: a large one in memory of output_memory.hpp, faulted in on
+// several threads with the GIL released, a small one from numpy.
+template <typename T>
+py::array output_array(const std::vector<py::ssize_t>& shape, const py::dtype& dtype) {
+  std::vector<py::ssize_t> strides(shape.size());
+  py::ssize_t stride = sizeof(T);
+  for (std::size_t a = shape.size(); a-- > 0;) {
+    strides[a] = stride;
+    stride *= shape[a];
+  }
+  const auto bytes = static_cast<std::size_t>(stride);
+  if (bytes < ivol_python::kMappedOutputBytes) return py::array(dtype, shape, strides);
+  struct Mapping {
+    void* data;
+    std::size_t bytes;
+  };
+  auto mapping = std::make_unique<Mapping>(Mapping{nullptr, bytes});
+  {
+    py::gil_scoped_release release;
+    mapping->data = ivol_python::map_output(bytes);
+  }
+  void* data = mapping->data;
+  py::capsule owner(mapping.get(), [](void* p) {
+    auto* m = static_cast<Mapping*>(p);
+    ivol_python::unmap_output(m->data, m->bytes);
+    delete m;
+  });
+  mapping.release();
+  return py::array(dtype, shape, strides, data, owner);
 }
 
 // Messages quote bytes of the file (a metadata block that is not UTF-8):
@@ -115,11 +148,10 @@ class PyReader {
     std::vector<ivol::DamagedRegion> damaged;
     py::array array;
     if (within_level(lo, hi, lod)) {
-      // Read into numpy's own array: no vector zeroed first and handed
-      // over, and numpy asks the kernel for huge pages for a large one (a
-      // whole volume's page faults cost a sixth of its read otherwise).
-      py::array_t<float> out(shape_of(lo, hi));
-      float* data = out.mutable_data();
+      // Read into the array's own memory: no vector zeroed first and
+      // handed over.
+      py::array out = output_array<float>(shape_of(lo, hi), py::dtype::of<float>());
+      auto* data = static_cast<float*>(out.mutable_data());
       {
         py::gil_scoped_release release;
         std::lock_guard<std::mutex> lock(mutex_);
@@ -160,14 +192,11 @@ class PyReader {
     std::vector<ivol::DamagedRegion> damaged;
     py::array array;
     if (within_level(lo, hi, lod)) {
-      // Into numpy's own array, as read() does: no zeroed vector first.
+      // Into the array's own memory, as read() does: no zeroed vector first.
       const std::uint64_t bytes = std::uint64_t{hi[0] - lo[0]} * (hi[1] - lo[1]) * (hi[2] - lo[2]) *
                                   ivol::encoding_width(reader_->layout().encoding);
-      // Strides given, not computed by pybind11 2.10 from the dtype's
-      // item size, which it misreads under numpy 2 (see owning_array).
-      py::array_t<std::uint8_t> out(std::vector<py::ssize_t>{static_cast<py::ssize_t>(bytes)},
-                                    std::vector<py::ssize_t>{1});
-      std::uint8_t* data = out.mutable_data();
+      py::array out = output_array<std::uint8_t>({static_cast<py::ssize_t>(bytes)}, py::dtype::of<std::uint8_t>());
+      auto* data = static_cast<std::uint8_t*>(out.mutable_data());
       {
         py::gil_scoped_release release;
         std::lock_guard<std::mutex> lock(mutex_);

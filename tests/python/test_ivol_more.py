@@ -288,6 +288,67 @@ class WholeReads(unittest.TestCase):
             self.assertGreater(len(damaged), 0)
             self.assertEqual(salvaged.shape, a.shape)
 
+    def test_large_output_memory(self):
+        # Reads of 32 MiB or more land in memory the package maps and faults
+        # in itself (python/src/output_memory.hpp), not numpy's.
+        z, y, x = np.indices((288, 256, 256), dtype=np.uint32)
+        a = ((x * 7 + y * 3 + z * 5) % 4001).astype(np.uint16)
+        with tempfile.TemporaryDirectory() as d:
+            path = os.path.join(d, "large.ivol")
+            ivol.write(path, a)
+            f = ivol.open(path)
+            whole = f[:]
+            self.assertEqual(whole.nbytes, 288 * 256 * 256 * 4)
+            self.assertTrue(np.array_equal(whole, a.astype(np.float32)))
+            stored = f.stored[...]
+            self.assertEqual(stored.nbytes, 288 * 256 * 256 * 2)
+            self.assertTrue(np.array_equal(stored, a))
+            # The arrays own their memory: they outlive the file, are
+            # writable, and a view keeps it alive after the array is gone.
+            part = whole[100:110, 5, :]
+            del f, whole, stored
+            part += 1
+            self.assertTrue(np.array_equal(part, a[100:110, 5, :].astype(np.float32) + 1))
+            self.assertTrue(np.array_equal(ivol.open(path)[-3:], a[-3:].astype(np.float32)))
+
+            # A read that fails leaves no memory behind.
+            with open(path, "r+b") as out:
+                size = os.path.getsize(path)
+                out.seek(size // 2)
+                byte = out.read(1)
+                out.seek(size // 2)
+                out.write(bytes([byte[0] ^ 0x55]))
+            f = ivol.open(path)
+
+            def resident():
+                with open("/proc/self/statm") as s:
+                    return int(s.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+            with self.assertRaises(ivol.ChecksumError):
+                f[:]
+            before = resident()
+            for _ in range(8):
+                with self.assertRaises(ivol.ChecksumError):
+                    f[:]
+            self.assertLess(resident() - before, 32 << 20)
+
+            # Memory that cannot be had is a MemoryError, not a crash.
+            script = (
+                "import resource, sys, ivol\n"
+                "f = ivol.open(sys.argv[1])\n"
+                "soft, hard = resource.getrlimit(resource.RLIMIT_AS)\n"
+                "with open('/proc/self/statm') as s: used = int(s.read().split()[0]) * 4096\n"
+                "resource.setrlimit(resource.RLIMIT_AS, (used + (48 << 20), hard))\n"
+                "try:\n"
+                "    f[:]\n"
+                "except MemoryError:\n"
+                "    print('MemoryError')\n"
+            )
+            ivol.write(path, a)
+            r = subprocess.run([sys.executable, "-B", "-c", script, path], capture_output=True, text=True,
+                               env=os.environ)
+            self.assertEqual((r.returncode, r.stdout.strip()), (0, "MemoryError"), r.stderr)
+
 
 if __name__ == "__main__":
     unittest.main(verbosity=1)
