@@ -171,8 +171,8 @@ class Reader {
   // level) and are listed in *damaged (salvage).
   std::vector<float> read_box(const Box& box, unsigned lod = 0, std::vector<DamagedRegion>* damaged = nullptr);
   // The same into the caller's `out`, box.voxel_count() floats: a caller
-  // that holds its own array (numpy's, whose large allocations the kernel
-  // backs with huge pages) saves allocating, zeroing and copying one.
+  // that holds its own array (the Python package's) saves allocating,
+  // zeroing and copying one.
   void read_box_into(const Box& box, float* out, unsigned lod = 0, std::vector<DamagedRegion>* damaged = nullptr);
   // Stored bits of `box`, encoding_width() bytes per voxel, little-endian.
   std::vector<std::uint8_t> read_box_bits(const Box& box, unsigned lod = 0,
