@@ -87,6 +87,36 @@ print('same' if ok else 'differ')"
 import sys; sys.exit(0 if (np.memmap('$h5bands/one.raw', np.uint8, 'r', shape=(1, 16384, 16384)) == h5('$h5bands/big-one-chunk.h5')).all() else 1)\""
   rm -f "$h5bands/one.raw"
 
+  # Full disks under the outputs that bands feed: every write is checked,
+  # nothing is left, and -f keeps the good file it would have replaced. A
+  # tmpfs of our own, unmounted after.
+  h5bands_full="$h5bands/full"
+  mkdir -p "$h5bands_full"
+  if mount -t tmpfs -o size=256k tmpfs "$h5bands_full" 2>/dev/null; then
+    h5bands_saved_out=$out
+    out=$h5bands_full
+    for ext in raw tif h5 mha nrrd; do
+      bad "h5bands-full-disk-$ext" 2 "No space left" -- \
+        "${bands_cap[@]}" "$IVOL" convert "$h5bands/gzip.h5" "$h5bands_full/x.$ext" --memory 4
+    done
+    printf 'a good file' >"$h5bands_full/good.raw"
+    log=$("${bands_cap[@]}" "$IVOL" convert "$h5bands/gzip.h5" "$h5bands_full/good.raw" --memory 4 -f 2>&1)
+    got=$?
+    if [ "$got" -eq 2 ] && [ "$(cat "$h5bands_full/good.raw")" = "a good file" ] && [ "$(ls -A "$h5bands_full")" = good.raw ]; then
+      echo "ok   h5bands-full-disk-force"
+      passed=$((passed + 1))
+    else
+      echo "FAIL h5bands-full-disk-force: exit $got (expected 2), $(ls -A "$h5bands_full" | tr '\n' ' ')left"
+      echo "$log" | sed 's/^/    /' | head -5
+      failed=$((failed + 1))
+    fi
+    rm -f "$h5bands_full"/* "$h5bands_full"/.[!.]* 2>/dev/null
+    out=$h5bands_saved_out
+    umount "$h5bands_full"
+  else
+    echo "skipped h5bands full-disk cases: cannot mount a tmpfs here (needs root or CAP_SYS_ADMIN)"
+  fi
+
   # Into .ivol the writer takes whole slices, 8 at a time: refused by name.
   bad h5bands-big-to-ivol 2 "more than the 16 MiB this conversion may hold: the .ivol writer takes whole slices" -- \
     "${bands_cap[@]}" "$IVOL" convert "$h5bands/big-gzip.h5" "$out/x.ivol" --memory 16
