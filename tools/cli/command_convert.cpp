@@ -345,7 +345,9 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       return kExitOk;
     }
 
-    Reader reader(s->input);
+    ReaderOptions reader_options;
+    reader_options.cache_bytes = convert::export_cache_bytes(foreign.memory_bytes);
+    Reader reader(s->input, reader_options);
     warn_if_fetched_whole(reader, "ivol convert");
     const convert::SampleType natural = natural_export_type(to, reader);
     const convert::SampleType type = s->out_type.empty() ? natural : parse_sample_type(s->out_type, "--out-type");

@@ -1,5 +1,6 @@
 #include "formats.hpp"
 
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <iostream>
@@ -32,41 +33,48 @@ class VdbSink final : public convert::SlabWriter {
     type_ = shape.type;
     volume_.type = convert::SampleType::Float32;
     // The whole volume is held as float32, and beside it the tree
-    // write_vdb builds from it, and one slice as read, copied and converted
-    // (write()): weighed before anything is read, so that a grid beyond
-    // --memory is a refusal naming its size, not an allocation that fails
-    // (or a process killed) halfway.
+    // write_vdb builds from it, and one slice as read (its stored bits and
+    // samples; write() converts in place): weighed before anything is read,
+    // so that a grid beyond --memory is a refusal naming its size, not an
+    // allocation that fails (or a process killed) halfway. A source sizes
+    // its slabs from what the volume and tree leave (held_bytes).
     const std::string what = path + ": an OpenVDB grid of " + convert::dims_text(shape.dims);
     const double slice = static_cast<double>(shape.dims[0]) * shape.dims[1] *
                          (2.0 * convert::sample_size(shape.type) + sizeof(float));
-    convert::require_within_budget(convert::vdb_output_bytes(shape.dims) + slice, convert::memory_budget(memory_bytes),
+    const double held = convert::vdb_output_bytes(shape.dims);
+    convert::require_within_budget(held + slice, convert::memory_budget(memory_bytes),
                                    what + " (written whole: the volume as float32 and the grid's tree)");
+    held_ = static_cast<std::uint64_t>(std::ceil(held));
     const std::uint64_t bytes = convert::slab_bytes(shape.dims, shape.dims[2], convert::SampleType::Float32, what);
     convert::checked_resize(volume_.data, bytes, what);
   }
+  // Samples (native byte order) to float32 straight into the volume, with
+  // no copy of the slab: exact for u8, u16, i16 and f32; binary16 by bit
+  // operations, not through binary64 (which would quiet a signalling NaN),
+  // so that the half-float grid stores the bits given.
   void write(const void* samples, std::uint32_t count) override {
     const std::size_t n = std::size_t{count} * volume_.dims[0] * volume_.dims[1];
     const auto* p = static_cast<const std::uint8_t*>(samples);
     std::uint8_t* floats = volume_.data.data() + at_;
-    if (type_ == convert::SampleType::Float16) {
-      // Bit operations, not through binary64 (which would quiet a signalling
-      // NaN): the half-float grid then stores the binary16 bits given.
+    auto convert_as = [&](auto sample, auto to_float) {
       for (std::size_t i = 0; i < n; ++i) {
-        std::uint16_t h;
-        std::memcpy(&h, p + 2 * i, 2);
-        const float f = binary16_to_float(h);
+        decltype(sample) s;
+        std::memcpy(&s, p + sizeof s * i, sizeof s);
+        const float f = to_float(s);
         std::memcpy(floats + 4 * i, &f, 4);
       }
-    } else {
-      convert::DenseVolume slab;
-      slab.type = type_;
-      slab.dims = {volume_.dims[0], volume_.dims[1], count};
-      slab.data.assign(p, p + n * convert::sample_size(type_));
-      const std::vector<float> values = slab.to_float();  // exact for u8, u16, i16 and f32
-      std::memcpy(floats, values.data(), n * 4);
+    };
+    const auto widen = [](auto s) { return static_cast<float>(s); };
+    switch (type_) {
+      case convert::SampleType::UInt8: convert_as(std::uint8_t{}, widen); break;
+      case convert::SampleType::UInt16: convert_as(std::uint16_t{}, widen); break;
+      case convert::SampleType::Int16: convert_as(std::int16_t{}, widen); break;
+      case convert::SampleType::Float16: convert_as(std::uint16_t{}, [](std::uint16_t h) { return binary16_to_float(h); }); break;
+      case convert::SampleType::Float32: std::memcpy(floats, p, n * 4); break;
     }
     at_ += n * 4;
   }
+  std::uint64_t held_bytes() const override { return held_; }
   void finish() override {
     const std::string grid = half_ ? "a half-float grid" : "a float32 grid";
     const convert::LossTally loss =
@@ -86,6 +94,7 @@ class VdbSink final : public convert::SlabWriter {
   bool allow_lossy_;
   bool half_ = false;
   std::size_t at_ = 0;
+  std::uint64_t held_ = 0;  // the volume and the tree, as weighed
 };
 
 }  // namespace

@@ -6,6 +6,7 @@
 // naming what was being allocated, not a bare std::bad_alloc.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -22,6 +23,14 @@ namespace ivol::convert {
 constexpr std::uint64_t kDefaultMemoryBytes = std::uint64_t{2048} << 20;
 
 inline std::uint64_t memory_budget(std::uint64_t bytes) { return bytes ? bytes : kDefaultMemoryBytes; }
+
+// The decoded-block cache of the Reader a conversion out of .ivol reads
+// with (ReaderOptions::cache_bytes): a quarter of --memory, at most the
+// Reader's default 256 MiB. It is held besides --memory (README, "What a
+// conversion may hold").
+inline std::uint64_t export_cache_bytes(std::uint64_t memory_bytes) {
+  return std::min<std::uint64_t>(std::uint64_t{256} << 20, memory_budget(memory_bytes) / 4);
+}
 
 inline std::string dims_text(const Dims& dims) {
   return std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]);

@@ -43,6 +43,10 @@ class SlabWriter {
   virtual void write_rows(const void* /*samples*/, std::uint32_t /*rows*/) {}
   // After the last slice: the file appears at its path.
   virtual void finish() = 0;
+  // Memory the writer holds through the whole run, already weighed against
+  // the budget (an OpenVDB output's volume and tree): a source sizes its
+  // slabs from what is left.
+  virtual std::uint64_t held_bytes() const { return 0; }
 };
 
 // Where a writer fed by write_rows stands: the slices complete and the rows
