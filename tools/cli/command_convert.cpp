@@ -325,9 +325,10 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       // An OpenVDB output holds the whole volume and its tree within the
       // budget (its sink weighs them with one slice read): larger slabs
       // would buy nothing but memory beyond it.
-      const auto slab = to == Format::Vdb ? 1u
-                                          : static_cast<std::uint32_t>(std::clamp<std::uint64_t>(
-                                                std::min<std::uint64_t>(64ull << 20, budget) / slice, 1, shape.dims[2]));
+      const auto slab = to == Format::Vdb
+                            ? 1u
+                            : static_cast<std::uint32_t>(std::clamp<std::uint64_t>(
+                                  std::min<std::uint64_t>(64ull << 20, budget) / slice, 1, shape.dims[2]));
       std::vector<std::uint8_t> buffer;
       convert::checked_resize(buffer, std::uint64_t{slab} * slice,
                               s->input + ": a slab of " + std::to_string(slab) + " slices");

@@ -39,8 +39,8 @@ class VdbSink final : public convert::SlabWriter {
     // allocation that fails (or a process killed) halfway. A source sizes
     // its slabs from what the volume and tree leave (held_bytes).
     const std::string what = path + ": an OpenVDB grid of " + convert::dims_text(shape.dims);
-    const double slice = static_cast<double>(shape.dims[0]) * shape.dims[1] *
-                         (2.0 * convert::sample_size(shape.type) + sizeof(float));
+    const double slice =
+        static_cast<double>(shape.dims[0]) * shape.dims[1] * (2.0 * convert::sample_size(shape.type) + sizeof(float));
     const double held = convert::vdb_output_bytes(shape.dims);
     convert::require_within_budget(held + slice, convert::memory_budget(memory_bytes),
                                    what + " (written whole: the volume as float32 and the grid's tree)");
@@ -66,11 +66,21 @@ class VdbSink final : public convert::SlabWriter {
     };
     const auto widen = [](auto s) { return static_cast<float>(s); };
     switch (type_) {
-      case convert::SampleType::UInt8: convert_as(std::uint8_t{}, widen); break;
-      case convert::SampleType::UInt16: convert_as(std::uint16_t{}, widen); break;
-      case convert::SampleType::Int16: convert_as(std::int16_t{}, widen); break;
-      case convert::SampleType::Float16: convert_as(std::uint16_t{}, [](std::uint16_t h) { return binary16_to_float(h); }); break;
-      case convert::SampleType::Float32: std::memcpy(floats, p, n * 4); break;
+      case convert::SampleType::UInt8:
+        convert_as(std::uint8_t{}, widen);
+        break;
+      case convert::SampleType::UInt16:
+        convert_as(std::uint16_t{}, widen);
+        break;
+      case convert::SampleType::Int16:
+        convert_as(std::int16_t{}, widen);
+        break;
+      case convert::SampleType::Float16:
+        convert_as(std::uint16_t{}, [](std::uint16_t h) { return binary16_to_float(h); });
+        break;
+      case convert::SampleType::Float32:
+        std::memcpy(floats, p, n * 4);
+        break;
     }
     at_ += n * 4;
   }

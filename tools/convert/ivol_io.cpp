@@ -559,8 +559,8 @@ LossTally export_from_ivol(Reader& reader, Box box, unsigned lod, SampleType typ
   // What the sink holds for the whole run (an OpenVDB output's volume and
   // tree, which it weighed with one slice) leaves the rest for slabs.
   const std::uint64_t left = budget > sink.held_bytes() ? budget - sink.held_bytes() : 0;
-  const auto slab = static_cast<std::uint32_t>(
-      std::max<std::uint64_t>(1, std::min<std::uint64_t>(64ull << 20, left) / slice_bytes));
+  const auto slab =
+      static_cast<std::uint32_t>(std::max<std::uint64_t>(1, std::min<std::uint64_t>(64ull << 20, left) / slice_bytes));
   ProgressTicker ticker(progress, box.hi[2] - box.lo[2]);
   std::vector<std::uint8_t> samples;
   LossTally loss;
