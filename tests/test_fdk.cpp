@@ -227,6 +227,46 @@ TEST(Fdk, ReducedScanMergesPixelsWhereTheyLie) {
     }
 }
 
+// A source that counts the requests it is asked (an HDF5 source's each
+// cost a round trip to its child process).
+class CountingProjections : public ProjectionSource {
+ public:
+  explicit CountingProjections(ProjectionSource& source) : source_(source) {}
+  int columns() const override { return source_.columns(); }
+  int rows() const override { return source_.rows(); }
+  std::size_t view_count() const override { return source_.view_count(); }
+  void read_rows(std::size_t view, int row_begin, int row_end, float* out) override {
+    ++requests;
+    source_.read_rows(view, row_begin, row_end, out);
+  }
+  int requests = 0;
+
+ private:
+  ProjectionSource& source_;
+};
+
+TEST(Fdk, ReducedScanAsksForRunsOfRows) {
+  // 4096 columns binned by 2: runs of 128 binned rows (4 MiB of source
+  // rows); a band of 300 binned rows takes 3 requests, not 300, and every
+  // pixel is still the mean of its four, across the runs' boundaries.
+  InMemoryProjections p(4096, 620, 2);
+  for (std::size_t i = 0; i < p.data().size(); ++i) p.data()[i] = static_cast<float>((i * 37) % 1009);
+  CountingProjections counted(p);
+  ReducedProjections reduced(counted, 1, 2);
+  std::vector<float> band(2048 * 300);
+  reduced.read_rows(1, 5, 305, band.data());
+  EXPECT_EQ(counted.requests, 3);
+  const float* image = p.view_data(1);
+  for (int row = 5; row < 305; ++row)
+    for (int c = 0; c < 2048; c += 97) {
+      const float sum = image[(2 * row) * 4096 + 2 * c] + image[(2 * row) * 4096 + 2 * c + 1] +
+                        image[(2 * row + 1) * 4096 + 2 * c] + image[(2 * row + 1) * 4096 + 2 * c + 1];
+      ASSERT_EQ(band[(row - 5) * 2048 + c], sum / 4) << "row " << row << " column " << c;
+    }
+  reduced.read_rows(0, 7, 7, band.data());  // an empty band asks for nothing
+  EXPECT_EQ(counted.requests, 3);
+}
+
 TEST(Fdk, GlobalMemoryFftGivesSameBits) {
   SmallCase c = small_case(2 * M_PI, 20);
   InMemoryProjections p = project_ball(c.geometry, {0, 0, 0}, 12.0, 0.02);

@@ -67,7 +67,18 @@ inline void read_box(const Dataset& d, const std::vector<hsize_t>& start, const 
                      double* out, const std::string& where) {
   H5Sselect_hyperslab(d.space.get(), H5S_SELECT_SET, start.data(), nullptr, count.data(), nullptr);
   Handle memory(H5Screate_simple(static_cast<int>(count.size()), count.data(), nullptr), H5Sclose);
-  if (H5Dread(d.id.get(), H5T_NATIVE_DOUBLE, memory.get(), d.space.get(), H5P_DEFAULT, out) < 0) read_failed(where);
+  // libhdf5 1.10 zeroes its type-conversion buffer (1 MiB by default) on
+  // every read that converts: sized to the request when that is smaller, a
+  // read of a few rows no longer costs a megabyte of memset.
+  hsize_t values = 1;
+  for (const hsize_t n : count) values *= n;
+  Handle transfer(H5Pcreate(H5P_DATASET_XFER), H5Pclose);
+  constexpr hsize_t kDefaultBuffer = hsize_t{1} << 20;
+  if (transfer.valid() && values > 0 && values * sizeof(double) < kDefaultBuffer)
+    H5Pset_buffer(transfer.get(), static_cast<std::size_t>(values * sizeof(double)), nullptr, nullptr);
+  if (H5Dread(d.id.get(), H5T_NATIVE_DOUBLE, memory.get(), d.space.get(),
+              transfer.valid() ? transfer.get() : H5P_DEFAULT, out) < 0)
+    read_failed(where);
 }
 
 // All values of a dataset of at most `most` values, as doubles.
