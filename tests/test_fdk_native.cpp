@@ -13,6 +13,7 @@
 #include "ball_projections.hpp"
 #include "ivol/recon/fdk.hpp"
 #include "ivol/recon/fdk_reference.hpp"
+#include "ivol/structures.hpp"
 
 namespace ivol::recon {
 namespace {
@@ -81,6 +82,68 @@ TEST(FdkNative, SameBitsAsTheOpenClKernel) {
       }
     EXPECT_EQ(differing, 0U) << "of " << a.size() << " voxels; worst difference " << worst;
     EXPECT_GT(*std::max_element(b.begin(), b.end()), 0.01F) << "the ball is reconstructed";
+  }
+}
+
+// A structure's blocks (fdk_backproject_fine on OpenCL devices, the native
+// backprojector on CPU devices with AVX-512F) get the same bits either way,
+// and its fine voxels the dense reconstruction's: octrees with full-
+// resolution bricks around the ball and coarse leaves elsewhere, on every
+// case above (the strip and the gather path, thin slabs, a short scan).
+TEST(FdkNative, StructureBlocksSameBitsAsTheOpenClKernel) {
+  if (!native_backprojection_supported())
+    GTEST_SKIP() << "this CPU lacks AVX-512F: the native backprojector is not used here";
+  const int cpu = cpu_device();
+  ASSERT_GE(cpu, 0) << "no OpenCL CPU device (install pocl-opencl-icd)";
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(c.name);
+    InMemoryProjections p = project_ball(c.geometry, {1.0, -2.0, 1.5}, 9.0, 0.02);
+    NeedMask mask;
+    mask.dims = Dims{c.grid.size[0], c.grid.size[1], c.grid.size[2]};
+    mask.factor = 1;
+    mask.cells = mask.dims;
+    mask.need.resize(c.grid.voxel_count());
+    for (std::uint32_t k = 0; k < mask.dims[2]; ++k)
+      for (std::uint32_t j = 0; j < mask.dims[1]; ++j)
+        for (std::uint32_t i = 0; i < mask.dims[0]; ++i) {
+          const Vec3 at = c.grid.voxel_centre(i, j, k);
+          const double r = std::hypot(at[0] - 1.0, at[1] + 2.0, at[2] - 1.5);
+          mask.need[(std::size_t{k} * mask.dims[1] + j) * mask.dims[0] + i] = r < 10.0 ? 1 : 0;
+        }
+    FdkOptions kernel;
+    kernel.devices = {cpu};
+    kernel.native_cpu_backprojection = false;
+    kernel.max_slab_slices = c.max_slab_slices;
+    FdkOptions native = kernel;
+    native.native_cpu_backprojection = true;
+    auto by_kernel = generate_structure(StructureKind::Octree, mask);
+    auto by_native = generate_structure(StructureKind::Octree, mask);
+    FdkReconstructor(p, c.geometry, kernel).reconstruct_structure(c.grid, *by_kernel);
+    const FdkReport report = FdkReconstructor(p, c.geometry, native).reconstruct_structure(c.grid, *by_native);
+    ASSERT_EQ(report.backprojectors, std::vector<std::string>{"native-avx512"});
+    const std::vector<float>& a = by_kernel->values();
+    const std::vector<float>& b = by_native->values();
+    ASSERT_EQ(a.size(), b.size());
+    ASSERT_LT(a.size(), c.grid.voxel_count()) << "coarse leaves too";
+    std::size_t differing = 0;
+    for (std::size_t i = 0; i < a.size(); ++i) differing += std::memcmp(&a[i], &b[i], sizeof(float)) != 0;
+    EXPECT_EQ(differing, 0U) << "of " << a.size() << " structure voxels";
+    // Fine voxels: the dense reconstruction's bits (native both).
+    const std::vector<float> dense = reconstruct_fdk_dense(p, c.geometry, c.grid, native);
+    std::size_t fine = 0;
+    for (const Brick& brick : by_native->bricks()) {
+      if (brick.voxel[0] != 1 || brick.voxel[1] != 1 || brick.voxel[2] != 1) continue;
+      for (std::uint32_t z = 0; z < brick.count[2]; ++z)
+        for (std::uint32_t y = 0; y < brick.count[1]; ++y)
+          for (std::uint32_t x = 0; x < brick.count[0]; ++x, ++fine) {
+            const float value = b[brick.first_value + (std::uint64_t{z} * brick.count[1] + y) * brick.count[0] + x];
+            const std::size_t at =
+                (std::size_t{brick.origin[2] + z} * c.grid.size[1] + brick.origin[1] + y) * c.grid.size[0] +
+                brick.origin[0] + x;
+            ASSERT_EQ(0, std::memcmp(&value, &dense[at], sizeof(float))) << "voxel " << at;
+          }
+    }
+    EXPECT_GT(fine, 1000U);
   }
 }
 

@@ -339,7 +339,11 @@ void FdkDevice::reconstruct_tasks(const RowBand& band, const std::vector<FineTas
     bool blocks;
   };
   std::vector<Launch> launches;
-  if (!blocks.empty()) launches.push_back({&backproject_fine_, &fine_tasks_, blocks.size(), 0, true});
+  // On a CPU device with the native backprojector the blocks are summed on
+  // the host, straight into `out`, with the kernel's bits; the lone coarse
+  // voxels stay with their kernels.
+  const bool native_blocks = native_ && !blocks.empty();
+  if (!blocks.empty() && !native_blocks) launches.push_back({&backproject_fine_, &fine_tasks_, blocks.size(), 0, true});
   if (!lone[0]->empty())
     launches.push_back({&backproject_centre_, &centre_tasks_, lone[0]->size(), block_outputs, false});
   if (!lone[1]->empty())
@@ -372,10 +376,30 @@ void FdkDevice::reconstruct_tasks(const RowBand& band, const std::vector<FineTas
       }
       if (target == &event) backproject_events_.push_back(event);
     }
+    if (native_blocks) {
+      const std::size_t bytes = static_cast<std::size_t>(kBatch) * stride_rows * stride_cols_ * sizeof(float);
+      cl::Event mapped;
+      const auto* data = static_cast<const float*>(
+          queue_.enqueueMapBuffer(filtered, CL_TRUE, CL_MAP_READ, 0, bytes, nullptr, &mapped));
+      transfer_events_.push_back(mapped);
+      const auto start = std::chrono::steady_clock::now();
+      native_->add_fine_batch(data, stride_cols_, stride_rows, band.first,
+                              problem_.backproject_views.data() + first_view, blocks.data(), blocks.size(), out.data());
+      timings_.backprojection += seconds_since(start);
+      cl::Event unmapped;
+      queue_.enqueueUnmapMemObject(filtered, const_cast<float*>(data), nullptr, &unmapped);
+      transfer_events_.push_back(unmapped);
+    }
   });
-  cl::Event read;
-  queue_.enqueueReadBuffer(task_sums_, CL_TRUE, 0, outputs * sizeof(float), out.data(), nullptr, &read);
-  transfer_events_.push_back(read);
+  // The kernels' sums: all of them, or those after the native blocks'.
+  const std::size_t first_output = native_blocks ? block_outputs : 0;
+  if (outputs > first_output) {
+    cl::Event read;
+    queue_.enqueueReadBuffer(task_sums_, CL_TRUE, first_output * sizeof(float),
+                             (outputs - first_output) * sizeof(float), out.data() + first_output, nullptr, &read);
+    transfer_events_.push_back(read);
+  }
+  queue_.finish();
   finish_timings();
 }
 

@@ -73,6 +73,21 @@ struct BatchArgs {
   const BackprojectView* views;
 };
 
+BatchArgs batch_args(const float* transposed, int stride_cols, int stride_rows, int band_first_row,
+                     const BackprojectView* views) {
+  BatchArgs args;
+  args.transposed = transposed;
+  args.plane = static_cast<std::size_t>(stride_cols) * stride_rows;
+  args.stride_rows = stride_rows;
+  // As the kernel: clamped into the zero border, one pixel before the band
+  // and up to IVOL_BAND_BORDER_AFTER after it.
+  args.column_limit = static_cast<float>(stride_cols - kBorderBefore - kBorderAfter);
+  args.row_limit = static_cast<float>(stride_rows - kBorderBefore - kBorderAfter);
+  args.band_first = static_cast<float>(band_first_row);
+  args.views = views;
+  return args;
+}
+
 // Adds one batch to the voxel column whose per-view scalars are `at`:
 // sixteen slices at a time, each view's sixteen rows from one strip.
 __attribute__((target("avx512f,fma"))) inline void backproject_column(const BatchArgs& a, const ColumnView* at,
@@ -150,6 +165,80 @@ __attribute__((target("avx512f,fma"))) void backproject_rows(const BatchArgs& a,
         }
 }
 
+constexpr int kDepth = IVOL_BACKPROJECT_DEPTH;
+constexpr int kRun = IVOL_FINE_RUN;
+static_assert(kDepth == 8 && kRun == 16, "one vector holds a task's voxels along k twice over");
+
+// Adds one batch to fine tasks [begin, end): kernels/fdk_backproject.cl's
+// fdk_backproject_fine operation for operation. A lane holds voxel d = lane
+// mod 8 of a task's stack (the upper eight repeat the lower), so that a
+// column's eight rows come from one 16-row strip like a dense column's.
+__attribute__((target("avx512f,fma"))) void backproject_fine_tasks(const BatchArgs& a, const FineTask* tasks,
+                                                                   std::size_t begin, std::size_t end, float* sums) {
+  const __m512i one = _mm512_set1_epi32(1);
+  const __m512 minus_one = _mm512_set1_ps(-1.0F);
+  const __m512 row_limit = _mm512_set1_ps(a.row_limit);
+  const __m512 band_first = _mm512_set1_ps(a.band_first);
+  const __m512 depth = _mm512_setr_ps(0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7);
+  ColumnView at[kBatch];
+  alignas(64) float part[kLanes];
+  for (std::size_t t = begin; t < end; ++t) {
+    const FineTask& task = tasks[t];
+    // The kernel: fk = task.k + (float)d * task.step_k, fused.
+    const __m512 fk = _mm512_fmadd_ps(depth, _mm512_set1_ps(task.step_k), _mm512_set1_ps(task.k));
+    const int run_i = static_cast<int>(task.run_i);
+    // Only the lanes that hold points of the brick: the kernel computes all
+    // sixteen, and the host never reads the rest (a brick of 2³ voxels fills
+    // four of a task's sixteen lanes).
+    const int along_i = static_cast<int>(task.count & 0xFF), along_j = static_cast<int>((task.count >> 8) & 0xFF);
+    for (int x = 0; x < kRun; ++x) {
+      if ((x & (run_i - 1)) >= along_i || x / run_i >= along_j) continue;
+      const float fi = __builtin_fmaf(static_cast<float>(x & (run_i - 1)), task.step_i, task.i);
+      const float fj = __builtin_fmaf(static_cast<float>(x / run_i), task.step_j, task.j);
+      for (int v = 0; v < kBatch; ++v) at[v] = column_view(a.views[v], fi, fj, a.column_limit);
+      __m512 sum = _mm512_setzero_ps();
+      for (int v = 0; v < kBatch; ++v) {
+        const ColumnView& c = at[v];
+        __m512 row = _mm512_fmadd_ps(fk, _mm512_set1_ps(c.row_step), _mm512_set1_ps(c.row_at_zero));
+        row = _mm512_min_ps(_mm512_max_ps(_mm512_sub_ps(row, band_first), minus_one), row_limit);
+        const __m512i row_index = _mm512_cvt_roundps_epi32(row, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
+        const __m512 row_frac = _mm512_sub_ps(row, _mm512_cvtepi32_ps(row_index));
+        const __m512 column_frac = _mm512_set1_ps(c.column_frac);
+        const int first = _mm_cvtsi128_si32(_mm512_castsi512_si128(row_index));
+        const int last = _mm_extract_epi32(_mm512_extracti32x4_epi32(row_index, 1), 3);  // lane 7
+        const int lowest = std::min(first, last);
+        const float* left = a.transposed + static_cast<std::size_t>(v) * a.plane +
+                            static_cast<std::size_t>(c.column_index) * a.stride_rows;
+        __m512 top;
+        __m512 bottom;
+        if (std::max(first, last) - lowest < static_cast<int>(kLanes) - 1) {
+          const float* strip = left + lowest + kBorderBefore;
+          const __m512 l0 = _mm512_loadu_ps(strip);
+          const __m512 s0 = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(_mm512_loadu_ps(strip + a.stride_rows), l0), l0);
+          const __m512i offset = _mm512_sub_epi32(row_index, _mm512_set1_epi32(lowest));
+          top = _mm512_permutexvar_ps(offset, s0);
+          bottom = _mm512_permutexvar_ps(_mm512_add_epi32(offset, one), s0);
+        } else {
+          const __m512i stride_rows = _mm512_set1_epi32(a.stride_rows);
+          const __m512i offset = _mm512_add_epi32(row_index, _mm512_set1_epi32(kBorderBefore));
+          const __m512i below = _mm512_add_epi32(offset, one);
+          const __m512 tl = _mm512_i32gather_ps(offset, left, 4);
+          const __m512 tr = _mm512_i32gather_ps(_mm512_add_epi32(offset, stride_rows), left, 4);
+          const __m512 bl = _mm512_i32gather_ps(below, left, 4);
+          const __m512 br = _mm512_i32gather_ps(_mm512_add_epi32(below, stride_rows), left, 4);
+          top = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(tr, tl), tl);
+          bottom = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(br, bl), bl);
+        }
+        const __m512 value = _mm512_fmadd_ps(row_frac, _mm512_sub_ps(bottom, top), top);
+        sum = _mm512_fmadd_ps(_mm512_set1_ps(c.weight), value, sum);
+      }
+      _mm512_store_ps(part, sum);
+      float* out = sums + t * (kDepth * kRun) + x;
+      for (int d = 0; d < kDepth; ++d) out[d * kRun] += part[d];
+    }
+  }
+}
+
 }  // namespace
 
 bool native_backprojection_available() {
@@ -168,8 +257,7 @@ void NativeBackprojector::start_slab(std::uint32_t nx, std::uint32_t ny, std::ui
   columns_.assign(std::size_t{nx} * ny * depth_, 0.0F);
 }
 
-void NativeBackprojector::add_batch(const float* filtered, int stride_cols, int stride_rows, int band_first_row,
-                                    const BackprojectView* views) {
+void NativeBackprojector::transpose(const float* filtered, int stride_cols, int stride_rows) {
   const std::size_t plane = static_cast<std::size_t>(stride_cols) * stride_rows;
   // A strip read at the last column of the last view may run kStrip floats
   // past its plane; those lanes are never selected.
@@ -185,20 +273,26 @@ void NativeBackprojector::add_batch(const float* filtered, int stride_cols, int 
             out[static_cast<std::size_t>(c) * stride_rows + r] = in[static_cast<std::size_t>(r) * stride_cols + c];
     }
   });
-  BatchArgs args;
-  args.transposed = transposed_.data();
-  args.plane = plane;
-  args.stride_rows = stride_rows;
-  // As the kernel: clamped into the zero border, one pixel before the band
-  // and up to IVOL_BAND_BORDER_AFTER after it.
-  args.column_limit = static_cast<float>(stride_cols - kBorderBefore - kBorderAfter);
-  args.row_limit = static_cast<float>(stride_rows - kBorderBefore - kBorderAfter);
-  args.band_first = static_cast<float>(band_first_row);
-  args.views = views;
+}
+
+void NativeBackprojector::add_batch(const float* filtered, int stride_cols, int stride_rows, int band_first_row,
+                                    const BackprojectView* views) {
+  transpose(filtered, stride_cols, stride_rows);
+  const BatchArgs args = batch_args(transposed_.data(), stride_cols, stride_rows, band_first_row, views);
   on_threads(threads_, [&](unsigned t) {
     const std::uint32_t j_begin = static_cast<std::uint32_t>(std::uint64_t{ny_} * t / threads_);
     const std::uint32_t j_end = static_cast<std::uint32_t>(std::uint64_t{ny_} * (t + 1) / threads_);
     backproject_rows(args, columns_.data(), nx_, depth_, k_first_, j_begin, j_end);
+  });
+}
+
+void NativeBackprojector::add_fine_batch(const float* filtered, int stride_cols, int stride_rows, int band_first_row,
+                                         const BackprojectView* views, const FineTask* tasks, std::size_t task_count,
+                                         float* sums) {
+  transpose(filtered, stride_cols, stride_rows);
+  const BatchArgs args = batch_args(transposed_.data(), stride_cols, stride_rows, band_first_row, views);
+  on_threads(threads_, [&](unsigned t) {
+    backproject_fine_tasks(args, tasks, task_count * t / threads_, task_count * (t + 1) / threads_, sums);
   });
 }
 

@@ -42,6 +42,13 @@ class NativeBackprojector {
   // The slab as nx·ny·slices floats, x fastest.
   void finish_slab(std::vector<float>& out) const;
 
+  // Adds the same batch to a structure's blocks of voxels, as the kernel
+  // fdk_backproject_fine does, with its bits: the voxel (x, d) of task t into
+  // sums[(t·IVOL_BACKPROJECT_DEPTH + d)·IVOL_FINE_RUN + x]. Each task's eight
+  // voxels along k take one vector, as a dense column's sixteen do.
+  void add_fine_batch(const float* filtered, int stride_cols, int stride_rows, int band_first_row,
+                      const BackprojectView* views, const FineTask* tasks, std::size_t task_count, float* sums);
+
   // One lane of the vector loop (16 voxels along k) for one view.
   static constexpr std::uint32_t kLanes = 16;
 
@@ -50,6 +57,9 @@ class NativeBackprojector {
   std::uint32_t nx_ = 0, ny_ = 0, k_first_ = 0, slices_ = 0, depth_ = 0;  // depth_: slices in whole lanes
   std::vector<float> columns_;                                            // [j][i][k], depth_ per column
   std::vector<float> transposed_;  // per view [column][row], then a strip's overrun of zeros
+
+  // The batch's bands into transposed_ (columns contiguous).
+  void transpose(const float* filtered, int stride_cols, int stride_rows);
 };
 
 }  // namespace ivol::recon::detail
