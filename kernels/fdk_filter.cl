@@ -57,6 +57,30 @@ static FFT_SPACE float2* stockham(FFT_SPACE float2* src, FFT_SPACE float2* dst, 
   return src;
 }
 
+/* The first step of fdk_filter_rows alone, in place: pixel (i, r) of the
+ * batch's view v weighted exactly as fdk_filter_rows weights it, for CPU
+ * devices whose FFTs then run in native code (recon/src/fdk_native_filter.cpp,
+ * which mirrors the rest of fdk_filter_rows). Global size (columns,
+ * band_rows, views in the batch). */
+__kernel void fdk_weight_rows(__global float* raw, __global const FilterView* views, int view_offset, int columns,
+                              int band_rows, int band_first_row) {
+  const int i = get_global_id(0);
+  const int r = get_global_id(1);
+  const int view = get_global_id(2);
+  const FilterView fv = views[view_offset + view];
+  __global float* image = raw + (size_t)view * (size_t)band_rows * (size_t)columns;
+  /* The same expressions as fdk_filter_rows, so the same roundings. */
+  const float v = fv.v_first + (float)(band_first_row + r) * fv.pitch_v - fv.foot_v;
+  const float du = fv.u_first + (float)i * fv.pitch_u - fv.foot_u;
+  float weight = fv.scale;
+  if (fv.parker_delta >= 0.0f) {
+    const float gamma = -fv.parker_sign * atan(du / fv.sdd);
+    weight *= parker_weight(fv.parker_beta, gamma, fv.parker_delta);
+  }
+  const float base = fv.sdd * fv.sdd + du * du;
+  image[r * columns + i] = image[r * columns + i] * weight * fv.sdd * rsqrt(base + v * v);
+}
+
 /* Global size: (local size × row pairs, views in the batch). raw holds the
  * batch's images of band_rows × columns line integrals, filtered the same
  * inside the zero border of IVOL_BAND_BORDER_* (stride_cols ≥ columns + 3);

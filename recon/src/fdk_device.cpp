@@ -56,6 +56,7 @@ FdkDevice::FdkDevice(const DeviceHandle& handle, const FdkProblem& problem)
   queue_ = cl::CommandQueue(context_, handle.device, CL_QUEUE_PROFILING_ENABLE);
   program_ = build_recon_program(context_, handle.device, fft_in_global_ ? "-DIVOL_FFT_IN_GLOBAL" : "");
   filter_ = cl::Kernel(program_, "fdk_filter_rows");
+  weight_ = cl::Kernel(program_, "fdk_weight_rows");
   backproject_ = cl::Kernel(program_, "fdk_backproject");
   backproject_fine_ = cl::Kernel(program_, "fdk_backproject_fine");
   backproject_centre_ = cl::Kernel(program_, "fdk_backproject_centre");
@@ -74,6 +75,7 @@ FdkDevice::FdkDevice(const DeviceHandle& handle, const FdkProblem& problem)
                          const_cast<float*>(problem.twiddles.data()));
   if (!handle.info.is_gpu && problem.native_cpu_backprojection && native_backprojection_available())
     native_ = std::make_unique<NativeBackprojector>(std::max(1u, std::thread::hardware_concurrency()));
+  native_filter_ = !handle.info.is_gpu && problem.native_cpu_backprojection && native_filter_available();
 }
 
 void FdkDevice::configure(std::uint32_t max_slices, int max_band_rows) {
@@ -93,7 +95,8 @@ void FdkDevice::configure(std::uint32_t max_slices, int max_band_rows) {
     const std::size_t filtered_bytes =
         static_cast<std::size_t>(kBatch) * (max_band_rows + kBorder) * stride_cols_ * sizeof(float);
     for (int p = 0; p < 2; ++p) {
-      raw_[p] = cl::Buffer(context_, CL_MEM_READ_ONLY, std::max<std::size_t>(raw_floats, 1) * sizeof(float));
+      // Read-write: fdk_weight_rows weights the rows in place.
+      raw_[p] = cl::Buffer(context_, CL_MEM_READ_WRITE, std::max<std::size_t>(raw_floats, 1) * sizeof(float));
       filtered_[p] = cl::Buffer(context_, CL_MEM_READ_WRITE, filtered_bytes);
       host_raw_[p].resize(raw_floats);
     }
@@ -134,6 +137,10 @@ void FdkDevice::filter_batch(int parity, std::size_t first_view, int view_count,
                             &write);
   transfer_events_.push_back(write);
 
+  if (native_filter_) {
+    filter_batch_native(parity, first_view, view_count, band);
+    return;
+  }
   const int n = 1 << problem_.log2n;
   const int pairs = (band.rows() + 1) / 2;
   int arg = 0;
@@ -180,6 +187,51 @@ void FdkDevice::filter_to_host(std::size_t first_view, int count, const RowBand&
       std::size_t{static_cast<std::size_t>(band.rows())} * columns * sizeof(float), images.data(), nullptr, &read);
   transfer_events_.push_back(read);
   finish_timings();
+}
+
+void FdkDevice::filter_batch_native(int parity, std::size_t first_view, int view_count, const RowBand& band) {
+  const int columns = problem_.geometry->detector.columns;
+  int arg = 0;
+  weight_.setArg(arg++, raw_[parity]);
+  weight_.setArg(arg++, filter_views_);
+  weight_.setArg(arg++, static_cast<cl_int>(first_view));
+  weight_.setArg(arg++, static_cast<cl_int>(columns));
+  weight_.setArg(arg++, static_cast<cl_int>(band.rows()));
+  weight_.setArg(arg++, static_cast<cl_int>(band.first));
+  cl::Event weighted;
+  queue_.enqueueNDRangeKernel(weight_, cl::NullRange, cl::NDRange(columns, band.rows(), view_count), cl::NullRange,
+                              nullptr, &weighted);
+  filter_events_.push_back(weighted);
+  const std::size_t raw_bytes = static_cast<std::size_t>(view_count) * band.rows() * columns * sizeof(float);
+  const int stride_rows = band.rows() + kBorder;
+  const std::size_t filtered_bytes = static_cast<std::size_t>(kBatch) * stride_rows * stride_cols_ * sizeof(float);
+  cl::Event mapped_raw, mapped_filtered;
+  const auto* raw = static_cast<const float*>(
+      queue_.enqueueMapBuffer(raw_[parity], CL_TRUE, CL_MAP_READ, 0, raw_bytes, nullptr, &mapped_raw));
+  // CL_MAP_WRITE, not ..._INVALIDATE_REGION: the zero border stays.
+  auto* filtered = static_cast<float*>(queue_.enqueueMapBuffer(filtered_[parity], CL_TRUE, CL_MAP_READ | CL_MAP_WRITE,
+                                                               0, filtered_bytes, nullptr, &mapped_filtered));
+  transfer_events_.push_back(mapped_raw);
+  transfer_events_.push_back(mapped_filtered);
+  const auto start = std::chrono::steady_clock::now();
+  NativeFilterBatch batch;
+  batch.weighted = raw;
+  batch.columns = columns;
+  batch.band_rows = band.rows();
+  batch.view_count = view_count;
+  batch.log2n = problem_.log2n;
+  batch.twiddles = problem_.twiddles.data();
+  batch.response = problem_.response.data();
+  batch.filtered = filtered;
+  batch.stride_cols = stride_cols_;
+  batch.stride_rows = stride_rows;
+  filter_rows_native(batch, std::max(1u, std::thread::hardware_concurrency()));
+  timings_.filtering += seconds_since(start);
+  cl::Event unmapped_raw, unmapped_filtered;
+  queue_.enqueueUnmapMemObject(raw_[parity], const_cast<float*>(raw), nullptr, &unmapped_raw);
+  queue_.enqueueUnmapMemObject(filtered_[parity], filtered, nullptr, &unmapped_filtered);
+  transfer_events_.push_back(unmapped_raw);
+  transfer_events_.push_back(unmapped_filtered);
 }
 
 void FdkDevice::load_batch(int parity, std::size_t first_view, int view_count, const RowBand& band) {

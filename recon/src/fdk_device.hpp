@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "fdk_native_backproject.hpp"
+#include "fdk_native_filter.hpp"
 #include "fdk_plan.hpp"
 #include "opencl_runtime.hpp"
 
@@ -90,6 +91,9 @@ class FdkDevice {
   // the host backprojects the filtered bands in place (PoCL's buffers are
   // host memory).
   void reconstruct_slab_native(std::uint32_t k_begin, std::uint32_t k_end, std::vector<float>& out);
+  // filter_batch with native_filter_: fdk_weight_rows on the device, then
+  // the FFTs in native code into the mapped filtered buffer.
+  void filter_batch_native(int parity, std::size_t first_view, int view_count, const RowBand& band);
   void finish_timings();
   double event_seconds(const cl::Event& event) const;
   void collect(std::vector<cl::Event>& events, double& into);
@@ -102,6 +106,8 @@ class FdkDevice {
   cl::CommandQueue queue_;
   cl::Program program_;
   cl::Kernel filter_;
+  cl::Kernel weight_;           // fdk_weight_rows: with native_filter_, the filter's first step
+  bool native_filter_ = false;  // FFTs in native code (fdk_native_filter.hpp), on CPU devices
   cl::Kernel backproject_;
   cl::Kernel backproject_fine_;
   cl::Kernel backproject_centre_;

@@ -4,8 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <system_error>
-#include <thread>
+
+#include "native_threads.hpp"
 
 // This file is compiled with -ffp-contract=off (recon/CMakeLists.txt): every
 // fused multiply-add below is written out, where the kernel's compiler fuses.
@@ -21,20 +21,6 @@ constexpr std::uint32_t kLanes = NativeBackprojector::kLanes;
 // rows so that each voxel's row and the next one are among them.
 constexpr int kStrip = 2 * kLanes;
 constexpr std::uint32_t kTile = 16;
-
-// Runs work(t) for t = 0 .. threads − 1, the last (and any the system
-// would not start a thread for) on the calling thread.
-template <class Work>
-void on_threads(unsigned threads, const Work& work) {
-  std::vector<std::thread> pool;
-  unsigned started = 0;
-  try {
-    for (; started + 1 < threads; ++started) pool.emplace_back([&work, started] { work(started); });
-  } catch (const std::system_error&) {
-  }
-  for (unsigned t = started; t < threads; ++t) work(t);
-  for (std::thread& thread : pool) thread.join();
-}
 
 // What a voxel column (i, j) keeps along k for one view: the kernel's
 // per-view scalars, computed with the kernel's roundings.
