@@ -166,22 +166,61 @@ __attribute__((target("avx512f,fma"))) void backproject_fine_tasks(const BatchAr
   const __m512 row_limit = _mm512_set1_ps(a.row_limit);
   const __m512 band_first = _mm512_set1_ps(a.band_first);
   const __m512 depth = _mm512_setr_ps(0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7);
-  ColumnView at[kBatch];
+  // The per-view scalars of a task's sixteen lanes, [view][lane]: column_view
+  // for all lanes at once, the same operations in vector form.
+  alignas(64) float lane_frac[kBatch][kRun], lane_weight[kBatch][kRun], lane_row0[kBatch][kRun],
+      lane_step[kBatch][kRun];
+  alignas(64) int lane_column[kBatch][kRun];
   alignas(64) float part[kLanes];
+  const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  const __m512 one_f = _mm512_set1_ps(1.0F);
+  const __m512 column_limit = _mm512_set1_ps(a.column_limit);
   for (std::size_t t = begin; t < end; ++t) {
     const FineTask& task = tasks[t];
     // The kernel: fk = task.k + (float)d * task.step_k, fused.
     const __m512 fk = _mm512_fmadd_ps(depth, _mm512_set1_ps(task.step_k), _mm512_set1_ps(task.k));
     const int run_i = static_cast<int>(task.run_i);
+    // fi = task.i + (float)(x & (run_i − 1)) · step_i and fj = task.j +
+    // (float)(x / run_i) · step_j, fused, for the sixteen lanes x.
+    const __m512i x_i = _mm512_and_si512(lane, _mm512_set1_epi32(run_i - 1));
+    const __m512i x_j = _mm512_srlv_epi32(lane, _mm512_set1_epi32(__builtin_ctz(static_cast<unsigned>(run_i))));
+    const __m512 fi = _mm512_fmadd_ps(_mm512_cvtepi32_ps(x_i), _mm512_set1_ps(task.step_i), _mm512_set1_ps(task.i));
+    const __m512 fj = _mm512_fmadd_ps(_mm512_cvtepi32_ps(x_j), _mm512_set1_ps(task.step_j), _mm512_set1_ps(task.j));
+    for (int v = 0; v < kBatch; ++v) {
+      const BackprojectView& m = a.views[v];
+      const __m512 w = _mm512_add_ps(
+          _mm512_fmadd_ps(_mm512_set1_ps(m.depth[0]), fi, _mm512_mul_ps(_mm512_set1_ps(m.depth[1]), fj)),
+          _mm512_set1_ps(m.depth[3]));
+      const __m512 inv_w = _mm512_div_ps(one_f, w);
+      const __m512 projected = _mm512_mul_ps(
+          _mm512_add_ps(
+              _mm512_fmadd_ps(_mm512_set1_ps(m.column[0]), fi, _mm512_mul_ps(_mm512_set1_ps(m.column[1]), fj)),
+              _mm512_set1_ps(m.column[3])),
+          inv_w);
+      // fmin(fmax(p, −1), limit): max_ps returns −1 for a NaN p as fmax does.
+      const __m512 column = _mm512_min_ps(_mm512_max_ps(projected, _mm512_set1_ps(-1.0F)), column_limit);
+      const __m512 column_floor = _mm512_roundscale_ps(column, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
+      _mm512_store_ps(lane_frac[v], _mm512_sub_ps(column, column_floor));
+      _mm512_store_ps(lane_weight[v], _mm512_mul_ps(inv_w, inv_w));
+      _mm512_store_ps(
+          lane_row0[v],
+          _mm512_mul_ps(_mm512_add_ps(_mm512_fmadd_ps(_mm512_set1_ps(m.row[0]), fi,
+                                                      _mm512_mul_ps(_mm512_set1_ps(m.row[1]), fj)),
+                                      _mm512_set1_ps(m.row[3])),
+                        inv_w));
+      _mm512_store_ps(lane_step[v], _mm512_mul_ps(_mm512_set1_ps(m.row[2]), inv_w));
+      _mm512_store_si512(lane_column[v],
+                         _mm512_add_epi32(_mm512_cvttps_epi32(column_floor), _mm512_set1_epi32(kBorderBefore)));
+    }
     // Only the lanes that hold points of the brick: the kernel computes all
     // sixteen, and the host never reads the rest (a brick of 2³ voxels fills
     // four of a task's sixteen lanes).
     const int along_i = static_cast<int>(task.count & 0xFF), along_j = static_cast<int>((task.count >> 8) & 0xFF);
     for (int x = 0; x < kRun; ++x) {
       if ((x & (run_i - 1)) >= along_i || x / run_i >= along_j) continue;
-      const float fi = __builtin_fmaf(static_cast<float>(x & (run_i - 1)), task.step_i, task.i);
-      const float fj = __builtin_fmaf(static_cast<float>(x / run_i), task.step_j, task.j);
-      for (int v = 0; v < kBatch; ++v) at[v] = column_view(a.views[v], fi, fj, a.column_limit);
+      ColumnView at[kBatch];
+      for (int v = 0; v < kBatch; ++v)
+        at[v] = ColumnView{lane_frac[v][x], lane_weight[v][x], lane_row0[v][x], lane_step[v][x], lane_column[v][x]};
       __m512 sum = _mm512_setzero_ps();
       for (int v = 0; v < kBatch; ++v) {
         const ColumnView& c = at[v];
