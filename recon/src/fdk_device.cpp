@@ -373,15 +373,20 @@ void FdkDevice::reconstruct_tasks(const RowBand& band, const std::vector<FineTas
     queue_.enqueueWriteBuffer(buffer, CL_FALSE, 0, bytes, data, nullptr, &copy);
     transfer_events_.push_back(copy);
   };
-  upload(task_sums_, nullptr, 0);
-  if (task_sums_.getInfo<CL_MEM_SIZE>() < outputs * sizeof(float))
-    task_sums_ = cl::Buffer(context_, CL_MEM_READ_WRITE, outputs * sizeof(float));
-  cl::Event fill;
-  queue_.enqueueFillBuffer(task_sums_, 0.0F, 0, outputs * sizeof(float), nullptr, &fill);
-  transfer_events_.push_back(fill);
-  upload(fine_tasks_, blocks.data(), blocks.size() * sizeof(FineTask));
-  upload(centre_tasks_, lone[0]->data(), lone[0]->size() * sizeof(CoarseTask));
-  upload(octant_tasks_, lone[1]->data(), lone[1]->size() * sizeof(CoarseTask));
+  // On a CPU device with the native backprojector every task is summed on
+  // the host, straight into `out`, with the kernels' bits: nothing to upload.
+  const bool native_tasks = native_ != nullptr;
+  if (!native_tasks) {
+    upload(task_sums_, nullptr, 0);
+    if (task_sums_.getInfo<CL_MEM_SIZE>() < outputs * sizeof(float))
+      task_sums_ = cl::Buffer(context_, CL_MEM_READ_WRITE, outputs * sizeof(float));
+    cl::Event fill;
+    queue_.enqueueFillBuffer(task_sums_, 0.0F, 0, outputs * sizeof(float), nullptr, &fill);
+    transfer_events_.push_back(fill);
+    upload(fine_tasks_, blocks.data(), blocks.size() * sizeof(FineTask));
+    upload(centre_tasks_, lone[0]->data(), lone[0]->size() * sizeof(CoarseTask));
+    upload(octant_tasks_, lone[1]->data(), lone[1]->size() * sizeof(CoarseTask));
+  }
 
   struct Launch {
     cl::Kernel* kernel;
@@ -391,16 +396,14 @@ void FdkDevice::reconstruct_tasks(const RowBand& band, const std::vector<FineTas
     bool blocks;
   };
   std::vector<Launch> launches;
-  // On a CPU device with the native backprojector the blocks are summed on
-  // the host, straight into `out`, with the kernel's bits; the lone coarse
-  // voxels stay with their kernels.
-  const bool native_blocks = native_ && !blocks.empty();
-  if (!blocks.empty() && !native_blocks) launches.push_back({&backproject_fine_, &fine_tasks_, blocks.size(), 0, true});
-  if (!lone[0]->empty())
-    launches.push_back({&backproject_centre_, &centre_tasks_, lone[0]->size(), block_outputs, false});
-  if (!lone[1]->empty())
-    launches.push_back(
-        {&backproject_octants_, &octant_tasks_, lone[1]->size(), block_outputs + lone[0]->size(), false});
+  if (!native_tasks) {
+    if (!blocks.empty()) launches.push_back({&backproject_fine_, &fine_tasks_, blocks.size(), 0, true});
+    if (!lone[0]->empty())
+      launches.push_back({&backproject_centre_, &centre_tasks_, lone[0]->size(), block_outputs, false});
+    if (!lone[1]->empty())
+      launches.push_back(
+          {&backproject_octants_, &octant_tasks_, lone[1]->size(), block_outputs + lone[0]->size(), false});
+  }
   run_views(band, [&](cl::Buffer& filtered, int stride_rows, std::size_t first_view, cl::Event* done) {
     for (std::size_t l = 0; l < launches.size(); ++l) {
       const Launch& launch = launches[l];
@@ -428,27 +431,30 @@ void FdkDevice::reconstruct_tasks(const RowBand& band, const std::vector<FineTas
       }
       if (target == &event) backproject_events_.push_back(event);
     }
-    if (native_blocks) {
+    if (native_tasks) {
       const std::size_t bytes = static_cast<std::size_t>(kBatch) * stride_rows * stride_cols_ * sizeof(float);
       cl::Event mapped;
       const auto* data = static_cast<const float*>(
           queue_.enqueueMapBuffer(filtered, CL_TRUE, CL_MAP_READ, 0, bytes, nullptr, &mapped));
       transfer_events_.push_back(mapped);
       const auto start = std::chrono::steady_clock::now();
-      native_->add_fine_batch(data, stride_cols_, stride_rows, band.first,
-                              problem_.backproject_views.data() + first_view, blocks.data(), blocks.size(), out.data());
+      const BackprojectView* views = problem_.backproject_views.data() + first_view;
+      if (!blocks.empty())
+        native_->add_fine_batch(data, stride_cols_, stride_rows, band.first, views, blocks.data(), blocks.size(),
+                                out.data());
+      native_->add_lone_batch(data, stride_cols_, stride_rows, band.first, views, lone[0]->data(), lone[0]->size(), 1,
+                              out.data() + block_outputs);
+      native_->add_lone_batch(data, stride_cols_, stride_rows, band.first, views, lone[1]->data(), lone[1]->size(), 8,
+                              out.data() + block_outputs + lone[0]->size());
       timings_.backprojection += seconds_since(start);
       cl::Event unmapped;
       queue_.enqueueUnmapMemObject(filtered, const_cast<float*>(data), nullptr, &unmapped);
       transfer_events_.push_back(unmapped);
     }
   });
-  // The kernels' sums: all of them, or those after the native blocks'.
-  const std::size_t first_output = native_blocks ? block_outputs : 0;
-  if (outputs > first_output) {
+  if (!native_tasks) {
     cl::Event read;
-    queue_.enqueueReadBuffer(task_sums_, CL_TRUE, first_output * sizeof(float),
-                             (outputs - first_output) * sizeof(float), out.data() + first_output, nullptr, &read);
+    queue_.enqueueReadBuffer(task_sums_, CL_TRUE, 0, outputs * sizeof(float), out.data(), nullptr, &read);
     transfer_events_.push_back(read);
   }
   queue_.finish();

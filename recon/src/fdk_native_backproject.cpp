@@ -188,9 +188,9 @@ __attribute__((target("avx512f,fma"))) void backproject_fine_tasks(const BatchAr
     const __m512 fj = _mm512_fmadd_ps(_mm512_cvtepi32_ps(x_j), _mm512_set1_ps(task.step_j), _mm512_set1_ps(task.j));
     for (int v = 0; v < kBatch; ++v) {
       const BackprojectView& m = a.views[v];
-      const __m512 w = _mm512_add_ps(
-          _mm512_fmadd_ps(_mm512_set1_ps(m.depth[0]), fi, _mm512_mul_ps(_mm512_set1_ps(m.depth[1]), fj)),
-          _mm512_set1_ps(m.depth[3]));
+      const __m512 w =
+          _mm512_add_ps(_mm512_fmadd_ps(_mm512_set1_ps(m.depth[0]), fi, _mm512_mul_ps(_mm512_set1_ps(m.depth[1]), fj)),
+                        _mm512_set1_ps(m.depth[3]));
       const __m512 inv_w = _mm512_div_ps(one_f, w);
       const __m512 projected = _mm512_mul_ps(
           _mm512_add_ps(
@@ -202,12 +202,11 @@ __attribute__((target("avx512f,fma"))) void backproject_fine_tasks(const BatchAr
       const __m512 column_floor = _mm512_roundscale_ps(column, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
       _mm512_store_ps(lane_frac[v], _mm512_sub_ps(column, column_floor));
       _mm512_store_ps(lane_weight[v], _mm512_mul_ps(inv_w, inv_w));
-      _mm512_store_ps(
-          lane_row0[v],
-          _mm512_mul_ps(_mm512_add_ps(_mm512_fmadd_ps(_mm512_set1_ps(m.row[0]), fi,
-                                                      _mm512_mul_ps(_mm512_set1_ps(m.row[1]), fj)),
-                                      _mm512_set1_ps(m.row[3])),
-                        inv_w));
+      _mm512_store_ps(lane_row0[v],
+                      _mm512_mul_ps(_mm512_add_ps(_mm512_fmadd_ps(_mm512_set1_ps(m.row[0]), fi,
+                                                                  _mm512_mul_ps(_mm512_set1_ps(m.row[1]), fj)),
+                                                  _mm512_set1_ps(m.row[3])),
+                                    inv_w));
       _mm512_store_ps(lane_step[v], _mm512_mul_ps(_mm512_set1_ps(m.row[2]), inv_w));
       _mm512_store_si512(lane_column[v],
                          _mm512_add_epi32(_mm512_cvttps_epi32(column_floor), _mm512_set1_epi32(kBorderBefore)));
@@ -261,6 +260,89 @@ __attribute__((target("avx512f,fma"))) void backproject_fine_tasks(const BatchAr
       float* out = sums + t * (kDepth * kRun) + x;
       for (int d = 0; d < kDepth; ++d) out[d * kRun] += part[d];
     }
+  }
+}
+
+// Adds one batch to lone coarse voxels [begin, end), sixteen at a time:
+// kernels/fdk_backproject.cl's fdk_backproject_centre (octants == 1) or
+// fdk_backproject_octants (8), sample_view operation for operation, from
+// the band as filtered (rows contiguous; four gathers a sample, as the
+// kernel's).
+__attribute__((target("avx512f,fma"))) void backproject_lone_tasks(const BatchArgs& a, const float* filtered,
+                                                                   int stride_cols, const CoarseTask* tasks,
+                                                                   std::size_t begin, std::size_t end, int octants,
+                                                                   float* sums) {
+  const __m512 one_f = _mm512_set1_ps(1.0F);
+  const __m512 minus_one = _mm512_set1_ps(-1.0F);
+  const __m512 column_limit = _mm512_set1_ps(a.column_limit);
+  const __m512 row_limit = _mm512_set1_ps(a.row_limit);
+  const __m512 band_first = _mm512_set1_ps(a.band_first);
+  const __m512i border = _mm512_set1_epi32(kBorderBefore);
+  const __m512i stride = _mm512_set1_epi32(stride_cols);
+  const __m512i one = _mm512_set1_epi32(1);
+  const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  const std::size_t plane = a.plane;
+  for (std::size_t t0 = begin; t0 < end; t0 += kLanes) {
+    const int count = static_cast<int>(std::min<std::size_t>(kLanes, end - t0));
+    const __mmask16 live = static_cast<__mmask16>((1u << count) - 1);
+    // The tasks' fields as vectors (CoarseTask: 8 floats; lanes past the
+    // end repeat the first task).
+    const __m512i index = _mm512_mullo_epi32(_mm512_mask_blend_epi32(live, _mm512_setzero_si512(), lane),
+                                             _mm512_set1_epi32(sizeof(CoarseTask) / sizeof(float)));
+    const auto* fields = reinterpret_cast<const float*>(tasks + t0);
+    const __m512 ci = _mm512_i32gather_ps(index, fields + 0, 4);
+    const __m512 cj = _mm512_i32gather_ps(index, fields + 1, 4);
+    const __m512 ck = _mm512_i32gather_ps(index, fields + 2, 4);
+    const __m512 qi = _mm512_i32gather_ps(index, fields + 3, 4);
+    const __m512 qj = _mm512_i32gather_ps(index, fields + 4, 4);
+    const __m512 qk = _mm512_i32gather_ps(index, fields + 5, 4);
+    const __m512 zero = _mm512_setzero_ps();
+    __m512 sum = _mm512_setzero_ps();
+    for (int v = 0; v < kBatch; ++v) {
+      const BackprojectView& m = a.views[v];
+      const float* image = filtered + static_cast<std::size_t>(v) * plane;
+      for (int octant = 0; octant < octants; ++octant) {
+        // fi = task.i + (OCTANTS == 1 ? 0.0f : ±quarter_i), and so on.
+        const __m512 fi = _mm512_add_ps(ci, octants == 1 ? zero : (octant & 1) ? qi : _mm512_mul_ps(qi, minus_one));
+        const __m512 fj = _mm512_add_ps(cj, octants == 1 ? zero : (octant & 2) ? qj : _mm512_mul_ps(qj, minus_one));
+        const __m512 fk = _mm512_add_ps(ck, octants == 1 ? zero : (octant & 4) ? qk : _mm512_mul_ps(qk, minus_one));
+        const __m512 w = _mm512_add_ps(
+            _mm512_fmadd_ps(_mm512_set1_ps(m.depth[0]), fi, _mm512_mul_ps(_mm512_set1_ps(m.depth[1]), fj)),
+            _mm512_set1_ps(m.depth[3]));
+        const __m512 inv_w = _mm512_div_ps(one_f, w);
+        const __m512 projected = _mm512_mul_ps(
+            _mm512_add_ps(
+                _mm512_fmadd_ps(_mm512_set1_ps(m.column[0]), fi, _mm512_mul_ps(_mm512_set1_ps(m.column[1]), fj)),
+                _mm512_set1_ps(m.column[3])),
+            inv_w);
+        const __m512 column = _mm512_min_ps(_mm512_max_ps(projected, minus_one), column_limit);
+        const __m512 column_floor = _mm512_roundscale_ps(column, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
+        const __m512 column_frac = _mm512_sub_ps(column, column_floor);
+        const __m512 row_at_zero = _mm512_mul_ps(
+            _mm512_add_ps(_mm512_fmadd_ps(_mm512_set1_ps(m.row[0]), fi, _mm512_mul_ps(_mm512_set1_ps(m.row[1]), fj)),
+                          _mm512_set1_ps(m.row[3])),
+            inv_w);
+        __m512 row = _mm512_fmadd_ps(fk, _mm512_mul_ps(_mm512_set1_ps(m.row[2]), inv_w), row_at_zero);
+        row = _mm512_min_ps(_mm512_max_ps(_mm512_sub_ps(row, band_first), minus_one), row_limit);
+        const __m512 row_floor = _mm512_roundscale_ps(row, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
+        const __m512 row_frac = _mm512_sub_ps(row, row_floor);
+        const __m512i at =
+            _mm512_add_epi32(_mm512_mullo_epi32(_mm512_add_epi32(_mm512_cvttps_epi32(row_floor), border), stride),
+                             _mm512_add_epi32(_mm512_cvttps_epi32(column_floor), border));
+        const __m512 tl = _mm512_i32gather_ps(at, image, 4);
+        const __m512 tr = _mm512_i32gather_ps(_mm512_add_epi32(at, one), image, 4);
+        const __m512 bl = _mm512_i32gather_ps(_mm512_add_epi32(at, stride), image, 4);
+        const __m512 br = _mm512_i32gather_ps(_mm512_add_epi32(_mm512_add_epi32(at, stride), one), image, 4);
+        const __m512 top = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(tr, tl), tl);
+        const __m512 bottom = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(br, bl), bl);
+        const __m512 value =
+            _mm512_mul_ps(_mm512_mul_ps(inv_w, inv_w), _mm512_fmadd_ps(row_frac, _mm512_sub_ps(bottom, top), top));
+        sum = _mm512_add_ps(sum, value);
+      }
+    }
+    alignas(64) float part[kLanes];
+    _mm512_store_ps(part, _mm512_div_ps(sum, _mm512_set1_ps(static_cast<float>(octants))));
+    for (int l = 0; l < count; ++l) sums[t0 + l] += part[l];
   }
 }
 
@@ -318,6 +400,19 @@ void NativeBackprojector::add_fine_batch(const float* filtered, int stride_cols,
   const BatchArgs args = batch_args(transposed_.data(), stride_cols, stride_rows, band_first_row, views);
   on_threads(threads_, [&](unsigned t) {
     backproject_fine_tasks(args, tasks, task_count * t / threads_, task_count * (t + 1) / threads_, sums);
+  });
+}
+
+void NativeBackprojector::add_lone_batch(const float* filtered, int stride_cols, int stride_rows, int band_first_row,
+                                         const BackprojectView* views, const CoarseTask* tasks, std::size_t task_count,
+                                         int octants, float* sums) const {
+  const BatchArgs args = batch_args(nullptr, stride_cols, stride_rows, band_first_row, views);
+  // Whole groups of sixteen tasks per thread.
+  const std::size_t groups = (task_count + kLanes - 1) / kLanes;
+  on_threads(threads_, [&](unsigned t) {
+    const std::size_t first = std::min(task_count, groups * t / threads_ * kLanes);
+    const std::size_t last = std::min(task_count, groups * (t + 1) / threads_ * kLanes);
+    if (first < last) backproject_lone_tasks(args, filtered, stride_cols, tasks, first, last, octants, sums);
   });
 }
 

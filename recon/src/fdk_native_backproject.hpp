@@ -48,6 +48,12 @@ class NativeBackprojector {
   // voxels along k take one vector, as a dense column's sixteen do.
   void add_fine_batch(const float* filtered, int stride_cols, int stride_rows, int band_first_row,
                       const BackprojectView* views, const FineTask* tasks, std::size_t task_count, float* sums);
+  // Adds the same batch to lone coarse voxels, as fdk_backproject_centre
+  // (octants 1) or fdk_backproject_octants (8) do, with their bits: task t
+  // into sums[t]. Reads `filtered` as it is (no transpose).
+  void add_lone_batch(const float* filtered, int stride_cols, int stride_rows, int band_first_row,
+                      const BackprojectView* views, const CoarseTask* tasks, std::size_t task_count, int octants,
+                      float* sums) const;
 
   // One lane of the vector loop (16 voxels along k) for one view.
   static constexpr std::uint32_t kLanes = 16;
