@@ -9,11 +9,11 @@
  * per view for the whole stack; only the detector row moves with k. The
  * order of accumulation is fixed, so a voxel's bits do not depend on the slab
  * it was computed in. A batch short of views is padded with views whose
- * rays miss the detector. On CPU devices with AVX-512 the dense slabs take
- * recon/src/fdk_native_backproject.cpp instead, which repeats this
- * arithmetic operation for operation (clang's fused multiply-adds included):
- * a change here must be made there too, and test_fdk_native compares the
- * bits of the two. */
+ * rays miss the detector. On CPU devices with AVX-512 the dense slabs and
+ * the structure kernels below take recon/src/fdk_native_backproject.cpp
+ * instead, which repeats this arithmetic operation for operation (clang's
+ * fused multiply-adds included): a change here must be made there too, and
+ * test_fdk_native compares the bits of the two. */
 __kernel void fdk_backproject(__global float* restrict slab, int row_stride, int ny, int k_first,
                               __global const float* restrict filtered, int stride_cols, int stride_rows,
                               int band_first_row, __global const BackprojectView* restrict views, int view_offset) {

@@ -8,7 +8,9 @@
  * Rows are paired by their global index, so a row gives the same bits
  * whatever band it is filtered in. The FFT scratch lives in local memory, or
  * in global memory (IVOL_FFT_IN_GLOBAL) when n is too long for the device's
- * local memory. */
+ * local memory. On CPU devices with AVX-512, fdk_weight_rows does the
+ * weighting and recon/src/fdk_native_filter.cpp the rest, operation for
+ * operation: a change here must be made there too (test_fdk_native). */
 
 #ifdef IVOL_FFT_IN_GLOBAL
 #define FFT_SPACE __global
