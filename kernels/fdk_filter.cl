@@ -35,6 +35,21 @@ static float parker_weight(float beta, float gamma, float delta) {
 }
 
 /* Radix-2 Stockham passes from src; returns the buffer holding the result. */
+/* Cosine, distance (and Parker) weights of pixel (column i, detector row
+ * `row`) of a view: shared by fdk_filter_rows and fdk_weight_rows, so that
+ * the native FFT path starts from the same bits. */
+static float weighted(const FilterView fv, float sample, int i, int row) {
+  const float v = fv.v_first + (float)row * fv.pitch_v - fv.foot_v;
+  const float du = fv.u_first + (float)i * fv.pitch_u - fv.foot_u;
+  float weight = fv.scale;
+  if (fv.parker_delta >= 0.0f) {
+    const float gamma = -fv.parker_sign * atan(du / fv.sdd);
+    weight *= parker_weight(fv.parker_beta, gamma, fv.parker_delta);
+  }
+  const float base = fv.sdd * fv.sdd + du * du;
+  return sample * weight * fv.sdd * rsqrt(base + v * v);
+}
+
 static FFT_SPACE float2* stockham(FFT_SPACE float2* src, FFT_SPACE float2* dst, __global const float2* twiddles,
                                   int log2n, float direction, int lid, int lsize) {
   const int half_n = 1 << (log2n - 1);
@@ -69,18 +84,8 @@ __kernel void fdk_weight_rows(__global float* raw, __global const FilterView* vi
   const int i = get_global_id(0);
   const int r = get_global_id(1);
   const int view = get_global_id(2);
-  const FilterView fv = views[view_offset + view];
   __global float* image = raw + (size_t)view * (size_t)band_rows * (size_t)columns;
-  /* The same expressions as fdk_filter_rows, so the same roundings. */
-  const float v = fv.v_first + (float)(band_first_row + r) * fv.pitch_v - fv.foot_v;
-  const float du = fv.u_first + (float)i * fv.pitch_u - fv.foot_u;
-  float weight = fv.scale;
-  if (fv.parker_delta >= 0.0f) {
-    const float gamma = -fv.parker_sign * atan(du / fv.sdd);
-    weight *= parker_weight(fv.parker_beta, gamma, fv.parker_delta);
-  }
-  const float base = fv.sdd * fv.sdd + du * du;
-  image[r * columns + i] = image[r * columns + i] * weight * fv.sdd * rsqrt(base + v * v);
+  image[r * columns + i] = weighted(views[view_offset + view], image[r * columns + i], i, band_first_row + r);
 }
 
 /* Global size: (local size × row pairs, views in the batch). raw holds the
@@ -109,20 +114,11 @@ __kernel void fdk_filter_rows(__global const float* raw, __global float* filtere
   __global const float* image = raw + (size_t)view * (size_t)band_rows * (size_t)columns;
 
   /* From the detector's row index, not the band's: same bits in every band. */
-  const float va = fv.v_first + (float)(band_first_row + row_a) * fv.pitch_v - fv.foot_v;
-  const float vb = fv.v_first + (float)(band_first_row + row_b) * fv.pitch_v - fv.foot_v;
   for (int i = lid; i < n; i += lsize) {
     float2 value = (float2)(0.0f, 0.0f);
     if (i < columns) {
-      const float du = fv.u_first + (float)i * fv.pitch_u - fv.foot_u;
-      float weight = fv.scale;
-      if (fv.parker_delta >= 0.0f) {
-        const float gamma = -fv.parker_sign * atan(du / fv.sdd);
-        weight *= parker_weight(fv.parker_beta, gamma, fv.parker_delta);
-      }
-      const float base = fv.sdd * fv.sdd + du * du;
-      value.x = image[row_a * columns + i] * weight * fv.sdd * rsqrt(base + va * va);
-      if (row_b < band_rows) value.y = image[row_b * columns + i] * weight * fv.sdd * rsqrt(base + vb * vb);
+      value.x = weighted(fv, image[row_a * columns + i], i, band_first_row + row_a);
+      if (row_b < band_rows) value.y = weighted(fv, image[row_b * columns + i], i, band_first_row + row_b);
     }
     buffer_a[i] = value;
   }

@@ -74,6 +74,24 @@ BatchArgs batch_args(const float* transposed, int stride_cols, int stride_rows, 
   return args;
 }
 
+// A column's top and bottom samples, interpolated between detector columns,
+// from the four pixels around each row (`left`: the left column of a
+// transposed band, rows contiguous), where the rows span more than a strip.
+__attribute__((target("avx512f,fma"))) inline void gather_top_bottom(const float* left, int stride_rows,
+                                                                     __m512i row_index, __m512 column_frac, __m512& top,
+                                                                     __m512& bottom) {
+  const __m512i one = _mm512_set1_epi32(1);
+  const __m512i right = _mm512_set1_epi32(stride_rows);
+  const __m512i offset = _mm512_add_epi32(row_index, _mm512_set1_epi32(kBorderBefore));
+  const __m512i below = _mm512_add_epi32(offset, one);
+  const __m512 tl = _mm512_i32gather_ps(offset, left, 4);
+  const __m512 tr = _mm512_i32gather_ps(_mm512_add_epi32(offset, right), left, 4);
+  const __m512 bl = _mm512_i32gather_ps(below, left, 4);
+  const __m512 br = _mm512_i32gather_ps(_mm512_add_epi32(below, right), left, 4);
+  top = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(tr, tl), tl);
+  bottom = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(br, bl), bl);
+}
+
 // Adds one batch to the voxel column whose per-view scalars are `at`:
 // sixteen slices at a time, each view's sixteen rows from one strip.
 __attribute__((target("avx512f,fma"))) inline void backproject_column(const BatchArgs& a, const ColumnView* at,
@@ -117,15 +135,7 @@ __attribute__((target("avx512f,fma"))) inline void backproject_column(const Batc
         bottom = _mm512_permutex2var_ps(s0, _mm512_add_epi32(offset, one), s1);
       } else {
         // Steep rows (fine detector rows): gather the four pixels.
-        const __m512i stride_rows = _mm512_set1_epi32(a.stride_rows);
-        const __m512i offset = _mm512_add_epi32(row_index, _mm512_set1_epi32(kBorderBefore));
-        const __m512i below = _mm512_add_epi32(offset, one);
-        const __m512 tl = _mm512_i32gather_ps(offset, left, 4);
-        const __m512 tr = _mm512_i32gather_ps(_mm512_add_epi32(offset, stride_rows), left, 4);
-        const __m512 bl = _mm512_i32gather_ps(below, left, 4);
-        const __m512 br = _mm512_i32gather_ps(_mm512_add_epi32(below, stride_rows), left, 4);
-        top = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(tr, tl), tl);
-        bottom = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(br, bl), bl);
+        gather_top_bottom(left, a.stride_rows, row_index, column_frac, top, bottom);
       }
       const __m512 value = _mm512_fmadd_ps(row_frac, _mm512_sub_ps(bottom, top), top);
       sum = _mm512_fmadd_ps(_mm512_set1_ps(c.weight), value, sum);
@@ -243,15 +253,7 @@ __attribute__((target("avx512f,fma"))) void backproject_fine_tasks(const BatchAr
           top = _mm512_permutexvar_ps(offset, s0);
           bottom = _mm512_permutexvar_ps(_mm512_add_epi32(offset, one), s0);
         } else {
-          const __m512i stride_rows = _mm512_set1_epi32(a.stride_rows);
-          const __m512i offset = _mm512_add_epi32(row_index, _mm512_set1_epi32(kBorderBefore));
-          const __m512i below = _mm512_add_epi32(offset, one);
-          const __m512 tl = _mm512_i32gather_ps(offset, left, 4);
-          const __m512 tr = _mm512_i32gather_ps(_mm512_add_epi32(offset, stride_rows), left, 4);
-          const __m512 bl = _mm512_i32gather_ps(below, left, 4);
-          const __m512 br = _mm512_i32gather_ps(_mm512_add_epi32(below, stride_rows), left, 4);
-          top = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(tr, tl), tl);
-          bottom = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(br, bl), bl);
+          gather_top_bottom(left, a.stride_rows, row_index, column_frac, top, bottom);
         }
         const __m512 value = _mm512_fmadd_ps(row_frac, _mm512_sub_ps(bottom, top), top);
         sum = _mm512_fmadd_ps(_mm512_set1_ps(c.weight), value, sum);
