@@ -163,6 +163,20 @@ __attribute__((target("avx512f,fma"))) void backproject_rows(const BatchArgs& a,
 
 constexpr int kDepth = IVOL_BACKPROJECT_DEPTH;
 constexpr int kRun = IVOL_FINE_RUN;
+
+// Lane x's scalar in vector lanes 0-7 and lane y's in lanes 8-15.
+__attribute__((target("avx512f"))) inline __m512 lane_pair(const float (&lanes)[kRun], int x, int y) {
+  return _mm512_mask_blend_ps(0xFF00, _mm512_set1_ps(lanes[x]), _mm512_set1_ps(lanes[y]));
+}
+
+// Sixteen rows of a band's column from `lowest` on, interpolated towards
+// the next column by `frac` (the kernel's top(r) for each row r).
+__attribute__((target("avx512f,fma"))) inline __m512 strip_of(const float* band, int stride_rows, int column,
+                                                              int lowest, float frac) {
+  const float* strip = band + static_cast<std::size_t>(column) * stride_rows + lowest + kBorderBefore;
+  const __m512 left = _mm512_loadu_ps(strip);
+  return _mm512_fmadd_ps(_mm512_set1_ps(frac), _mm512_sub_ps(_mm512_loadu_ps(strip + stride_rows), left), left);
+}
 static_assert(kDepth == 8 && kRun == 16, "one vector holds a task's voxels along k twice over");
 
 // Adds one batch to fine tasks [begin, end): kernels/fdk_backproject.cl's
@@ -225,42 +239,63 @@ __attribute__((target("avx512f,fma"))) void backproject_fine_tasks(const BatchAr
     // sixteen, and the host never reads the rest (a brick of 2³ voxels fills
     // four of a task's sixteen lanes).
     const int along_i = static_cast<int>(task.count & 0xFF), along_j = static_cast<int>((task.count >> 8) & 0xFF);
-    for (int x = 0; x < kRun; ++x) {
-      if ((x & (run_i - 1)) >= along_i || x / run_i >= along_j) continue;
-      ColumnView at[kBatch];
-      for (int v = 0; v < kBatch; ++v)
-        at[v] = ColumnView{lane_frac[v][x], lane_weight[v][x], lane_row0[v][x], lane_step[v][x], lane_column[v][x]};
+    int used[kRun];
+    int used_count = 0;
+    for (int x = 0; x < kRun; ++x)
+      if ((x & (run_i - 1)) < along_i && x / run_i < along_j) used[used_count++] = x;
+    // Two lanes a vector: lanes 0-7 hold lane x's eight points along k, lanes
+    // 8-15 lane y's (x again when x is the last).
+    const __mmask16 upper = 0xFF00;
+    for (int u = 0; u < used_count; u += 2) {
+      const int x = used[u], y = u + 1 < used_count ? used[u + 1] : x;
       __m512 sum = _mm512_setzero_ps();
       for (int v = 0; v < kBatch; ++v) {
-        const ColumnView& c = at[v];
-        __m512 row = _mm512_fmadd_ps(fk, _mm512_set1_ps(c.row_step), _mm512_set1_ps(c.row_at_zero));
+        __m512 row = _mm512_fmadd_ps(fk, lane_pair(lane_step[v], x, y), lane_pair(lane_row0[v], x, y));
         row = _mm512_min_ps(_mm512_max_ps(_mm512_sub_ps(row, band_first), minus_one), row_limit);
         const __m512i row_index = _mm512_cvt_roundps_epi32(row, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
         const __m512 row_frac = _mm512_sub_ps(row, _mm512_cvtepi32_ps(row_index));
-        const __m512 column_frac = _mm512_set1_ps(c.column_frac);
-        const int first = _mm_cvtsi128_si32(_mm512_castsi512_si128(row_index));
-        const int last = _mm_extract_epi32(_mm512_extracti32x4_epi32(row_index, 1), 3);  // lane 7
-        const int lowest = std::min(first, last);
-        const float* left = a.transposed + static_cast<std::size_t>(v) * a.plane +
-                            static_cast<std::size_t>(c.column_index) * a.stride_rows;
+        // Rows are monotonic along k: each half's first or last lane is lowest.
+        const int x_first = _mm_cvtsi128_si32(_mm512_castsi512_si128(row_index));
+        const int x_last = _mm_extract_epi32(_mm512_extracti32x4_epi32(row_index, 1), 3);
+        const int y_first = _mm_cvtsi128_si32(_mm512_extracti32x4_epi32(row_index, 2));
+        const int y_last = _mm_extract_epi32(_mm512_extracti32x4_epi32(row_index, 3), 3);
+        const int x_lowest = std::min(x_first, x_last), y_lowest = std::min(y_first, y_last);
+        const float* band = a.transposed + static_cast<std::size_t>(v) * a.plane;
+        const int x_column = lane_column[v][x], y_column = lane_column[v][y];
         __m512 top;
         __m512 bottom;
-        if (std::max(first, last) - lowest < static_cast<int>(kLanes) - 1) {
-          const float* strip = left + lowest + kBorderBefore;
-          const __m512 l0 = _mm512_loadu_ps(strip);
-          const __m512 s0 = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(_mm512_loadu_ps(strip + a.stride_rows), l0), l0);
-          const __m512i offset = _mm512_sub_epi32(row_index, _mm512_set1_epi32(lowest));
-          top = _mm512_permutexvar_ps(offset, s0);
-          bottom = _mm512_permutexvar_ps(_mm512_add_epi32(offset, one), s0);
+        if (std::max(x_first, x_last) - x_lowest < static_cast<int>(kLanes) - 1 &&
+            std::max(y_first, y_last) - y_lowest < static_cast<int>(kLanes) - 1) {
+          // A 16-row strip for each lane, interpolated between its columns.
+          const __m512 sx = strip_of(band, a.stride_rows, x_column, x_lowest, lane_frac[v][x]);
+          const __m512 sy = strip_of(band, a.stride_rows, y_column, y_lowest, lane_frac[v][y]);
+          const __m512i offset = _mm512_sub_epi32(
+              row_index, _mm512_mask_blend_epi32(upper, _mm512_set1_epi32(x_lowest), _mm512_set1_epi32(y_lowest - 16)));
+          top = _mm512_permutex2var_ps(sx, offset, sy);
+          bottom = _mm512_permutex2var_ps(sx, _mm512_add_epi32(offset, one), sy);
         } else {
-          gather_top_bottom(left, a.stride_rows, row_index, column_frac, top, bottom);
+          // Steep rows: gather the four pixels of each lane.
+          const __m512i column_at = _mm512_mask_blend_epi32(upper, _mm512_set1_epi32(x_column * a.stride_rows),
+                                                            _mm512_set1_epi32(y_column * a.stride_rows));
+          const __m512i at = _mm512_add_epi32(column_at, _mm512_add_epi32(row_index, _mm512_set1_epi32(kBorderBefore)));
+          const __m512i right = _mm512_set1_epi32(a.stride_rows);
+          const __m512i below = _mm512_add_epi32(at, one);
+          const __m512 column_frac = lane_pair(lane_frac[v], x, y);
+          const __m512 tl = _mm512_i32gather_ps(at, band, 4);
+          const __m512 tr = _mm512_i32gather_ps(_mm512_add_epi32(at, right), band, 4);
+          const __m512 bl = _mm512_i32gather_ps(below, band, 4);
+          const __m512 br = _mm512_i32gather_ps(_mm512_add_epi32(below, right), band, 4);
+          top = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(tr, tl), tl);
+          bottom = _mm512_fmadd_ps(column_frac, _mm512_sub_ps(br, bl), bl);
         }
         const __m512 value = _mm512_fmadd_ps(row_frac, _mm512_sub_ps(bottom, top), top);
-        sum = _mm512_fmadd_ps(_mm512_set1_ps(c.weight), value, sum);
+        sum = _mm512_fmadd_ps(lane_pair(lane_weight[v], x, y), value, sum);
       }
       _mm512_store_ps(part, sum);
-      float* out = sums + t * (kDepth * kRun) + x;
-      for (int d = 0; d < kDepth; ++d) out[d * kRun] += part[d];
+      float* out = sums + t * (kDepth * kRun);
+      for (int d = 0; d < kDepth; ++d) out[d * kRun + x] += part[d];
+      if (y != x)
+        for (int d = 0; d < kDepth; ++d) out[d * kRun + y] += part[kDepth + d];
     }
   }
 }
