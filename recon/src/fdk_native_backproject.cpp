@@ -179,6 +179,29 @@ __attribute__((target("avx512f,fma"))) inline __m512 strip_of(const float* band,
 }
 static_assert(kDepth == 8 && kRun == 16, "one vector holds a task's voxels along k twice over");
 
+// The kernels' projection of sixteen points (fi, fj) into one view:
+// column_view's operations in vector form (the column clamped as
+// fmin(fmax(p, −1), limit): max_ps returns −1 for a NaN p as fmax does).
+struct LaneViews {
+  __m512 inv_w, column, column_floor, row_at_zero, row_step;
+};
+
+__attribute__((target("avx512f,fma"))) inline LaneViews project_lanes(const BackprojectView& m, __m512 fi, __m512 fj,
+                                                                      __m512 column_limit) {
+  auto affine = [&](const float* r) __attribute__((target("avx512f,fma"))) {
+    return _mm512_add_ps(_mm512_fmadd_ps(_mm512_set1_ps(r[0]), fi, _mm512_mul_ps(_mm512_set1_ps(r[1]), fj)),
+                         _mm512_set1_ps(r[3]));
+  };
+  LaneViews c;
+  c.inv_w = _mm512_div_ps(_mm512_set1_ps(1.0F), affine(m.depth));
+  c.column =
+      _mm512_min_ps(_mm512_max_ps(_mm512_mul_ps(affine(m.column), c.inv_w), _mm512_set1_ps(-1.0F)), column_limit);
+  c.column_floor = _mm512_roundscale_ps(c.column, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
+  c.row_at_zero = _mm512_mul_ps(affine(m.row), c.inv_w);
+  c.row_step = _mm512_mul_ps(_mm512_set1_ps(m.row[2]), c.inv_w);
+  return c;
+}
+
 // Adds one batch to fine tasks [begin, end): kernels/fdk_backproject.cl's
 // fdk_backproject_fine operation for operation. A lane holds voxel d = lane
 // mod 8 of a task's stack (the upper eight repeat the lower), so that a
@@ -197,7 +220,6 @@ __attribute__((target("avx512f,fma"))) void backproject_fine_tasks(const BatchAr
   alignas(64) int lane_column[kBatch][kRun];
   alignas(64) float part[kLanes];
   const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-  const __m512 one_f = _mm512_set1_ps(1.0F);
   const __m512 column_limit = _mm512_set1_ps(a.column_limit);
   for (std::size_t t = begin; t < end; ++t) {
     const FineTask& task = tasks[t];
@@ -211,29 +233,13 @@ __attribute__((target("avx512f,fma"))) void backproject_fine_tasks(const BatchAr
     const __m512 fi = _mm512_fmadd_ps(_mm512_cvtepi32_ps(x_i), _mm512_set1_ps(task.step_i), _mm512_set1_ps(task.i));
     const __m512 fj = _mm512_fmadd_ps(_mm512_cvtepi32_ps(x_j), _mm512_set1_ps(task.step_j), _mm512_set1_ps(task.j));
     for (int v = 0; v < kBatch; ++v) {
-      const BackprojectView& m = a.views[v];
-      const __m512 w =
-          _mm512_add_ps(_mm512_fmadd_ps(_mm512_set1_ps(m.depth[0]), fi, _mm512_mul_ps(_mm512_set1_ps(m.depth[1]), fj)),
-                        _mm512_set1_ps(m.depth[3]));
-      const __m512 inv_w = _mm512_div_ps(one_f, w);
-      const __m512 projected = _mm512_mul_ps(
-          _mm512_add_ps(
-              _mm512_fmadd_ps(_mm512_set1_ps(m.column[0]), fi, _mm512_mul_ps(_mm512_set1_ps(m.column[1]), fj)),
-              _mm512_set1_ps(m.column[3])),
-          inv_w);
-      // fmin(fmax(p, −1), limit): max_ps returns −1 for a NaN p as fmax does.
-      const __m512 column = _mm512_min_ps(_mm512_max_ps(projected, _mm512_set1_ps(-1.0F)), column_limit);
-      const __m512 column_floor = _mm512_roundscale_ps(column, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
-      _mm512_store_ps(lane_frac[v], _mm512_sub_ps(column, column_floor));
-      _mm512_store_ps(lane_weight[v], _mm512_mul_ps(inv_w, inv_w));
-      _mm512_store_ps(lane_row0[v],
-                      _mm512_mul_ps(_mm512_add_ps(_mm512_fmadd_ps(_mm512_set1_ps(m.row[0]), fi,
-                                                                  _mm512_mul_ps(_mm512_set1_ps(m.row[1]), fj)),
-                                                  _mm512_set1_ps(m.row[3])),
-                                    inv_w));
-      _mm512_store_ps(lane_step[v], _mm512_mul_ps(_mm512_set1_ps(m.row[2]), inv_w));
+      const LaneViews c = project_lanes(a.views[v], fi, fj, column_limit);
+      _mm512_store_ps(lane_frac[v], _mm512_sub_ps(c.column, c.column_floor));
+      _mm512_store_ps(lane_weight[v], _mm512_mul_ps(c.inv_w, c.inv_w));
+      _mm512_store_ps(lane_row0[v], c.row_at_zero);
+      _mm512_store_ps(lane_step[v], c.row_step);
       _mm512_store_si512(lane_column[v],
-                         _mm512_add_epi32(_mm512_cvttps_epi32(column_floor), _mm512_set1_epi32(kBorderBefore)));
+                         _mm512_add_epi32(_mm512_cvttps_epi32(c.column_floor), _mm512_set1_epi32(kBorderBefore)));
     }
     // Only the lanes that hold points of the brick: the kernel computes all
     // sixteen, and the host never reads the rest (a brick of 2³ voxels fills
@@ -309,7 +315,6 @@ __attribute__((target("avx512f,fma"))) void backproject_lone_tasks(const BatchAr
                                                                    int stride_cols, const CoarseTask* tasks,
                                                                    std::size_t begin, std::size_t end, int octants,
                                                                    float* sums) {
-  const __m512 one_f = _mm512_set1_ps(1.0F);
   const __m512 minus_one = _mm512_set1_ps(-1.0F);
   const __m512 column_limit = _mm512_set1_ps(a.column_limit);
   const __m512 row_limit = _mm512_set1_ps(a.row_limit);
@@ -343,23 +348,11 @@ __attribute__((target("avx512f,fma"))) void backproject_lone_tasks(const BatchAr
         const __m512 fi = _mm512_add_ps(ci, octants == 1 ? zero : (octant & 1) ? qi : _mm512_mul_ps(qi, minus_one));
         const __m512 fj = _mm512_add_ps(cj, octants == 1 ? zero : (octant & 2) ? qj : _mm512_mul_ps(qj, minus_one));
         const __m512 fk = _mm512_add_ps(ck, octants == 1 ? zero : (octant & 4) ? qk : _mm512_mul_ps(qk, minus_one));
-        const __m512 w = _mm512_add_ps(
-            _mm512_fmadd_ps(_mm512_set1_ps(m.depth[0]), fi, _mm512_mul_ps(_mm512_set1_ps(m.depth[1]), fj)),
-            _mm512_set1_ps(m.depth[3]));
-        const __m512 inv_w = _mm512_div_ps(one_f, w);
-        const __m512 projected = _mm512_mul_ps(
-            _mm512_add_ps(
-                _mm512_fmadd_ps(_mm512_set1_ps(m.column[0]), fi, _mm512_mul_ps(_mm512_set1_ps(m.column[1]), fj)),
-                _mm512_set1_ps(m.column[3])),
-            inv_w);
-        const __m512 column = _mm512_min_ps(_mm512_max_ps(projected, minus_one), column_limit);
-        const __m512 column_floor = _mm512_roundscale_ps(column, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
-        const __m512 column_frac = _mm512_sub_ps(column, column_floor);
-        const __m512 row_at_zero = _mm512_mul_ps(
-            _mm512_add_ps(_mm512_fmadd_ps(_mm512_set1_ps(m.row[0]), fi, _mm512_mul_ps(_mm512_set1_ps(m.row[1]), fj)),
-                          _mm512_set1_ps(m.row[3])),
-            inv_w);
-        __m512 row = _mm512_fmadd_ps(fk, _mm512_mul_ps(_mm512_set1_ps(m.row[2]), inv_w), row_at_zero);
+        const LaneViews c = project_lanes(m, fi, fj, column_limit);
+        const __m512 column_floor = c.column_floor;
+        const __m512 column_frac = _mm512_sub_ps(c.column, column_floor);
+        const __m512 inv_w = c.inv_w;
+        __m512 row = _mm512_fmadd_ps(fk, c.row_step, c.row_at_zero);
         row = _mm512_min_ps(_mm512_max_ps(_mm512_sub_ps(row, band_first), minus_one), row_limit);
         const __m512 row_floor = _mm512_roundscale_ps(row, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
         const __m512 row_frac = _mm512_sub_ps(row, row_floor);
