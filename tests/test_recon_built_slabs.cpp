@@ -1,9 +1,10 @@
-// A distributed dense reconstruction (recon_io/recon_built_slabs.hpp) with its
-// ranks as threads of one process, over an in-memory exchange: every rank
-// builds the subtrees of its own writer slabs, rank 0 writes them, and the
-// file is the one a single process writes; a rank that fails while building
-// makes rank 0 fail with its message and leave nothing. (tests/cli/run_mpi.sh
-// runs the same under mpirun.)
+// A distributed dense reconstruction (recon_io/recon_built_slabs.hpp), and
+// one into an octree structure (recon_io/recon_built_structure.hpp), with
+// their ranks as threads of one process, over an in-memory exchange: every
+// rank builds the subtrees of its own writer slabs, rank 0 writes them, and
+// the file is the one a single process writes; a rank that fails while
+// building makes rank 0 fail with its message and leave nothing.
+// (tests/cli/run_mpi.sh runs the same under mpirun.)
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -21,6 +22,7 @@
 #include "ivol/recon/phantom.hpp"
 #include "ivol_io.hpp"
 #include "recon_built_slabs.hpp"
+#include "recon_built_structure.hpp"
 #include "recon_slabs.hpp"
 #include "test_support.hpp"
 
@@ -86,21 +88,19 @@ struct RankOutcome {
 // `ranks` threads, each with its own reconstructor, as mpirun's processes.
 // The reconstructors are made one after the other: setting up OpenCL from
 // several threads at once is not safe (PoCL crashes), and processes never do.
-std::vector<RankOutcome> run_ranks(Scan& scan, int ranks, const std::string& path,
-                                   const convert::ImportOptions& options, std::uint32_t most_slab_slices,
-                                   Mailbox& mailbox) {
-  std::vector<RankOutcome> outcomes(static_cast<std::size_t>(ranks));
+template <typename Outcome, typename Rank>
+std::vector<Outcome> run_threads(Scan& scan, int ranks, Mailbox& mailbox, Rank&& rank) {
+  std::vector<Outcome> outcomes(static_cast<std::size_t>(ranks));
   std::vector<std::unique_ptr<recon::FdkReconstructor>> reconstructors;
   for (int r = 0; r < ranks; ++r)
     reconstructors.push_back(std::make_unique<recon::FdkReconstructor>(scan.projections, scan.geometry));
   std::vector<std::thread> threads;
   for (int r = 0; r < ranks; ++r) {
     threads.emplace_back([&, r] {
-      RankOutcome& mine = outcomes[static_cast<std::size_t>(r)];
+      Outcome& mine = outcomes[static_cast<std::size_t>(r)];
       try {
         ThreadExchange exchange(mailbox, r, ranks);
-        mine.built = convert::reconstruct_distributed(*reconstructors[static_cast<std::size_t>(r)], scan.grid, path,
-                                                      options, exchange, most_slab_slices, [] {});
+        mine.built = rank(*reconstructors[static_cast<std::size_t>(r)], exchange);
       } catch (const std::exception& e) {
         mine.error = e.what();
       }
@@ -108,6 +108,41 @@ std::vector<RankOutcome> run_ranks(Scan& scan, int ranks, const std::string& pat
   }
   for (auto& t : threads) t.join();
   return outcomes;
+}
+
+std::vector<RankOutcome> run_ranks(Scan& scan, int ranks, const std::string& path,
+                                   const convert::ImportOptions& options, std::uint32_t most_slab_slices,
+                                   Mailbox& mailbox) {
+  return run_threads<RankOutcome>(scan, ranks, mailbox, [&](recon::FdkReconstructor& r, ThreadExchange& exchange) {
+    return convert::reconstruct_distributed(r, scan.grid, path, options, exchange, most_slab_slices, [] {});
+  });
+}
+
+struct StructureRankOutcome {
+  convert::DistributedStructureBuild built;
+  std::string error;
+};
+
+// An octree with full resolution in two cubes of 8³ and coarse leaves up to
+// 32 voxels across elsewhere: leaves far taller than the writer's slabs.
+std::unique_ptr<VoxelStructure> two_cube_octree(const Dims& dims) {
+  NeedMask mask;
+  mask.dims = dims;
+  mask.factor = 8;
+  mask.cells = {5, 5, 5};
+  mask.need.assign(125, 0);
+  mask.need[(2 * 5 + 2) * 5 + 1] = mask.need[(1 * 5 + 3) * 5 + 2] = 1;
+  return generate_structure(StructureKind::Octree, mask);
+}
+
+std::vector<StructureRankOutcome> run_structure_ranks(Scan& scan, int ranks, const VoxelStructure& structure,
+                                                      const std::string& path, Mailbox& mailbox) {
+  convert::DistributedStructureOptions options;
+  options.most_slab_slices = 4;
+  return run_threads<StructureRankOutcome>(
+      scan, ranks, mailbox, [&](recon::FdkReconstructor& r, ThreadExchange& exchange) {
+        return convert::reconstruct_structure_distributed(r, scan.grid, structure, path, options, exchange);
+      });
 }
 
 TEST(ReconBuiltSlabs, SameFileAsOneProcess) {
@@ -166,6 +201,48 @@ TEST(ReconBuiltSlabs, RankFailingWhileBuildingEndsTheRun) {
   for (const auto& entry : std::filesystem::directory_iterator(directory))
     EXPECT_EQ(entry.path().filename().string().rfind(".recon-fails.ivol.tmp-", 0), std::string::npos)
         << entry.path() << " left behind";
+}
+
+TEST(ReconBuiltStructure, SameOctreeFileAsOneProcess) {
+  Scan scan;
+  const std::unique_ptr<VoxelStructure> structure = two_cube_octree(scan.grid.size);
+  const std::string one_path = test::temp_path("structure-one.ivol");
+  {
+    recon::FdkReconstructor reconstructor(scan.projections, scan.geometry);
+    reconstructor.reconstruct_structure(scan.grid, *structure);
+    write_structure(*structure, one_path, Metadata{});  // the writer's own slabs: one, of 64 slices
+  }
+  // Writer slabs of 4 slices (9 of them, 3 per rank); leaves up to 32 tall.
+  Mailbox mailbox;
+  const std::string path = test::temp_path("structure-ranks.ivol");
+  const std::vector<StructureRankOutcome> ranks = run_structure_ranks(scan, 3, *structure, path, mailbox);
+  std::uint64_t slices = 0, part_voxels = 0;
+  for (std::size_t r = 0; r < ranks.size(); ++r) {
+    EXPECT_EQ(ranks[r].error, "") << "rank " << r;
+    EXPECT_EQ(ranks[r].built.slabs_built, 3U) << "rank " << r;
+    EXPECT_LT(ranks[r].built.part_voxels, structure->voxel_count()) << "rank " << r << " reconstructed everything";
+    slices += ranks[r].built.slices_built;
+    part_voxels += ranks[r].built.part_voxels;
+  }
+  EXPECT_EQ(slices, scan.grid.size[2]);
+  EXPECT_GT(part_voxels, structure->voxel_count());  // tall leaves on several ranks
+  EXPECT_EQ(ranks[0].built.slab_slices, 4U);
+  EXPECT_GT(mailbox.bytes_to_rank0, 0U);
+  EXPECT_EQ(test::read_bytes(path), test::read_bytes(one_path));
+}
+
+TEST(ReconBuiltStructure, RankFailingWhileBuildingEndsTheRun) {
+  Scan scan;
+  const std::unique_ptr<VoxelStructure> structure = two_cube_octree(scan.grid.size);
+  const std::string path = test::temp_path("structure-fails.ivol");
+  std::filesystem::remove(path);
+  ::setenv("IVOL_TEST_FAIL_BUILD_RANK", "1", 1);
+  Mailbox mailbox;
+  const std::vector<StructureRankOutcome> ranks = run_structure_ranks(scan, 3, *structure, path, mailbox);
+  ::unsetenv("IVOL_TEST_FAIL_BUILD_RANK");
+  EXPECT_EQ(ranks[0].error, "rank 1: building the subtrees of slab 1: failure injected (IVOL_TEST_FAIL_BUILD_RANK)");
+  EXPECT_EQ(ranks[1].error, "building the subtrees of slab 1: failure injected (IVOL_TEST_FAIL_BUILD_RANK)");
+  EXPECT_FALSE(std::filesystem::exists(path));
 }
 
 }  // namespace

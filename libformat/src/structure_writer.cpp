@@ -3,10 +3,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <numeric>
 
 #include "block_pipeline.hpp"
-#include "brick_rows.hpp"
 #include "ivol/error.hpp"
 #include "ivol/structure_stream.hpp"
 
@@ -134,9 +132,7 @@ struct StructureStreamWriter::Impl {
   std::unique_ptr<StreamingOctreeWriter> octree;
   std::vector<float> slab;
   std::vector<std::uint8_t> keep;
-  std::vector<std::uint32_t> by_first_slice;  // bricks by their first slice
-  std::vector<std::uint32_t> open;            // bricks reaching into the next slab
-  std::size_t next_brick = 0;
+  std::unique_ptr<OctreeSlabFiller> filler;
 
   // The grids: borders or cell words at once, then the values in file order.
   VolumeLayout layout;
@@ -158,43 +154,17 @@ struct StructureStreamWriter::Impl {
     octree = std::make_unique<StreamingOctreeWriter>(path, dims, options);
     slab.resize(std::uint64_t{octree->slab_slices()} * dims[0] * dims[1]);
     keep.resize(slab.size());
-    const auto& bricks = structure.bricks();
-    by_first_slice.resize(bricks.size());
-    std::iota(by_first_slice.begin(), by_first_slice.end(), 0U);
-    std::stable_sort(by_first_slice.begin(), by_first_slice.end(),
-                     [&](std::uint32_t a, std::uint32_t b) { return bricks[a].origin[2] < bricks[b].origin[2]; });
+    filler = std::make_unique<OctreeSlabFiller>(structure);
   }
 
   // Full resolution exactly where the octree has fine voxels; each coarse
   // voxel one leaf.
   void write_octree_slab(StructureValueSource& values) {
-    const Dims& dims = structure.dims();
-    const auto& bricks = structure.bricks();
-    const std::uint64_t z0 = octree->next_slab_first();
-    const std::uint64_t z1 = z0 + octree->next_slab_count();
-    while (next_brick < by_first_slice.size() && bricks[by_first_slice[next_brick]].origin[2] < z1)
-      open.push_back(by_first_slice[next_brick++]);
-    for (std::size_t n = 0; n < open.size();) {
-      const Brick& b = bricks[open[n]];
-      const bool fine = b.voxel[0] == 1 && b.voxel[1] == 1 && b.voxel[2] == 1;
-      const std::uint32_t brick = open[n];
-      detail::for_each_brick_row(
-          b, dims, z0, z1, [&](std::uint64_t v, std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint64_t z) {
-            const auto row = static_cast<std::ptrdiff_t>(((z - z0) * dims[1] + y) * dims[0]);
-            std::fill(slab.begin() + row + static_cast<std::ptrdiff_t>(x0),
-                      slab.begin() + row + static_cast<std::ptrdiff_t>(x1), values.value(brick, v));
-            std::fill(keep.begin() + row + static_cast<std::ptrdiff_t>(x0),
-                      keep.begin() + row + static_cast<std::ptrdiff_t>(x1), fine ? 1 : 0);
-          });
-      if (b.origin[2] + std::uint64_t{b.voxel[2]} * b.count[2] <= z1) {  // done with this brick
-        open[n] = open.back();
-        open.pop_back();
-      } else {
-        ++n;
-      }
-    }
+    const std::uint32_t z0 = octree->next_slab_first();
+    const std::uint32_t z1 = z0 + octree->next_slab_count();
+    filler->fill(z0, z1, values, slab.data(), keep.data());
     octree->add_slab(slab.data(), keep.data());
-    values.release_below(static_cast<std::uint32_t>(z1));
+    values.release_below(z1);
   }
 
   void open_grid(const std::string& path, const Metadata* metadata) {

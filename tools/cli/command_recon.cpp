@@ -26,6 +26,7 @@
 #include "output_rules.hpp"
 #include "recon_budget.hpp"
 #include "recon_built_slabs.hpp"
+#include "recon_built_structure.hpp"
 #include "recon_slabs.hpp"
 #include "report.hpp"
 #include "scan_input.hpp"
@@ -359,7 +360,11 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   metadata.voxel_size = grid.voxel_size;
   metadata.origin = grid.origin;
   metadata.unit = "mm";
-  if (mpi && mpi->rank() != 0) {
+  // Distributed octrees: each rank fills and builds the writer's slabs it
+  // owns (recon_built_structure.hpp). The grids: the ranks reconstruct
+  // slabs for rank 0, which fills and writes, and share the compression.
+  const bool distributed_build = mpi && kind == StructureKind::Octree;
+  if (mpi && mpi->rank() != 0 && !distributed_build) {
     // A rank of a distributed run other than 0: its slabs go to rank 0, which
     // writes and reports; then it compresses blocks for rank 0's writer.
     StructureValueWindow unused(*structure);
@@ -392,41 +397,78 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   // sent; the writer calls it on this (the MPI) thread.
   if (mpi) options.write.encoder = mpi->block_encoder();
   options.write.framed_blocks = s.format_version == "1.3";
-  // Without sources to digest the metadata is complete here, and a grid's
-  // file begins with it (spec §15); the digests come after the values, so
-  // then it comes last (an early metadata block, stream 6, is not written).
-  std::optional<StructureStreamWriter> writer_storage;
-  if (complete_metadata)
-    writer_storage.emplace(*structure, s.output, options);
-  else
-    writer_storage.emplace(*structure, s.output, options, metadata);
-  StructureStreamWriter& writer = *writer_storage;
-  StructureValueWindow values(*structure);
-  double writing_during_fdk = 0;  // the writer works inside the FDK's slab hand-over
-  // The values in flight take their part (the preview's quarter once the
-  // preview is done, less the structure's share): slabs are cut thinner
-  // until they fit it.
   recon::FdkReconstructor::ValueWindowBound window;
   window.memory_limit = memory_share(s);
-  window.writer_slab_slices = writer.slab_slices();
-  const recon::FdkReport fdk = reconstructor.reconstruct_structure(
-      grid, *structure, values,
-      [&](std::uint32_t z_complete) {
-        const auto began = std::chrono::steady_clock::now();
-        writer.write_ready(z_complete, values);
-        writing_during_fdk += seconds_since(began);
-      },
-      window);
-  if (mpi) mpi->every_slab_received();  // the rest of the file is compressed on every rank
-  if (complete_metadata) complete_metadata(metadata);
-  const StreamingResult written = writer.finish(metadata, values);
-  const double writing = written.write.seconds;
+  recon::FdkReport fdk;
+  StreamingResult written;
+  double writing = 0;
+  double writing_during_fdk = 0;  // the writer works inside the FDK's slab hand-over
+  double building = 0;            // distributed: filling and building rank 0's own slabs
+  std::uint64_t value_window_peak = 0;
   std::vector<RankStats> ranks;
+  if (distributed_build) {
+    convert::DistributedStructureOptions distributed;
+    distributed.streaming = options;
+    distributed.most_slab_slices = s.slab_slices;
+    distributed.value_window_bytes = window.memory_limit;
+    distributed.metadata = metadata;
+    distributed.complete = complete_metadata;
+    distributed.every_slab_received = [&] { mpi->every_slab_received(); };
+    const convert::DistributedStructureBuild built = convert::reconstruct_structure_distributed(
+        reconstructor, grid, *structure, s.output, distributed, *mpi->exchange());
+    if (mpi->rank() == 0)
+      mpi->end_compression();
+    else
+      mpi->serve_compression();
+    RankStats mine = rank_stats(built.fdk, start);
+    mine.slabs_built = built.slabs_built;
+    mine.slices_built = built.slices_built;
+    mine.build_seconds = built.build_seconds;
+    ranks = mpi->gather(mine);
+    if (mpi->rank() != 0) return kExitOk;
+    fdk = built.fdk;
+    written = built.written;
+    writing = built.writing_seconds;
+    building = built.build_seconds;
+    value_window_peak = built.value_window_peak_bytes;
+    writing_during_fdk = built.during_fdk_seconds;
+    window.writer_slab_slices = built.slab_slices;
+  } else {
+    // Without sources to digest the metadata is complete here, and a grid's
+    // file begins with it (spec §15); the digests come after the values, so
+    // then it comes last (an early metadata block, stream 6, is not written).
+    std::optional<StructureStreamWriter> writer_storage;
+    if (complete_metadata)
+      writer_storage.emplace(*structure, s.output, options);
+    else
+      writer_storage.emplace(*structure, s.output, options, metadata);
+    StructureStreamWriter& writer = *writer_storage;
+    StructureValueWindow values(*structure);
+    // The values in flight take their part (the preview's quarter once the
+    // preview is done, less the structure's share): slabs are cut thinner
+    // until they fit it.
+    window.writer_slab_slices = writer.slab_slices();
+    fdk = reconstructor.reconstruct_structure(
+        grid, *structure, values,
+        [&](std::uint32_t z_complete) {
+          const auto began = std::chrono::steady_clock::now();
+          writer.write_ready(z_complete, values);
+          writing_during_fdk += seconds_since(began);
+        },
+        window);
+    if (mpi) mpi->every_slab_received();  // the rest of the file is compressed on every rank
+    if (complete_metadata) complete_metadata(metadata);
+    written = writer.finish(metadata, values);
+    writing = written.write.seconds;
+    value_window_peak = values.peak_bytes();
+    if (mpi) {
+      mpi->end_compression();
+      ranks = mpi->gather(rank_stats(fdk, start));
+    }
+  }
   double gups = fdk.gups();
   std::uint64_t voxel_updates = fdk.voxel_updates;  // this process's own slabs
   if (mpi) {
-    mpi->end_compression();
-    ranks = mpi->gather(rank_stats(fdk, start));
     gups = total_gups(ranks);
     voxel_updates = 0;
     for (const RankStats& k : ranks) voxel_updates += k.voxel_updates;
@@ -447,7 +489,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
       {"dense_float32_bytes", grid.voxel_count() * 4},
       {"file_bytes", written.write.file_bytes},
       {"temp_bytes", written.spill_bytes},
-      {"peak_value_bytes", values.peak_bytes()},
+      {"peak_value_bytes", value_window_peak},
       {"rows_filtered", fdk.rows_filtered},
       {"gups", gups},
       {"voxel_updates", voxel_updates},
@@ -463,9 +505,10 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   report["memory"] = memory_json(s, fdk, reconstructor.device_names().size());
   report["memory"]["preview_bytes"] = found.preview_bytes;
   report["memory"]["preview_spilled_bytes"] = found.preview_spilled_bytes;
-  report["memory"]["value_window_bytes"] = values.peak_bytes();
+  report["memory"]["value_window_bytes"] = value_window_peak;
   report["memory"]["value_window_model_bytes"] = fdk.value_window_model_bytes;
   report["memory"]["value_window_budget_bytes"] = window.memory_limit;
+  if (distributed_build) report["seconds"]["building"] = building;
   report["slab_slices"] = fdk.slab_slices;
   report["memory"]["need_mask_bytes"] = need_mask_bytes;
   report["memory"]["structure_held_bytes"] = structure_held;
@@ -657,7 +700,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     // Distributed and dense, each rank reconstructs whole writer slabs by
     // itself (recon_built_slabs.hpp); the preview is still shared.
     recon::FdkOptions reconstructor_options = options;
-    if (mpi && s->structure.empty()) reconstructor_options.exchange = nullptr;
+    // So do the ranks of a distributed octree (recon_built_structure.hpp).
+    if (mpi && (s->structure.empty() || s->structure == "octree")) reconstructor_options.exchange = nullptr;
     recon::FdkReconstructor reconstructor(*scan.projections, scan.geometry, reconstructor_options);
     for (const std::string& w : scan.warnings)
       if (!quiet) std::cerr << "ivol recon: warning: " << w << "\n";

@@ -35,14 +35,12 @@ void add(recon::FdkReport& into, const recon::FdkReport& report) {
   into.filtered_rows_disk_bytes = std::max(into.filtered_rows_disk_bytes, report.filtered_rows_disk_bytes);
 }
 
-// The rank (IVOL_TEST_FAIL_BUILD_RANK, for the tests only) that fails while
-// building its first slab, or -1.
-int rank_told_to_fail() {
+}  // namespace
+
+int rank_told_to_fail_building() {
   const char* value = std::getenv("IVOL_TEST_FAIL_BUILD_RANK");
   return value != nullptr ? std::atoi(value) : -1;
 }
-
-}  // namespace
 
 std::uint32_t distributed_slab_slices(const Dims& dims, const StreamingOptions& options, int ranks,
                                       std::uint32_t most_slices) {
@@ -74,7 +72,7 @@ DistributedBuild reconstruct_distributed(recon::FdkReconstructor& reconstructor,
   const std::uint32_t depth = shape.dims[2];
   const std::size_t slice = std::size_t{shape.dims[0]} * shape.dims[1];
   const std::uint32_t slab_count = builder.slab_count();
-  const bool injected_failure = rank_told_to_fail() == exchange.rank();
+  const bool injected_failure = rank_told_to_fail_building() == exchange.rank();
 
   // One of this rank's slabs: reconstructed with its margin, its keep mask,
   // its subtrees.

@@ -45,6 +45,10 @@ struct DistributedBuild {
 std::uint32_t distributed_slab_slices(const Dims& dims, const StreamingOptions& options, int ranks,
                                       std::uint32_t most_slices);
 
+// The rank (IVOL_TEST_FAIL_BUILD_RANK, for the tests only) that fails while
+// building its first slab, or -1.
+int rank_told_to_fail_building();
+
 // This rank's part; collective over `exchange`'s ranks. `reconstructor` must
 // have no exchange of its own: each rank reconstructs its slabs by itself.
 // Rank 0 writes `path`, calling every_slab_received() once every slab is in

@@ -83,6 +83,28 @@ class WholeStructureValues final : public StructureValueSource {
   const std::vector<float>& values_;
 };
 
+// The octree writer's slabs from a structure's bricks: full-resolution
+// samples, each fine voxel its value and each coarse voxel its value over all
+// the voxels it covers, and a keep mask that is 1 exactly on fine voxels
+// (StreamingOctreeWriter::add_slab and OctreeSlabBuilder::build take both).
+// Slabs come in increasing z and need not follow one another; every voxel of
+// a slab must be covered by the structure's bricks. Holds 4 bytes a brick
+// and the bricks reaching into the next slab.
+class OctreeSlabFiller {
+ public:
+  explicit OctreeSlabFiller(const VoxelStructure& structure);
+  // Slices z0 .. z1 - 1 into `samples` and `keep` ((z1 - z0) x size_y x
+  // size_x, [z][y][x]); the values of every brick meeting them must be final.
+  void fill(std::uint32_t z0, std::uint32_t z1, const StructureValueSource& values, float* samples, std::uint8_t* keep);
+
+ private:
+  const VoxelStructure& structure_;
+  std::vector<std::uint32_t> by_first_slice_;
+  std::vector<std::uint32_t> open_;  // bricks reaching into the next slab
+  std::size_t next_ = 0;
+  std::uint32_t last_end_ = 0;
+};
+
 // Writes a structure as an .ivol file of its own kind (as write_structure
 // does, and the same bytes) part by part: the octree slab by slab through
 // StreamingOctreeWriter, the grids' values in file order. Borders and cell

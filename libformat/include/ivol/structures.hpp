@@ -124,6 +124,21 @@ struct GenerationOptions {
 std::unique_ptr<VoxelStructure> generate_structure(StructureKind kind, const NeedMask& mask,
                                                    const GenerationOptions& options = {});
 
+// Slices first .. end - 1 of a volume.
+struct SliceRange {
+  std::uint32_t first = 0;
+  std::uint32_t end = 0;
+};
+
+// The bricks of `structure` that meet any of `ranges` (increasing and
+// disjoint), whole and in the structure's order, as a structure of the same
+// kind with values of its own, numbered anew: to reconstruct and build part
+// of a structure, as a rank of a distributed run does with its slabs
+// (docs/distributed.md). A brick that reaches beyond a range is in the part
+// whole; one that meets several ranges, once. The structure's bricks must be
+// ordered by their first slice, as generate_structure orders them.
+std::unique_ptr<VoxelStructure> structure_part(const VoxelStructure& structure, const std::vector<SliceRange>& ranges);
+
 // Writes a structure as an .ivol file of its own kind: the octree through
 // StreamingOctreeWriter, slab by slab (full resolution exactly where it has
 // fine voxels, each coarse voxel one leaf); the regular, rectilinear and
