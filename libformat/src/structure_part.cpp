@@ -2,6 +2,7 @@
 // (a distributed run's slabs, docs/distributed.md), and the octree writer's
 // slabs filled from a structure's bricks.
 #include <algorithm>
+#include <array>
 #include <stdexcept>
 
 #include "brick_rows.hpp"
@@ -27,16 +28,27 @@ class StructurePart final : public VoxelStructure {
     borders_ = whole.borders();
     nested_cell_ = whole.nested_cell();
     // Bricks come by their first slice, so a brick meets the ranges from the
-    // first one that does not end at or below its first slice.
+    // first one that does not end at or below its first slice. A brick of
+    // fine voxels is cut to the slices of each range it meets (a fine
+    // voxel's value is its own); a coarse voxel is taken whole, once.
     std::size_t from = 0;
-    for (const Brick& b : whole.bricks()) {
+    for (Brick b : whole.bricks()) {
       while (from < ranges.size() && ranges[from].end <= b.origin[2]) ++from;
-      for (std::size_t r = from; r < ranges.size() && ranges[r].first < brick_end(b); ++r)
-        if (meets(b, ranges[r])) {
+      const bool fine = b.voxel == std::array<std::uint32_t, 3>{1, 1, 1};
+      const Brick whole_brick = b;
+      for (std::size_t r = from; r < ranges.size() && ranges[r].first < brick_end(whole_brick); ++r) {
+        if (!meets(whole_brick, ranges[r])) continue;
+        if (!fine) {
           bricks_.push_back(b);
           break;
         }
+        b.origin[2] = std::max(whole_brick.origin[2], ranges[r].first);
+        b.count[2] = static_cast<std::uint32_t>(std::min<std::uint64_t>(brick_end(whole_brick), ranges[r].end) -
+                                                b.origin[2]);
+        bricks_.push_back(b);
+      }
     }
+    bricks_.sort_by_first_slice();  // the pieces of a cut brick come later
     finish_bricks();
   }
   StructureKind kind() const override { return kind_; }

@@ -43,10 +43,10 @@ int rank_told_to_fail_building() {
 }
 
 std::uint32_t distributed_slab_slices(const Dims& dims, const StreamingOptions& options, int ranks,
-                                      std::uint32_t most_slices) {
+                                      std::uint32_t most_slices, unsigned slabs_per_rank) {
   std::uint32_t slab = OctreeSlabBuilder(dims, options).slab_slices();
   const auto slabs = [&](std::uint32_t slices) { return (dims[2] + slices - 1) / slices; };
-  while (slab > 1 && slabs(slab) < static_cast<std::uint32_t>(ranks)) slab /= 2;
+  while (slab > 1 && slabs(slab) < static_cast<std::uint64_t>(ranks) * slabs_per_rank) slab /= 2;
   while (most_slices > 0 && slab > most_slices) slab /= 2;
   return slab;
 }

@@ -40,10 +40,11 @@ struct DistributedBuild {
 };
 
 // The writer's slab thickness for a distributed run: its own choice for the
-// volume and options, halved until every rank has a slab (while slabs are
-// thicker than one slice) and until it is at most `most_slices` (0: no bound).
+// volume and options, halved until every rank has `slabs_per_rank` slabs
+// (while slabs are thicker than one slice) and until it is at most
+// `most_slices` (0: no bound).
 std::uint32_t distributed_slab_slices(const Dims& dims, const StreamingOptions& options, int ranks,
-                                      std::uint32_t most_slices);
+                                      std::uint32_t most_slices, unsigned slabs_per_rank = 1);
 
 // The rank (IVOL_TEST_FAIL_BUILD_RANK, for the tests only) that fails while
 // building its first slab, or -1.

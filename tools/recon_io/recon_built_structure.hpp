@@ -5,7 +5,8 @@
 //
 // The volume is cut into the octree writer's slabs, handed out round robin.
 // Each rank takes the part of the structure that its slabs meet
-// (structure_part: whole bricks), reconstructs it in one pass, so that each
+// (structure_part: fine bricks cut to its slabs, coarse leaves whole),
+// reconstructs it in one pass, so that each
 // detector row it needs is filtered once, fills each of its slabs from it as
 // soon as the slab's bricks are final (OctreeSlabFiller), builds the slab's
 // subtrees (OctreeSlabBuilder) and sends them to rank 0. Rank 0 adds every

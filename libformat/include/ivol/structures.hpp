@@ -131,12 +131,13 @@ struct SliceRange {
 };
 
 // The bricks of `structure` that meet any of `ranges` (increasing and
-// disjoint), whole and in the structure's order, as a structure of the same
-// kind with values of its own, numbered anew: to reconstruct and build part
-// of a structure, as a rank of a distributed run does with its slabs
-// (docs/distributed.md). A brick that reaches beyond a range is in the part
-// whole; one that meets several ranges, once. The structure's bricks must be
-// ordered by their first slice, as generate_structure orders them.
+// disjoint), as a structure of the same kind with values of its own,
+// numbered anew: to reconstruct and build part of a structure, as a rank of a
+// distributed run does with its slabs (docs/distributed.md). A brick of fine
+// voxels is cut to the slices of each range it meets; a brick of coarse
+// voxels is in the part whole, once, even where it reaches beyond a range or
+// meets several. The structure's bricks must be ordered by their first slice,
+// as generate_structure orders them; the part's are too.
 std::unique_ptr<VoxelStructure> structure_part(const VoxelStructure& structure, const std::vector<SliceRange>& ranges);
 
 // Writes a structure as an .ivol file of its own kind: the octree through
