@@ -330,18 +330,25 @@ INDEX_SIGNATURE = b"IVIX"
 ENCODINGS = {1: ("binary16", 2), 2: ("uint16", 2), 3: ("float32", 4)}   # §9
 STREAM_METADATA, STREAM_NODES, STREAM_VALUES = 1, 2, 3                  # §6.4
 STREAM_BORDERS, STREAM_CELLS = 4, 5                                    # §6.4, since 1.1
-STREAM_NAMES = {1: "metadata", 2: "nodes", 3: "values", 4: "borders", 5: "cells"}
+STREAM_STORED_LOD = 7                                                  # §6.4, §8A.5, since 1.3
+STREAM_NAMES = {1: "metadata", 2: "nodes", 3: "values", 4: "borders", 5: "cells",
+                7: "stored level of detail"}
 KNOWN_STREAMS = frozenset(STREAM_NAMES)
 
 
 def known_stream(stream, kind):
     """§6.4 (1.1): streams 1-3 are known in every file; stream 4 only in a
     rectilinear grid (kind 3) and stream 5 only in a nested grid (kind 4). In
-    files of other kinds they are unknown streams, as in version 1.0."""
+    files of other kinds they are unknown streams, as in version 1.0.  The
+    same holds for stream 7 (1.3), known only in a bricked grid (kind 5).
+    Stream 6 (early metadata) is never "known" here: it is ignorable and this
+    reader does not use it except when salvaging."""
     if stream == STREAM_BORDERS:
         return kind == KIND_RECTILINEAR
     if stream == STREAM_CELLS:
         return kind == KIND_NESTED
+    if stream == STREAM_STORED_LOD:
+        return kind == KIND_BRICKED
     return stream in KNOWN_STREAMS
 KIND_OCTREE, KIND_REGULAR, KIND_RECTILINEAR, KIND_NESTED = 1, 2, 3, 4   # §6.1, §8, §8A
 KIND_BRICKED = 5                                                       # §8A.4 (1.3)
@@ -365,7 +372,7 @@ class Index:
         """How error messages name a block (§13)."""
         return "block %d (stream %d%s, level %d, at offset %d)" % (
             e.number, e.stream,
-            " " + STREAM_NAMES[e.stream] if e.stream in STREAM_NAMES else "",
+            " " + STREAM_NAMES[e.stream] if known_stream(e.stream, self.structure_kind) else "",
             e.level, e.file_offset)
 
 
@@ -515,15 +522,21 @@ def read_index(header, footer, idx):
                      "and is not ignorable" % (ix.where(e), e.stream))
             entries.append(e)    # ignorable: skipped (SPEC-NOTES 12 for its CRC)
             continue
-        if e.flags != 0:
+        if e.stream == STREAM_STORED_LOD:     # §6.4, §8A.5 (SPEC-NOTES 61, 62)
+            check_stored_lod_entry(ix, e)
+        elif e.flags != 0:
             fail("malformed", "block table: %s has flags 0x%02X, expected 0 for stream %d"
                  % (ix.where(e), e.flags, e.stream))
         check_stream_kind(ix, e)
         check_block_level(ix, e)
-        if e.codec in (3, 4) and not (e.stream == STREAM_VALUES and structure_kind == KIND_BRICKED
+        if e.codec in (3, 4) and not (e.stream in (STREAM_VALUES, STREAM_STORED_LOD)
+                                      and structure_kind == KIND_BRICKED
                                       and value_encoding in (1, 2)):   # §7 codecs 3 and 4
-            fail("malformed", "block table: %s: codec %d is valid only on values blocks of "
-                 "a bricked regular grid of 16-bit values" % (ix.where(e), e.codec))
+            fail("malformed", "block table: %s: codec %d is valid only on values and stored "
+                 "level of detail blocks of a bricked regular grid of 16-bit values"
+                 % (ix.where(e), e.codec))
+        if e.stream == STREAM_STORED_LOD:     # §8A.5: the limits of §7 (SPEC-NOTES 64)
+            check_block_limits(ix, e)
         entries.append(e)
     if expected_offset != footer.index_offset:
         fail("malformed", "block table: the last block ends at %d, expected index_offset %d"
@@ -560,8 +573,42 @@ def read_index(header, footer, idx):
     if structure_kind == KIND_NESTED:
         check_stream_coverage(ix, STREAM_CELLS, ix.cell_count)
     if structure_kind == KIND_BRICKED:
-        check_bricks(ix, [e for e in entries if e.stream == STREAM_VALUES])
+        ix.brick_of = {}
+        check_bricks(ix, [e for e in entries if e.stream == STREAM_VALUES], 0)
+        ix.stored_levels = check_stored_levels(ix, entries)
     return ix
+
+
+def level_size(size, k):
+    """§12.3, §8A.5: level of detail k has ceil(size_a / 2^k) elements along axis a."""
+    return tuple(-(-s // (1 << k)) for s in size)
+
+
+def check_stored_lod_entry(ix, e):
+    """§6.4, §8A.5: a block of stream 7 has the ignorable flag set (the reserved
+    flag bits were checked before) and a level k with 1 <= k <= D."""
+    if not e.flags & 1:
+        fail("malformed", "block table: %s: a stored level of detail block (stream 7) must "
+             "have the ignorable flag set, its flags are 0x%02X" % (ix.where(e), e.flags))
+    if not 1 <= e.level <= ix.depth:
+        fail("malformed", "block table: %s: a stored level of detail must have a level 1..%d "
+             "(depth), this block has level %d" % (ix.where(e), ix.depth, e.level))
+
+
+def check_stored_levels(ix, entries):
+    """§8A.5: the blocks of each stored level k cover the level's elements
+    0 .. m_x·m_y·m_z exactly once, and each holds one brick of the level (or,
+    codec 4, a run of whole bricks), the bricks of §8A.4 with the sizes m_a.
+    Returns the stored levels, in increasing order."""
+    by_level = collections.defaultdict(list)
+    for e in entries:
+        if e.stream == STREAM_STORED_LOD:
+            by_level[e.level].append(e)
+    for k in sorted(by_level):
+        mx, my, mz = level_size(ix.size, k)
+        check_coverage(ix, by_level[k], mx * my * mz, "stream 7 (stored level of detail %d)" % k)
+        check_bricks(ix, by_level[k], k)
+    return sorted(by_level)
 
 
 def brick_layout(size, b):
@@ -580,18 +627,25 @@ def brick_layout(size, b):
     return n, extent, first
 
 
-def check_bricks(ix, values):
+def check_bricks(ix, values, k):
     """§6.4, §8A.4, §7.3: every values block holds exactly one brick, or (codec
     4) a run of whole bricks that follow one another.  Each block is checked
     on its own, by the brick its first element and its end fall on, so a
-    claimed size costs nothing."""
-    (nx, ny, nz), extent, first = brick_layout(ix.size, ix.cell_log2)
+    claimed size costs nothing.  k = 0: the blocks of stream 3 and the
+    volume's bricks; k >= 1: the blocks of stored level of detail k (stream
+    7) and the bricks of that level, with the sizes m_a of §8A.5.  Records
+    the extent of each block's first brick in ix.brick_of[(k, first_element)]."""
+    size = level_size(ix.size, k)
+    (nx, ny, nz), extent, first = brick_layout(size, ix.cell_log2)
     B = 1 << ix.cell_log2
-    sx, sy, sz = ix.size
+    sx, sy, sz = size
     total = sx * sy * sz
+    what = "values" if k == 0 else "level %d" % k
     if len(values) > nx * ny * nz:
-        fail("malformed", "block table: %d values blocks, the bricked grid has %d bricks "
-             "(at least one brick per block)" % (len(values), nx * ny * nz))
+        fail("malformed", "block table: %d %s blocks, the bricked grid%s has %d bricks "
+             "(at least one brick per block)" % (len(values), what,
+                                                 "'s level of detail %d" % k if k else "",
+                                                 nx * ny * nz))
 
     def brick_starting_at(v):
         """The brick (i, j, k) whose first value is v, or None: the layers of
@@ -612,12 +666,12 @@ def check_bricks(ix, values):
             return None
         return (v // one, j, k)
 
-    ix.brick_of = {}
     for e in values:
         b = brick_starting_at(e.first_element)
         if b is None:
-            fail("malformed", "block table: %s: first_element %d is not the first value of a brick"
-                 % (ix.where(e), e.first_element))
+            fail("malformed", "block table: %s: first_element %d is not the first %s of a brick"
+                 % (ix.where(e), e.first_element, "value" if k == 0 else
+                    "element of level of detail %d" % k))
         ext = extent(*b)
         voxels = ext[0] * ext[1] * ext[2]
         end = e.first_element + e.element_count
@@ -628,7 +682,7 @@ def check_bricks(ix, values):
         elif e.element_count != voxels:
             fail("malformed", "block table: %s: brick (%d, %d, %d) is elements %d..%d"
                  % (ix.where(e), b[0], b[1], b[2], e.first_element, e.first_element + voxels))
-        ix.brick_of[e.first_element] = ext
+        ix.brick_of[(k, e.first_element)] = ext
 
 
 def check_stream_kind(ix, e):
@@ -643,7 +697,8 @@ def check_stream_kind(ix, e):
              "structure_kind %d, this file has structure_kind %d (%s)"
              % (ix.where(e), e.stream, STREAM_NAMES[e.stream], allowed[0], kind,
                 ix.structure_name))
-    if kind != KIND_OCTREE and e.stream != STREAM_METADATA and e.level != 0:
+    if kind != KIND_OCTREE and e.stream not in (STREAM_METADATA, STREAM_STORED_LOD) \
+            and e.level != 0:
         fail("malformed", "block table: %s: level %d, expected 0 for structure_kind %d "
              "(%s)" % (ix.where(e), e.level, kind, ix.structure_name))
 
@@ -676,19 +731,23 @@ def check_block_level(ix, e):
 def check_stream_coverage(ix, stream, total):
     """§6.4: the blocks of a stream cover 0 .. total exactly once.  With total
     None, only that they cover 0 .. n without gap or overlap; returns n."""
-    blocks = sorted((e for e in ix.blocks if e.stream == stream),
-                    key=lambda e: e.first_element)
+    return check_coverage(ix, [e for e in ix.blocks if e.stream == stream], total,
+                          "stream %d (%s)" % (stream, STREAM_NAMES[stream]))
+
+
+def check_coverage(ix, blocks, total, what):
+    """The blocks, taken in order of first_element, cover 0 .. total exactly
+    once (total None: 0 .. n for some n); returns n."""
     position = 0
-    for e in blocks:
+    for e in sorted(blocks, key=lambda e: e.first_element):
         if e.first_element != position:
-            fail("malformed", "block table: stream %d (%s): %s starts at element %d, "
-                 "expected %d (%s)" % (stream, STREAM_NAMES[stream], ix.where(e),
-                                       e.first_element, position,
-                                       "gap" if e.first_element > position else "overlap"))
+            fail("malformed", "block table: %s: %s starts at element %d, expected %d (%s)"
+                 % (what, ix.where(e), e.first_element, position,
+                    "gap" if e.first_element > position else "overlap"))
         position += e.element_count
     if total is not None and position != total:
-        fail("malformed", "block table: stream %d (%s) covers elements 0..%d, expected 0..%d"
-             % (stream, STREAM_NAMES[stream], position, total))
+        fail("malformed", "block table: %s covers elements 0..%d, expected 0..%d"
+             % (what, position, total))
     return position
 
 
@@ -696,7 +755,7 @@ def check_stream_coverage(ix, stream, total):
 
 def stream_width(ix, stream):
     return {STREAM_METADATA: 1, STREAM_NODES: 8, STREAM_VALUES: ix.width,
-            STREAM_BORDERS: 4, STREAM_CELLS: 8}[stream]
+            STREAM_BORDERS: 4, STREAM_CELLS: 8, STREAM_STORED_LOD: ix.width}[stream]
 
 
 BLOCK_SIGNATURE = b"IVBK"
@@ -741,20 +800,52 @@ def zstd_compress_bound(n):
     return n + (n >> 8) + (((128 << 10) - n) >> 11 if n < (128 << 10) else 0)
 
 
+KNOWN_CODECS = (0, 1, 2, 3, 4)
+
+
+def stored_size_bound(ix, e):
+    """§7: the largest stored_size of a block of codec 1 to 4 (None for others)."""
+    if e.codec not in (1, 2, 3, 4):
+        return None
+    bound = zstd_compress_bound(e.element_count * stream_width(ix, e.stream))
+    if e.codec == 3:       # §7.2: the codec header and a frame of 2n bytes
+        bound = PREDICTED_HEADER + zstd_compress_bound(2 * e.element_count)
+    if e.codec == 4:       # §7.3: the codec header and a frame of the mask and every value
+        bound = MASKED_HEADER + zstd_compress_bound((e.element_count + 7) // 8 + 2 * e.element_count)
+    if ix.header.framed:   # §7.1: plus the block header
+        bound += BLOCK_HEADER_SIZE
+    return bound
+
+
+def check_block_limits(ix, e):
+    """§6.4, §7, checked with the block table: a known codec, the decoded-size
+    limit, and the stored_size of codec 0 and the bound of codecs 1 to 4.
+    This reader does it for stream 7 (§8A.5); for the other streams it checks
+    the same when it reads the block (SPEC-NOTES 8, 54, 64)."""
+    where = ix.where(e)
+    if e.codec not in KNOWN_CODECS:   # §7 (SPEC-NOTES 63)
+        fail("unsupported-feature", "block table: %s: codec %d, this reader knows 0 .. 4"
+             % (where, e.codec))
+    size = e.element_count * stream_width(ix, e.stream)
+    if size > MAX_BLOCK_DECODED:
+        fail("malformed", "block table: %s: decoded size %d exceeds 64 MiB" % (where, size))
+    framing = BLOCK_HEADER_SIZE if ix.header.framed else 0
+    if e.codec == 0 and e.stored_size != framing + size:
+        fail("malformed", "block table: %s: stored block (codec 0) has stored_size %d, "
+             "expected %d" % (where, e.stored_size, framing + size))
+    bound = stored_size_bound(ix, e)
+    if bound is not None and e.stored_size > bound:
+        fail("malformed", "block table: %s: stored_size %d exceeds %d, the largest zstd frame "
+             "of its decoded size" % (where, e.stored_size, bound))
+
+
 def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
     """§7: read one block, check its CRC, decode it.  Returns the decoded bytes."""
     where = ix.where(e)
-    if e.codec in (1, 2, 3, 4):   # §7: bounded before the stored bytes are read
-        bound = zstd_compress_bound(e.element_count * stream_width(ix, e.stream))
-        if e.codec == 3:       # §7.2: the codec header and a frame of 2n bytes
-            bound = PREDICTED_HEADER + zstd_compress_bound(2 * e.element_count)
-        if e.codec == 4:       # §7.3: the codec header and a frame of the mask and every value
-            bound = MASKED_HEADER + zstd_compress_bound((e.element_count + 7) // 8 + 2 * e.element_count)
-        if ix.header.framed:   # §7.1: plus the block header
-            bound += BLOCK_HEADER_SIZE
-        if e.stored_size > bound:
-            fail("malformed", "%s: stored_size %d exceeds %d, the largest zstd frame of its "
-                 "decoded size" % (where, e.stored_size, bound))
+    bound = stored_size_bound(ix, e)   # §7: bounded before the stored bytes are read
+    if bound is not None and e.stored_size > bound:
+        fail("malformed", "%s: stored_size %d exceeds %d, the largest zstd frame of its "
+             "decoded size" % (where, e.stored_size, bound))
     stored = r.read(e.file_offset, e.stored_size)
     actual = crc32c(stored)
     if actual != e.crc:   # §7: the CRC is checked before decoding
@@ -768,7 +859,7 @@ def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
 def decode_payload(ix, e, stored, limit=MAX_BLOCK_DECODED):
     """§7: decode a block's payload (its stored bytes without a block header)."""
     where = ix.where(e)
-    if e.codec not in (0, 1, 2, 3, 4):   # checked when the block is read (SPEC-NOTES 8)
+    if e.codec not in KNOWN_CODECS:   # checked when the block is read (SPEC-NOTES 8)
         fail("unsupported-feature", "%s: codec %d, this reader knows 0 (stored), 1 (zstd), "
              "2 (zstd over byte planes), 3 (predicted 16-bit) and 4 (masked 16-bit)"
              % (where, e.codec))
@@ -783,15 +874,12 @@ def decode_payload(ix, e, stored, limit=MAX_BLOCK_DECODED):
             fail("malformed", "%s: stored block (codec 0) has a payload of %d bytes, "
                  "expected element_count x width = %d" % (where, len(stored), size))
         return stored
-    if e.codec == 3:
-        ext = getattr(ix, "brick_of", {}).get(e.first_element)
-        if ext is None or e.stream != STREAM_VALUES or width != 2:
-            fail("malformed", "%s: codec 3 outside a brick of 16-bit values" % where)
-        return decode_predicted(stored, ext, where)
-    if e.codec == 4:
-        ext = getattr(ix, "brick_of", {}).get(e.first_element)
-        if ext is None or e.stream != STREAM_VALUES or width != 2:
-            fail("malformed", "%s: codec 4 outside a brick of 16-bit values" % where)
+    if e.codec in (3, 4):   # a brick of stream 3, or of a stored level (§8A.5, SPEC-NOTES 66)
+        ext = getattr(ix, "brick_of", {}).get((e.level, e.first_element))
+        if ext is None or e.stream not in (STREAM_VALUES, STREAM_STORED_LOD) or width != 2:
+            fail("malformed", "%s: codec %d outside a brick of 16-bit values" % (where, e.codec))
+        if e.codec == 3:
+            return decode_predicted(stored, ext, where)
         return decode_masked(stored, e.element_count, where)
     content = decode_zstd_frame(stored, size, where)
     if e.codec == 1:
@@ -1424,36 +1512,50 @@ class Grid:
     nested grid)."""
 
 
-def read_grid_streams(r, ix, check_ignorable):
+def read_grid_streams(r, ix, verify):
     """§13 step 6 for the kinds of §8A: read every block of streams 3, 4 and 5
     in table (file) order, then check the borders (§8A.2) or the cell words and
     their first_value chain (§8A.3), and that stream 3 holds total_values
-    elements.  Every size was checked against the index or a limit before it is
+    elements.  With verify (a whole-file check), also check the CRCs of
+    ignorable blocks of unknown streams (SPEC-NOTES 12) and read the stored
+    levels of detail of a bricked grid (stream 7, §8A.5) into g.stored, k ->
+    the level's elements in its own brick order; without it, stream 7 is not
+    read.  Every size was checked against the index or a limit before it is
     allocated."""
     kind = ix.structure_kind
     n_values = ix.value_elements
     n_borders = ix.border_elements if kind == KIND_RECTILINEAR else 0
     n_cells = ix.cell_count if kind == KIND_NESTED else 0
-    need = n_values * ix.width + n_borders * 4 + n_cells * 8
+    stored_levels = getattr(ix, "stored_levels", []) if verify else []
+    n_stored = sum(math.prod(level_size(ix.size, k)) for k in stored_levels)
+    need = (n_values + n_stored) * ix.width + n_borders * 4 + n_cells * 8
     if need > LIMIT_DECODED_BYTES:
         raise ReaderLimit("the value, border and cell arrays need %d bytes, this "
                           "reader's limit is %d" % (need, LIMIT_DECODED_BYTES))
     arrays = {STREAM_VALUES: np.zeros(n_values, "<u%d" % ix.width),
               STREAM_BORDERS: np.zeros(n_borders, "<u4"),
               STREAM_CELLS: np.zeros(n_cells, "<u8")}
+    stored = {k: np.zeros(math.prod(level_size(ix.size, k)), "<u%d" % ix.width)
+              for k in stored_levels}
     for e in ix.blocks:
         if not known_stream(e.stream, ix.structure_kind):   # ignorable, unknown (§6.4)
-            if check_ignorable:
+            if verify:
                 check_ignorable_block(r, ix, e)
             continue
         if e.stream == STREAM_METADATA:
             continue                        # already read
-        target = arrays[e.stream]           # streams 3, 4, 5 (check_stream_kind)
+        if e.stream == STREAM_STORED_LOD:
+            if not verify:
+                continue                    # computed from full resolution instead (§12.3)
+            target = stored[e.level]
+        else:
+            target = arrays[e.stream]       # streams 3, 4, 5 (check_stream_kind)
         data = read_block(r, ix, e)
         target[e.first_element:e.first_element + e.element_count] = \
             np.frombuffer(data, target.dtype)
     g = Grid()
     g.values = arrays[STREAM_VALUES]
+    g.stored = stored
     if kind in (KIND_REGULAR, KIND_BRICKED):
         g.total_values = ix.total_values
     elif kind == KIND_RECTILINEAR:
@@ -1563,15 +1665,7 @@ def grid_dense(ix, g):
     if kind == KIND_REGULAR:                      # §8A.1: (z·size_y + y)·size_x + x
         return g.values.reshape(sz, sy, sx)
     if kind == KIND_BRICKED:                      # §8A.4: brick by brick
-        b = ix.cell_log2
-        B, m = 1 << b, (1 << b) - 1
-        z = np.arange(sz, dtype=np.int64)[:, None, None]
-        y = np.arange(sy, dtype=np.int64)[None, :, None]
-        x = np.arange(sx, dtype=np.int64)[None, None, :]
-        i, j, k = x >> b, y >> b, z >> b
-        ex, ey, ez = np.minimum(B, sx - i * B), np.minimum(B, sy - j * B), np.minimum(B, sz - k * B)
-        first = k * B * sy * sx + j * B * sx * ez + i * B * ey * ez
-        return g.values[first + ((z & m) * ey + (y & m)) * ex + (x & m)]
+        return unbrick(g.values, ix.size, ix.cell_log2)
     if kind == KIND_RECTILINEAR:                  # §8A.2: (k·n_y + j)·n_x + i
         nx, ny, nz = g.intervals
         cell = [np.repeat(np.arange(len(b) - 1), np.diff(b)) for b in g.borders]
@@ -1594,6 +1688,51 @@ def grid_dense(ix, g):
         index = fv[cz][cy, cx] + (r * my[cz][cy, cx] + q) * mx[cz][cy, cx] + p
         out[z] = g.values[index]
     return out
+
+
+def unbrick(values, size, b):
+    """§8A.4 (and §8A.5 for a stored level of detail, with its sizes m_a): the
+    array [z][y][x] of a bricked grid of the given size and brick edge 2^b,
+    from its elements in brick order.  Element (x, y, z) is element
+    first(x >> b, y >> b, z >> b) + ((z mod B)·e_y + (y mod B))·e_x + (x mod B)."""
+    sx, sy, sz = size
+    B, m = 1 << b, (1 << b) - 1
+    z = np.arange(sz, dtype=np.int64)[:, None, None]
+    y = np.arange(sy, dtype=np.int64)[None, :, None]
+    x = np.arange(sx, dtype=np.int64)[None, None, :]
+    i, j, k = x >> b, y >> b, z >> b
+    ex, ey, ez = np.minimum(B, sx - i * B), np.minimum(B, sy - j * B), np.minimum(B, sz - k * B)
+    first = k * B * sy * sx + j * B * sx * ez + i * B * ey * ez
+    return values[first + ((z & m) * ey + (y & m)) * ex + (x & m)]
+
+
+def check_stored_levels_equal(ix, g, dense):
+    """§8A.5, §13: a verifying reader checks that every stored level of detail
+    k holds exactly the bits of level of detail k computed from full
+    resolution by §12.3 (`malformed` otherwise; SPEC-NOTES 68)."""
+    for k in sorted(g.stored):
+        stored = unbrick(g.stored[k], level_size(ix.size, k), ix.cell_log2)
+        computed = lod_from_dense(ix, dense, k)
+        bad = np.argwhere(stored != computed)
+        if bad.size:
+            z, y, x = (int(a) for a in bad[0])
+            fail("malformed", "stored level of detail %d (stream 7): element (%d, %d, %d) is "
+                 "0x%X, level of detail %d computed from full resolution (§12.3) is 0x%X"
+                 % (k, x, y, z, int(stored[z, y, x]), k, int(computed[z, y, x])))
+
+
+def read_stored_level(r, ix, k):
+    """§8A.5, §12.3: level of detail k of a bricked grid that stores it, read
+    from the blocks of stream 7 of level k alone (their CRCs, block headers
+    and codecs checked as for any block read), not from full resolution.  A
+    reader that does not verify trusts the stored values (§8A.5, SPEC-NOTES 67)."""
+    values = np.zeros(math.prod(level_size(ix.size, k)), "<u%d" % ix.width)
+    for e in ix.blocks:
+        if e.stream == STREAM_STORED_LOD and e.level == k:
+            data = read_block(r, ix, e)
+            values[e.first_element:e.first_element + e.element_count] = \
+                np.frombuffer(data, values.dtype)
+    return unbrick(values, level_size(ix.size, k), ix.cell_log2)
 
 
 def lod_from_dense(ix, dense, k):
@@ -1659,9 +1798,14 @@ def verify_file(path, want_dense=False):
         if want_dense:
             check_output_limit(ix, D)
         if ix.structure_kind != KIND_OCTREE:          # §8A
-            g = read_grid_streams(r, ix, check_ignorable=True)
-            dense = grid_dense(ix, g).tobytes() if want_dense else None
-            return ix, meta, dense
+            g = read_grid_streams(r, ix, verify=True)
+            if not (want_dense or g.stored):
+                return ix, meta, None
+            if g.stored:                          # §8A.5: compared with the computed levels
+                check_dense_limit(ix)
+            dense = grid_dense(ix, g)
+            check_stored_levels_equal(ix, g, dense)
+            return ix, meta, dense.tobytes() if want_dense else None
         nodes, values = read_streams(r, ix, D, check_ignorable=True)
         levels = walk_octree(ix, nodes, values, D)
         check_averages(ix, values, levels)
@@ -1676,7 +1820,9 @@ def verify_file(path, want_dense=False):
 def level_of_detail(path, k):
     """§12.3: level of detail k, reading only the blocks of levels <= D - k.
     Returns (index, bytes).  With k = 0 all blocks are read and the averages
-    are checked as well."""
+    (or a bricked grid's stored levels of detail) are checked as well.  A
+    level k >= 1 that a bricked grid stores is read from stream 7 alone
+    (§8A.5)."""
     r, ix, meta = open_ivol(path)
     try:
         D = ix.depth
@@ -1684,10 +1830,15 @@ def level_of_detail(path, k):
             raise UsageError("level of detail %d out of range 0..%d for this file" % (k, D))
         top = D - k
         check_output_limit(ix, top)
+        if ix.structure_kind == KIND_BRICKED and k in ix.stored_levels:   # §8A.5
+            return ix, read_stored_level(r, ix, k).tobytes()
         if ix.structure_kind != KIND_OCTREE:          # §8A: from the dense export
             check_dense_limit(ix)
-            g = read_grid_streams(r, ix, check_ignorable=(k == 0))
-            return ix, lod_from_dense(ix, grid_dense(ix, g), k).tobytes()
+            g = read_grid_streams(r, ix, verify=(k == 0))
+            dense = grid_dense(ix, g)
+            if k == 0:
+                check_stored_levels_equal(ix, g, dense)
+            return ix, lod_from_dense(ix, dense, k).tobytes()
         nodes, values = read_streams(r, ix, top, check_ignorable=(k == 0))
         levels = walk_octree(ix, nodes, values, top)
         if k == 0:
@@ -1704,14 +1855,16 @@ def info(path):
     blocks = []
     for e in ix.blocks:
         blocks.append({"block": e.number, "stream": e.stream,
-                       "stream_name": STREAM_NAMES.get(e.stream, "unknown (ignorable)"),
+                       "stream_name": STREAM_NAMES[e.stream]
+                       if known_stream(e.stream, ix.structure_kind) else "unknown (ignorable)",
                        "level": e.level, "codec": e.codec, "flags": e.flags,
                        "file_offset": e.file_offset, "stored_size": e.stored_size,
                        "first_element": e.first_element,
                        "element_count": e.element_count, "crc": "0x%08X" % e.crc})
     per_stream = {}
     for e in ix.blocks:
-        s = per_stream.setdefault(STREAM_NAMES.get(e.stream, "stream %d" % e.stream),
+        s = per_stream.setdefault(STREAM_NAMES[e.stream] if known_stream(e.stream, ix.structure_kind)
+                                  else "stream %d" % e.stream,
                                   {"blocks": 0, "elements": 0, "stored_bytes": 0})
         s["blocks"] += 1
         s["elements"] += e.element_count
@@ -1738,6 +1891,9 @@ def info(path):
         out["value_elements"] = ix.value_elements
     if ix.structure_kind == KIND_RECTILINEAR:
         out["border_elements"] = ix.border_elements
+    if ix.structure_kind == KIND_BRICKED:
+        out["brick_log2"] = ix.cell_log2
+        out["stored_levels"] = ix.stored_levels        # §8A.5: levels of detail in stream 7
     if ix.structure_kind == KIND_NESTED:
         out["cell_log2"] = ix.cell_log2
         out["cell_edge"] = 1 << ix.cell_log2

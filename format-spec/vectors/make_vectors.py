@@ -24,6 +24,9 @@ The script contains
     grid (stream 4, borders) and nested grid (stream 5, cells), and their
     levels of detail from the dense source by the flat binary64 sum of
     §12.3 (sequential, z then y then x, from +0.0; not numpy's pairwise sum),
+  * (1.3 draft) bricked grids (§8A.4) with codecs 3 and 4 (§7.2, §7.3), and
+    stored levels of detail in stream 7 (§8A.5), each level computed from
+    the dense source by the same flat sum and bricked with its own sizes,
   * a small reader that follows the check order of §13; it is used only as a
     self-test: every valid vector must read back to its expected dense export
     and levels of detail, and every invalid vector must fail with its
@@ -58,6 +61,7 @@ NPBITS = {BINARY16: np.uint16, UINT16: np.uint16, FLOAT32: np.uint32}
 
 STREAM_META, STREAM_NODES, STREAM_VALUES = 1, 2, 3
 STREAM_BORDERS, STREAM_CELLS = 4, 5                     # since 1.1 (§6.4, §8A)
+STREAM_LOD = 7                                          # stored levels of detail, since 1.3 (§8A.5)
 KIND_OCTREE, KIND_REGULAR, KIND_RECTILINEAR, KIND_NESTED = 1, 2, 3, 4
 KIND_BRICKED = 5                                        # since 1.3 (§8A.4)
 KIND_NAME = {KIND_OCTREE: "octree", KIND_REGULAR: "regular",           # as metadata structure.kind
@@ -1244,7 +1248,7 @@ def read_ivol(data, verify=True):
     level_values = [1] + [8 * ic[l - 1] for l in range(1, D + 1)]
     first_value = [0] + [1 + 8 * first_inner[l - 1] for l in range(1, D + 1)]
     vw = VWIDTH[ve]
-    width = {1: 1, 2: 8, 3: vw, 4: 4, 5: 8}
+    width = {1: 1, 2: 8, 3: vw, 4: 4, 5: 8, 7: vw}
     # block table
     entries = []
     pos = hs
@@ -1260,14 +1264,20 @@ def read_ivol(data, verify=True):
         if cnt < 1 or ss < 1 or (framed and ss <= 32):
             _fail("malformed", "block.sizes", "block %d" % b)
         pos += ss
-        # streams 4 and 5 are known only in files of kinds 3 and 4; elsewhere
-        # they are unknown streams (§6.4 as revised in 1.1)
-        if stream in (1, 2, 3) or (stream == 4 and sk == 3) or (stream == 5 and sk == 4):
-            if flags != 0:
+        # streams 4 and 5 are known only in files of kinds 3 and 4, stream 7
+        # only in files of kind 5; elsewhere they are unknown streams (§6.4)
+        if (stream in (1, 2, 3) or (stream == 4 and sk == 3) or (stream == 5 and sk == 4)
+                or (stream == STREAM_LOD and sk == 5)):
+            if stream == STREAM_LOD:         # §6.4, §8A.5: ignorable, a level 1 .. D
+                if flags != 1:
+                    _fail("malformed", "lod.flags", "block %d" % b)
+                if not 1 <= level <= D:
+                    _fail("malformed", "lod.level", "block %d level %d" % (b, level))
+            elif flags != 0:
                 _fail("malformed", "block.flags", "block %d" % b)
             if codec not in (0, 1, 2, 3, 4):
                 _fail("unsupported-feature", "codec", "block %d codec %d" % (b, codec))
-            if codec in (3, 4) and not (stream == 3 and sk == 5 and ve in (1, 2)):
+            if codec in (3, 4) and not (stream in (3, STREAM_LOD) and sk == 5 and ve in (1, 2)):
                 _fail("malformed", "codec%d.where" % codec, "block %d" % b)
             if codec == 3 and ss > 24 + zstd_bound(2 * cnt) + (32 if framed else 0):
                 _fail("malformed", "block.stored_bound", "block %d" % b)
@@ -1277,7 +1287,7 @@ def read_ivol(data, verify=True):
                 _fail("malformed", "block.too_large", "block %d" % b)
             if codec == 0 and ss != cnt * width[stream] + (32 if framed else 0):
                 _fail("malformed", "block.stored_size", "block %d" % b)
-            if codec in (1, 2) and ss > zstd_bound(cnt * width[stream]):
+            if codec in (1, 2) and ss > zstd_bound(cnt * width[stream]) + (32 if framed else 0):
                 _fail("malformed", "block.stored_bound", "block %d" % b)
         elif not flags & 1:
             _fail("unsupported-feature", "stream", "block %d stream %d" % (b, stream))
@@ -1290,7 +1300,7 @@ def read_ivol(data, verify=True):
     if metas[0]["level"] != 0:
         _fail("malformed", "metadata.level")
     if sk != 1:
-        return _read_grid(data, entries, metas[0], sk, ve, D, ires, (X, Y, Z))
+        return _read_grid(data, entries, metas[0], sk, ve, D, ires, (X, Y, Z), verify)
     for stream, total in ((2, total_inner), (3, total_values)):
         pos = 0
         for e in sorted((e for e in entries if e["stream"] == stream), key=lambda e: e["first"]):
@@ -1412,10 +1422,11 @@ def _tile(entries, stream):
     return pos
 
 
-def _read_grid(data, entries, meta_entry, sk, ve, D, cell_log2, size):
+def _read_grid(data, entries, meta_entry, sk, ve, D, cell_log2, size, verify=True):
     """The rest of read_ivol for the structures of §8A (§6.4, §8A, §12)."""
     X, Y, Z = size
-    entries = [e for e in entries if e["stream"] in (1, 2, 3) or e["stream"] == sk + 1]   # drop ignorable unknown
+    known = {2: (), 3: (4,), 4: (5,), 5: (STREAM_LOD,)}[sk]
+    entries = [e for e in entries if e["stream"] in (1, 2, 3) + known]   # drop ignorable unknown
     present = {e["stream"] for e in entries}
     if 2 in present:
         _fail("malformed", "stream.kind", "nodes stream with structure_kind %d" % sk)
@@ -1431,15 +1442,17 @@ def _read_grid(data, entries, meta_entry, sk, ve, D, cell_log2, size):
     n_values_cov = _tile(entries, 3)
     if sk in (2, 5) and n_values_cov != X * Y * Z:
         _fail("malformed", "stream.coverage", "stream 3")
-    if sk == 5:   # §8A.4: one brick per values block (codec 4: a run of whole bricks, §7.3)
-        bricks = bricked_order(size, cell_log2)
-        vblocks = sorted((e for e in entries if e["stream"] == 3), key=lambda e: e["first"])
-        if len(vblocks) > len(bricks):
-            _fail("malformed", "bricked.blocks", "%d blocks, %d bricks" % (len(vblocks), len(bricks)))
+    def check_bricks(blocks, bsize, what):
+        """§8A.4: one brick per block, or (codec 4) a run of whole bricks, the
+        blocks already known to tile the grid of size bsize in order."""
+        bricks = bricked_order(bsize, cell_log2)
+        blocks = sorted(blocks, key=lambda e: e["first"])
+        if len(blocks) > len(bricks):
+            _fail("malformed", what + ".blocks", "%d blocks, %d bricks" % (len(blocks), len(bricks)))
         q = 0
-        for e in vblocks:
+        for e in blocks:
             if q >= len(bricks) or e["first"] != bricks[q][0]:
-                _fail("malformed", "bricked.block", "block %d" % e["n"])
+                _fail("malformed", what + ".block", "block %d" % e["n"])
             e["brick"] = bricks[q][1]
             left, held = e["count"], 0
             while left > 0 and q < len(bricks):
@@ -1447,10 +1460,28 @@ def _read_grid(data, entries, meta_entry, sk, ve, D, cell_log2, size):
                 left -= ext[0] * ext[1] * ext[2]
                 q, held = q + 1, held + 1
             if left != 0:
-                _fail("malformed", "codec4.run" if e["codec"] == CODEC_MASKED else "bricked.block",
+                _fail("malformed", "codec4.run" if e["codec"] == CODEC_MASKED else what + ".block",
                       "block %d" % e["n"])
             if held > 1 and e["codec"] != CODEC_MASKED:
-                _fail("malformed", "bricked.block", "block %d" % e["n"])
+                _fail("malformed", what + ".block", "block %d" % e["n"])
+
+    stored_levels = {}
+    if sk == 5:   # §8A.4: one brick per values block (codec 4: a run of whole bricks, §7.3)
+        check_bricks([e for e in entries if e["stream"] == 3], size, "bricked")
+        # §8A.5: each stored level k is a bricked grid of ceil(size / 2^k), whole or absent
+        for e in entries:
+            if e["stream"] == STREAM_LOD:
+                stored_levels.setdefault(e["level"], []).append(e)
+        for k, blocks in sorted(stored_levels.items()):
+            m = tuple(ceil_div(a, 1 << k) for a in size)
+            pos = 0
+            for e in sorted(blocks, key=lambda e: e["first"]):
+                if e["first"] != pos:
+                    _fail("malformed", "lod.coverage", "level %d" % k)
+                pos += e["count"]
+            if pos != m[0] * m[1] * m[2]:
+                _fail("malformed", "lod.coverage", "level %d" % k)
+            check_bricks(blocks, m, "lod")
     if sk == 3:
         _tile(entries, 4)
     if sk == 4:
@@ -1572,6 +1603,20 @@ def _read_grid(data, entries, meta_entry, sk, ve, D, cell_log2, size):
                                 n += 1
                     arr[zc, yc, xc] = encode(ve, acc / n)
         lods[kk] = arr
+    # stored levels of detail (§8A.5): decoded; a verifying reader compares
+    # them with the levels just computed from full resolution
+    for k, blocks in sorted(stored_levels.items()):
+        m = tuple(ceil_div(a, 1 << k) for a in size)
+        flat = [None] * (m[0] * m[1] * m[2])
+        for e in blocks:
+            raw = decode_block(data, e, vw)
+            flat[e["first"]:e["first"] + e["count"]] = struct.unpack("<%d%s" % (e["count"], "I" if vw == 4 else "H"), raw)
+        arr = np.zeros((m[2], m[1], m[0]), dtype=dt)
+        for first, (ex, ey, ez), (ox, oy, oz) in bricked_order(m, cell_log2):
+            arr[oz:oz + ez, oy:oy + ey, ox:ox + ex] = np.array(flat[first:first + ex * ey * ez],
+                                                               dtype=dt).reshape(ez, ey, ex)
+        if verify and not np.array_equal(arr, lods[k]):
+            _fail("malformed", "lod.value", "level %d" % k)
     return dense, lods, meta
 
 
@@ -2619,6 +2664,7 @@ def gen():
     gen_framed()
     gen_bricked()
     gen_masked()
+    gen_stored_lods()
     return SAMPLE
 
 
@@ -3123,6 +3169,317 @@ def gen_masked():
     data, _ = assemble(g32, [meta_block(DEFAULT_META)] + b32, structure_kind=KIND_BRICKED, ireserved=2, **framed)
     add_invalid("bricked_float32_codec4", data, "malformed", "codec4.where",
                 "A bricked grid of float32 values whose brick has codec 4, which holds 16-bit values only.")
+
+
+# ------------------------------------- stored levels of detail (stream 7, 1.3 draft)
+
+def lod_level_blocks(arr, enc, b, k, codec=CODEC_PLANES, **pred):
+    """§8A.5: the blocks of stream 7 that store level of detail k, the array
+    `arr` ([z][y][x], m_z x m_y x m_x): the level as a bricked grid of its own
+    sizes m_a with the file's brick edge 2^b (§8A.4 with m_a for size_a), one
+    brick per block, ignorable flag set, `level` k.  codec and pred as in
+    bricked_blocks (codec 3 and 4 payloads of the level's bricks)."""
+    blocks = bricked_blocks(write_bricked(arr, enc, b), codec, **pred)
+    for blk in blocks:
+        blk.stream, blk.level, blk.flags = STREAM_LOD, k, 1
+    return blocks
+
+
+def merge_masked_run(blocks, q0, q1, background=None):
+    """Blocks q0 .. q1 - 1 (whole bricks that follow one another) as one codec
+    4 block (§7.3), with the run's most common value as background unless
+    given; stream, level and flags of the first."""
+    part = blocks[q0:q1]
+    vals = [v for b in part for v in struct.unpack("<%dH" % b.count, b.data)]
+    merged = Blk(part[0].stream, part[0].level, part[0].first, len(vals), b"".join(b.data for b in part),
+                 codec=CODEC_MASKED, flags=part[0].flags)
+    bg = background if background is not None else max(sorted(set(vals)), key=vals.count)
+    merged.stored = masked_payload(vals, bg)
+    blocks[q0:q1] = [merged]
+
+
+def merge_background_runs(blocks, background):
+    """Every run of two or more blocks that follow one another and hold the
+    background alone becomes one codec 4 block (form 0), as §15 recommends.
+    Returns the runs merged, as (first block, end) of the original numbering."""
+    alone = [all(v == background for v in struct.unpack("<%dH" % b.count, b.data)) for b in blocks]
+    runs, q = [], 0
+    while q < len(blocks):
+        e = q
+        while e < len(blocks) and alone[e]:
+            e += 1
+        if e - q >= 2:
+            runs.append((q, e))
+        q = max(e, q + 1)
+    for q0, q1 in reversed(runs):
+        merge_masked_run(blocks, q0, q1, background)
+    return runs
+
+
+def gen_stored_lods():
+    """§8A.5 (1.3 draft): bricked grids that store levels of detail in stream 7,
+    then files that break one rule of §6.4 / §8A.5 each, and files of other
+    kinds where stream 7 is an unknown stream.  The stored levels are computed
+    from the dense source by flat_lods (§12.3); the expected outputs of the
+    valid files too (add_valid), never from the stored blocks."""
+    framed = dict(framed=True, minor=3)
+    rng = np.random.default_rng(2301)
+
+    def lods_file(src, enc, b, levels, values=None, mutate=None, lods_first=False, lods=None, **kw):
+        """A framed bricked grid: the metadata, the values bricks (codec and
+        predictor settings `values`, default codec 3), then for each k of
+        `levels` ({k: dict(codec=..., runs=background or None, predictor
+        settings)}) the blocks of stream 7 of level k.  mutate(lod) may change
+        the dict k -> blocks of stream 7 before the file is assembled."""
+        g = write_bricked(src, enc, b)
+        v = dict(values or {})
+        background = v.pop("runs", None)
+        blocks = bricked_blocks(g, v.pop("codec", CODEC_PREDICTED), **v)
+        if background is not None:
+            merge_background_runs(blocks, background)
+        lods = lods if lods is not None else flat_lods(src, enc, g.D)
+        lod = {}
+        for k, how in sorted(levels.items()):
+            how = dict(how)
+            background = how.pop("runs", None)
+            lod[k] = lod_level_blocks(lods[k], enc, b, k, how.pop("codec", CODEC_PLANES), **how)
+            if background is not None:
+                merge_background_runs(lod[k], background)
+        if mutate:
+            mutate(lod)
+        stream7 = [blk for k in sorted(lod) for blk in lod[k]]
+        if lods_first:
+            blocks = list(reversed(stream7)) + blocks + [meta_block(DEFAULT_META)]
+        else:
+            blocks = [meta_block(DEFAULT_META)] + blocks + stream7
+        data, _ = assemble(g, blocks, structure_kind=KIND_BRICKED, ireserved=b, **dict(framed, **kw))
+        return data
+
+    def valid(name, src, enc, b, levels, desc, **kw):
+        add_valid(name, lods_file(src, enc, b, levels, **kw), src, enc, desc, kind=KIND_BRICKED,
+                  extra={"brick_log2": b, "stored_levels": sorted(levels)})
+
+    def ball(X, Y, Z, centre, radius, background, inside):
+        z, y, x = np.mgrid[0:Z, 0:Y, 0:X]
+        d2 = (x - centre[0]) ** 2 + (y - centre[1]) ** 2 + (z - centre[2]) ** 2
+        return np.where(d2 <= radius * radius, inside, background).astype(np.uint16)
+
+    # ---- valid
+    src = rng.integers(0, 65536, (5, 7, 9)).astype(np.uint16)
+    valid("bricked_lods_9x7x5_uint16_all_levels", src, UINT16, 1,
+          {k: dict(codec=CODEC_PREDICTED, value_map=0) for k in range(1, 5)},
+          "Bricked grid 9x7x5 uint16 (value_scale 0.5, value_offset -1000), bricks of 2, storing every level "
+          "of detail k = 1 .. D = 4 in stream 7 (§8A.5; ignorable flag, level k): level k is a bricked grid "
+          "of its own, ceil(size / 2^k) = 5x4x3, 3x2x2, 2x1x1, 1x1x1, with bricks of 2 (edge bricks of 1), "
+          "each brick one codec 3 block. Random values: the means (of the decoded integers, not the "
+          "physical values) have many ties, rounded to even.",
+          values=dict(value_map=0), scale=0.5, offset=-1000.0)
+
+    vals = np.round(rng.normal(0.4, 0.2, 13 * 6 * 11), 3)
+    src = arr_f16(vals, (11, 6, 13))
+    src[4:8, 0:4, 4:8] = 0x8000                      # a level-2 cell of -0: +0 in levels 2 ..
+    src[0:4, 0:4, 8:12] = 0x0001                     # a cell of the smallest subnormal
+    src[9, 5, 12] = 0x7C01                           # a NaN payload: the canonical NaN above it
+    valid("bricked_lods_13x6x11_binary16_levels_2_up", src, BINARY16, 2,
+          {2: dict(codec=CODEC_PREDICTED), 3: dict(codec=CODEC_PLANES), 4: dict(codec=CODEC_STORED)},
+          "Bricked grid 13x6x11 binary16, bricks of 4, storing levels 2, 3 and 4 (= D) only, not level 1: "
+          "level 2 (4x2x3, one brick) codec 3 with the binary16 order map, level 3 (2x1x2) codec 2, level 4 "
+          "(1x1x1) codec 0. A 4x4x4 cell of -0 is +0 at level 2 and a NaN 0x7C01 gives the canonical NaN "
+          "0x7E00 in every level above it (§12.3, no leaf exception); the stored levels hold exactly those "
+          "bits. Level 1 is computed from full resolution.")
+
+    inside = arr_f16(np.round(rng.normal(0.7, 0.15, 24 * 20 * 18), 3), (18, 20, 24))
+    src = ball(24, 20, 18, (5.0, 5.5, 4.5), 4.6, 0x8000, inside)
+    valid("bricked_lods_24x20x18_binary16_masked", src, BINARY16, 2,
+          {1: dict(codec=CODEC_MASKED, runs=0x0000), 2: dict(codec=CODEC_MASKED),
+           3: dict(codec=CODEC_PREDICTED), 4: dict(codec=CODEC_PREDICTED, value_map=0),
+           5: dict(codec=CODEC_STORED)},
+          "Bricked grid 24x20x18 binary16, bricks of 4, a ball of values in a background of -0 (0x8000), "
+          "the values bricks codec 4 with runs of background bricks in one block each; storing every level: "
+          "level 1 (12x10x9, 27 bricks) codec 4 with background +0 (the mean of -0 voxels, §12.3), its runs "
+          "of bricks of +0 alone as single codec 4 blocks of form 0 (§7.3), level 2 (6x5x5) codec 4 one brick "
+          "per block, levels 3 (3x3x3) and 4 (2x2x2) codec 3, level 5 (1x1x1) codec 0.",
+          values=dict(codec=CODEC_MASKED, runs=0x8000))
+
+    src = (rng.integers(0, 4000, (2, 3, 17)) + 20000).astype(np.uint16)
+    valid("bricked_lods_17x3x2_uint16_blocks_first", src, UINT16, 2,
+          {k: dict(codec=CODEC_ZSTD) for k in range(1, 6)},
+          "Bricked grid 17x3x2 uint16, bricks of 4, depth 5, storing every level (9x2x1, 5x1x1, 3x1x1, "
+          "2x1x1, 1x1x1; zstd), its stream 7 blocks at the start of the file in reverse order and the "
+          "metadata last: blocks of stream 7 may lie anywhere (§8A.5, §6.3).",
+          values=dict(codec=CODEC_PLANES), lods_first=True)
+
+    src = arr_f32(rng.normal(3.0, 2.0, 10 * 9 * 7), (7, 9, 10))
+    _order_sensitive_cells_f32(src)
+    valid("bricked_lods_10x9x7_float32_levels_1_and_3", src, FLOAT32, 1,
+          {1: dict(codec=CODEC_PLANES), 3: dict(codec=CODEC_STORED)},
+          "Bricked grid 10x9x7 float32, bricks of 2, storing levels 1 (codec 2) and 3 (codec 0), not 2 "
+          "and 4: a level may be absent. Level 1 holds cells of 2^60, -2^60 and 1s whose mean depends on "
+          "the order of the sum (§12.3: binary64 from +0.0, z, then y, then x): (0,0,0) = 0.625, "
+          "(1,0,0) = 0.75, (3,1,0) = +0, as in regular_16_float32.",
+          values=dict(codec=CODEC_ZSTD))
+
+    src = rng.integers(100, 200, (3, 5, 6)).astype(np.uint16)
+    valid("bricked_lods_6x5x3_uint16_brick_8", src, UINT16, 3,
+          {k: dict(codec=CODEC_STORED) for k in range(1, 4)},
+          "Bricked grid 6x5x3 uint16, bricks of 8 (byte 11 = 3), larger than the volume and every level: "
+          "each level (3x3x2, 2x2x1, 1x1x1) is one brick, one codec 0 block.",
+          values=dict(codec=CODEC_STORED))
+
+    # ---- stream 7 outside a bricked grid: an unknown stream (§6.4)
+    base = vol_object_in_air(6, 5, 4, UINT16, 107, 100, (2.0, 2.0, 1.5), 2.2, 1000, 2000)
+    t = build_tree(base, UINT16)
+
+    def octree_with_stream_7(flags):
+        bl = level_blocks(t, CODEC_ZSTD)
+        bl.insert(2, Blk(STREAM_LOD, 9, 0, 3, b"not a stored level", codec=CODEC_PREDICTED, flags=flags))
+        bl.append(meta_block(DEFAULT_META))
+        return assemble(t, bl)[0]
+    add_valid("octree_ignorable_stream_7", octree_with_stream_7(1), base, UINT16,
+              "The 6x5x4 uint16 octree of ignorable_stream_200 (version_minor 0) with an ignorable block of "
+              "stream 7 (level 9 > D, codec 3, 3 elements, 18 stored bytes that are no codec 3 payload): "
+              "stream 7 is known only in files of structure_kind 5 (§6.4), so here it is an unknown stream, "
+              "skipped, whose level, codec and element_count mean nothing.")
+    src = rng.integers(0, 60000, (3, 4, 5)).astype(np.uint16)
+    g = write_regular(src, UINT16)
+    wrong = Blk(STREAM_LOD, 1, 0, 12, pack_values(UINT16, [0xFFFF] * 12), codec=CODEC_STORED, flags=1)
+    d, *_ = grid_file(g, limit=32, meta_first=True, mutate_blocks=lambda bl: bl.append(wrong), **framed)
+    add_valid("regular_ignorable_stream_7", d, src, UINT16,
+              "Framed regular grid 5x4x3 uint16 (structure_kind 2) with an ignorable block of stream 7, level "
+              "1, 12 elements (3x2x2, the size of level 1) of 0xFFFF: not the level of detail, but stream 7 "
+              "is an unknown stream outside structure_kind 5 (§6.4): skipped, never compared.",
+              kind=KIND_REGULAR)
+
+    # ---- invalid: one rule broken each.  Base: 7x6x5 uint16, bricks of 2,
+    # levels 1 (4x3x3: 8 bricks), 2 (2x2x2: one brick) and 3 stored, codec 2.
+    src = rng.integers(900, 1100, (5, 6, 7)).astype(np.uint16)
+    src[0:2, 0:2, 0:2] = [[[1000, 1000], [1000, 1000]], [[1000, 1000], [1000, 1004]]]   # mean 1000.5
+    every = {k: dict(codec=CODEC_PLANES) for k in (1, 2, 3)}
+    lods = flat_lods(src, UINT16, 3)
+    assert lods[1][0, 0, 0] == 1000                  # the tie rounds to even
+    read_ivol(lods_file(src, UINT16, 1, every))      # the base itself is valid
+
+    def inv(name, expect, tag, desc, mutate, verify_only=False, **kw):
+        add_invalid(name, lods_file(src, UINT16, 1, every, mutate=mutate, **kw), expect, tag, desc,
+                    verify_only=verify_only, dense_src=src if verify_only else None)
+
+    def add_level(k, arr):
+        return lambda lod: lod.__setitem__(k, lod_level_blocks(arr, UINT16, 1, k))
+    inv("bricked_lods_level_0", "malformed", "lod.level",
+        "Base (7x6x5 uint16, bricks of 2, levels 1 .. 3 stored in stream 7, codec 2) with a level 0 in "
+        "stream 7 as well: the full-resolution bricks again, ignorable, level 0. Stored levels are "
+        "1 <= k <= D (§8A.5).", add_level(0, src))
+    inv("bricked_lods_level_above_depth", "malformed", "lod.level",
+        "Base with a stored level 4 > D = 3: one brick of one element (ceil(size / 16) = 1x1x1) holding "
+        "the mean of the volume (§8A.5: 1 <= k <= D).", add_level(4, lods[3]))
+
+    def set_flags(lod):
+        lod[2][0].flags = 0
+    inv("bricked_lods_not_ignorable", "malformed", "lod.flags",
+        "Base whose block of stored level 2 has flags 0: stream 7 blocks MUST have the ignorable flag "
+        "set (§6.4, §8A.5); a reader that knows stream 7 reports malformed (one that does not, an older "
+        "1.3 draft reader, unsupported-feature).", set_flags)
+    inv("bricked_lods_level_gap", "malformed", "lod.coverage",
+        "Base without the fourth brick of level 1 (a gap: a level is stored whole or not at all).",
+        lambda lod: lod[1].pop(3))
+    inv("bricked_lods_level_overlap", "malformed", "lod.coverage",
+        "Base with the third brick of level 1 stored twice (two identical blocks: an overlap).",
+        lambda lod: lod[1].insert(3, copy.copy(lod[1][2])))
+
+    def two_bricks(lod):
+        a, b = lod[1][0], lod[1][1]
+        lod[1][0:2] = [Blk(STREAM_LOD, 1, a.first, a.count + b.count, a.data + b.data, codec=CODEC_PLANES,
+                           flags=1)]
+    inv("bricked_lods_two_bricks_in_a_block", "malformed", "lod.block",
+        "Base whose first block of level 1 holds its first two bricks (codec 2; the coverage holds): one "
+        "brick of the level per block (§8A.5).", two_bricks)
+
+    def split(lod):
+        a = lod[1][0]
+        h = a.count // 2
+        lod[1][0:1] = [Blk(STREAM_LOD, 1, a.first, h, a.data[:2 * h], codec=CODEC_STORED, flags=1),
+                       Blk(STREAM_LOD, 1, a.first + h, a.count - h, a.data[2 * h:], codec=CODEC_STORED, flags=1)]
+    inv("bricked_lods_brick_split_in_two", "malformed", None,
+        "Base whose first brick of level 1 is split over two blocks (codec 0; the coverage holds).", split)
+
+    def run_inside(lod):
+        bl = lod[1]
+        merge_masked_run(bl, 0, 3)
+        r = bl[0]
+        vals = list(struct.unpack("<%dH" % r.count, r.data))
+        cut = bricked_order((4, 3, 3), 1)[2][0] + 2          # bricks 0 and 1, 2 values of brick 2
+        first = Blk(STREAM_LOD, 1, r.first, cut, r.data[:2 * cut], codec=CODEC_MASKED, flags=1)
+        first.stored = masked_payload(vals[:cut], vals[0])
+        rest = Blk(STREAM_LOD, 1, r.first + cut, r.count - cut, r.data[2 * cut:], codec=CODEC_MASKED, flags=1)
+        rest.stored = masked_payload(vals[cut:], vals[cut])
+        bl[0:1] = [first, rest]
+    inv("bricked_lods_codec4_run_ends_inside_a_brick", "malformed", "codec4.run",
+        "Base whose level 1 starts with a codec 4 block holding bricks 0 and 1 and the first 2 elements of "
+        "brick 2 of the level, and a codec 4 block of the rest of brick 2 (the coverage holds): a run ends "
+        "at a brick of its level (§7.3, §8A.5).", run_inside)
+
+    def stored_size_over_bound(lod):
+        blk = lod[2][0]
+        blk.codec = CODEC_ZSTD
+        blk.stored = padded_zframe(blk.data, zstd_bound(len(blk.data)) + 1)
+    inv("bricked_lods_stored_size_over_bound", "malformed", "block.stored_bound",
+        "Base whose level 2 block (8 elements, 16 bytes) is a valid zstd frame (codec 1) padded with empty "
+        "raw blocks to more than ZSTD_compressBound(16) = 79 bytes (stored_size 114 > 79 + 32): the limits "
+        "of §7 apply to stream 7 as to a values block of that many elements (§8A.5), unlike an unknown "
+        "stream.", stored_size_over_bound)
+
+    def bad_crc(lod):
+        lod[1][1].ov = {"crc": crc32c(lod[1][1].stored_bytes()) ^ 1}
+    inv("bricked_lods_crc", "checksum", "block.crc",
+        "Base whose second block of level 1 has a wrong crc in its index entry (block header and payload "
+        "CRCs hold): a verifying reader checks every block it reads, stream 7 included.", bad_crc)
+
+    half_up = {k: a.copy() for k, a in lods.items()}
+    half_up[1][0, 0, 0] = 1001
+    inv("bricked_lods_value_rounded_half_up", "malformed", "lod.value",
+        "Base whose stored level 1 holds 1001 at (0, 0, 0), where the mean of the cell's voxels "
+        "(7 x 1000 and 1004) is 1000.5, rounded to even: 1000 (§9, §12.3). Only a reader that verifies "
+        "stored levels (§8A.5, §13) refuses it; a reader that does not trusts it, and its dense export is "
+        "the given one.", None, verify_only=True, lods=half_up)
+
+    # binary16: -0 and a NaN payload are averaged at every level >= 1
+    vals = np.round(rng.normal(0.25, 0.1, 6 * 6 * 5), 3)
+    src16 = arr_f16(vals, (5, 6, 6))
+    src16[0:2, 0:2, 0:2] = 0x8000
+    src16[0:2, 0:2, 2:4] = 0x7C01
+    lods16 = flat_lods(src16, BINARY16, 3)
+    assert lods16[1][0, 0, 0] == 0x0000 and lods16[1][0, 0, 1] == 0x7E00
+    for name, x, bits, what in (("negative_zero", 0, 0x8000, "-0 (0x8000) where the mean of the cell's "
+                                 "eight -0 voxels is +0.0 + -0 + ... = +0 (0x0000)"),
+                                ("nan_payload", 1, 0x7C01, "the NaN 0x7C01 of the cell's eight voxels, "
+                                 "where the mean encodes to the canonical NaN 0x7E00")):
+        changed = {k: a.copy() for k, a in lods16.items()}
+        changed[1][0, 0, x] = bits
+        data = lods_file(src16, BINARY16, 1, {k: dict(codec=CODEC_PREDICTED) for k in (1, 2, 3)},
+                         lods=changed)
+        add_invalid("bricked_lods_value_" + name, data, "malformed", "lod.value",
+                    "Bricked grid 6x6x5 binary16, bricks of 2, levels 1 .. 3 stored (codec 3), whose stored "
+                    "level 1 keeps at (%d, 0, 0) %s (§12.3: no leaf exception in a grid), as a writer that "
+                    "copies uniform cells would. Only a verifying reader refuses it." % (x, what),
+                    verify_only=True, dense_src=src16)
+
+    f32src = arr_f32(rng.normal(0, 1, 5 * 4 * 3), (3, 4, 5))
+    f32lods = flat_lods(f32src, FLOAT32, 3)
+
+    def f32_codec3(lod):
+        blk = lod[2][0]
+        blk.codec = CODEC_PREDICTED
+        blk.stored = predicted_payload([v & 0xFFFF for v in struct.unpack("<%dI" % blk.count, blk.data)],
+                                       (blk.count, 1, 1), value_map=0)
+    data = lods_file(f32src, FLOAT32, 1, {k: dict(codec=CODEC_PLANES) for k in (1, 2, 3)},
+                     values=dict(codec=CODEC_PLANES), mutate=f32_codec3, lods=f32lods)
+    add_invalid("bricked_lods_float32_codec3", data, "malformed", "codec3.where",
+                "Bricked grid 5x4x3 float32 storing levels 1 .. 3, whose level 2 block has codec 3: codecs "
+                "3 and 4 are valid on stream 7 blocks only in a grid of 16-bit values (§7).")
+    add_invalid("octree_not_ignorable_stream_7", octree_with_stream_7(0), "unsupported-feature", "stream",
+                "octree_ignorable_stream_7 with the block of stream 7 not ignorable (flags 0): outside "
+                "structure_kind 5 stream 7 is an unknown stream, and a non-ignorable block of an unknown "
+                "stream makes the reader refuse the file (§6.4).")
 
 
 def gen_grids_valid():
@@ -3750,9 +4107,11 @@ to the folder of the manifest:
 | `dense` | (valid files) the expected dense export (§12.2): raw little-endian element bits, `u16` per voxel for binary16 and uint16, `u32` for float32, in order `[z][y][x]`, x fastest |
 | `lod` | (valid files) `{"k": file}`: expected level of detail k (§12.3) for every k = 1 .. D, same layout as `dense`, array shape `ceil(size/2^k)` per axis |
 | `value_encoding`, `size` | (valid files) for convenience: the encoding name and `[size_x, size_y, size_z]` |
-| `structure` | (valid files) for convenience: `octree` (structure_kind 1), `regular` (2), `rectilinear` (3) or `nested` (4, since 1.1), the names of §11 `structure.kind` |
+| `structure` | (valid files) for convenience: `octree` (structure_kind 1), `regular` (2), `rectilinear` (3), `nested` (4, since 1.1) or `bricked` (5, since 1.3), the names of §11 `structure.kind` (`bricked` is this manifest's name; §11 lists none for kind 5) |
 | `cell_log2` | (valid nested grids) for convenience: index byte 11 |
-| `expect_without_verify` | (some invalid files) the result for a reader that does not verify inner averages (§10): `"ok"`; `dense` then gives the dense export it must produce |
+| `brick_log2` | (valid bricked grids) for convenience: index byte 11, b (bricks of 2^b) |
+| `stored_levels` | (valid bricked grids with stream 7) for convenience: the levels of detail k the file stores (§8A.5); `lod` still lists every k = 1 .. D, computed from the dense source |
+| `expect_without_verify` | (some invalid files) the result for a reader that does not verify, i.e. checks neither inner averages (§10) nor stored levels of detail against full resolution (§8A.5, §13): `"ok"`; `dense` then gives the dense export it must produce. `expect` is the verifying reader's result: these files need a full check (every block read, every average and stored level recomputed) to be refused. Such a reader's levels of detail are not given (one that reads a stored level trusts it, §8A.5) |
 | `description` | what the file tests |
 
 Level of detail 0 is the dense export. All comparisons are bit-exact: no
@@ -3796,6 +4155,23 @@ refuse a file for its minor version). The invalid `codec2_*` files break
 the frame rules of §7 in a codec-2 block, each with the class §7 and §13
 give. Every valid codec-2 file has the same dense export and levels of
 detail as the file it is derived from (named in its description).
+
+Stored levels of detail (1.3 draft, §8A.5): a bricked grid may store levels
+of detail k (1 <= k <= D) in stream 7, each level a bricked grid of its own
+(ceil(size / 2^k) elements per axis, the file's brick edge), one brick per
+block (or a codec 4 run of whole bricks), ignorable flag set, `level` k, and
+equal bit for bit to the level computed from full resolution. The
+`bricked_lods_*` files cover it. Their stored levels, and their expected
+levels of detail (`lod`, for every k, stored or not), are both computed from
+the dense source by the flat sum above, never read back from the file; a
+reader may read a stored level or compute it, the bytes must be the same.
+The invalid `bricked_lods_*` files break one rule of §6.4 / §8A.5 each; the
+three `bricked_lods_value_*` files hold a stored level that differs from the
+computed one in one element (a tie rounded up, -0 kept, a NaN payload kept):
+only a verifying reader refuses them (`expect_without_verify`). Outside
+structure_kind 5 stream 7 is an unknown stream: `octree_ignorable_stream_7`
+and `regular_ignorable_stream_7` are valid (the block is skipped, whatever it
+holds), `octree_not_ignorable_stream_7` is `unsupported-feature`.
 
 ### Changes to the 1.0 vectors for 1.1
 
@@ -3889,7 +4265,8 @@ def write_readme(zver):
   refuse it by the limit of §8A.2 (at most size_x + size_y + size_z + 3
   borders) from the block table, before it allocates or decodes.
 * Invalid files marked "ok without verify" break the inner-average rule of
-  §10, which only a verifying reader checks.
+  §10, or the rule of §8A.5 that a stored level of detail equals the level
+  computed from full resolution, which only a verifying reader checks.
 * Questions about the specification that came up while writing these vectors
   are listed in `SPEC-NOTES.md`.
 """)

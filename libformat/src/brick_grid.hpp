@@ -71,13 +71,26 @@ class BrickGrid {
   Dims count_{};
 };
 
-// The brick a values block of a bricked grid holds, as codec 3 needs it; none
-// for other blocks, or for a block that does not start at a brick (salvage).
-inline std::optional<Dims> brick_of_block(const VolumeLayout& v, std::uint8_t stream, std::uint64_t first) {
-  if (v.kind != StructureKind::Bricked || stream != 3) return std::nullopt;
+// The dims a bricked grid's block of stream 3 (the volume) or 7 (a stored
+// level of detail, spec §8A.5) is a brick of; none for other blocks.
+inline std::optional<Dims> bricked_stream_dims(const VolumeLayout& v, std::uint8_t stream, std::uint8_t level) {
+  if (v.kind != StructureKind::Bricked) return std::nullopt;
+  if (stream == 3) return v.dims;
+  if (stream == 7 && level >= 1 && level <= v.depth) return lod_dims(v.dims, level);
+  return std::nullopt;
+}
+
+// The brick a values block of a bricked grid holds (stream 3, or 7 for a
+// stored level of detail), as codec 3 needs it; none for other blocks, or
+// for a block that does not start at a brick (salvage).
+inline std::optional<Dims> brick_of_block(const VolumeLayout& v, std::uint8_t stream, std::uint8_t level,
+                                          std::uint64_t first) {
+  const std::optional<Dims> dims = bricked_stream_dims(v, stream, level);
+  if (!dims) return std::nullopt;
+  const Dims& d = *dims;
   // More than 2^56 voxels is refused elsewhere (spec §8A); here it must not overflow.
-  if (std::uint64_t{v.dims[0]} * v.dims[1] > (std::uint64_t{1} << 56) / v.dims[2]) return std::nullopt;
-  const BrickGrid grid(v.dims, v.cell_log2);
+  if (std::uint64_t{d[0]} * d[1] > (std::uint64_t{1} << 56) / d[2]) return std::nullopt;
+  const BrickGrid grid(d, v.cell_log2);
   std::array<std::uint32_t, 3> brick{};
   if (!grid.brick_at(first, brick)) return std::nullopt;
   return grid.extent(brick[0], brick[1], brick[2]);

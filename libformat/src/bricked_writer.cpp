@@ -12,6 +12,7 @@
 #include "ivol/masked_codec.hpp"
 #include "ivol/predicted_codec.hpp"
 #include "layout.hpp"
+#include "stored_levels.hpp"
 
 namespace ivol {
 
@@ -20,6 +21,7 @@ struct BrickedGridWriter::Impl {
       : options(o),
         grid(dims, o.brick_log2),
         file(path, layout_of(dims, o), true),
+        levels(dims, o.brick_log2, o.encoding, o.first_stored_level),
         start(std::chrono::steady_clock::now()) {}
 
   static VolumeLayout layout_of(const Dims& dims, const BrickedOptions& o) {
@@ -42,10 +44,12 @@ struct BrickedGridWriter::Impl {
 
   // One brick, cut from the layer and encoded: the smallest of codec 3,
   // codec 2 and codec 4, or stored when none is smaller (random bits).
-  EncodedBlock encode(const std::uint16_t* layer, std::uint32_t i, std::uint32_t j, std::uint32_t k) const {
-    const Dims& d = dims();
-    const Dims e = grid.extent(i, j, k);
-    const std::uint64_t edge = grid.edge();
+  // `layer` holds the brick layer's slices of a volume of `d` voxels in
+  // bricks `g`: the full-resolution grid, or a stored level of detail's.
+  EncodedBlock encode(const std::uint16_t* layer, const Dims& d, const detail::BrickGrid& g, std::uint32_t i,
+                      std::uint32_t j, std::uint32_t k) const {
+    const Dims e = g.extent(i, j, k);
+    const std::uint64_t edge = g.edge();
     std::vector<std::uint16_t> brick(std::size_t{e[0]} * e[1] * e[2]);
     std::size_t n = 0;
     for (std::uint32_t z = 0; z < e[2]; ++z)
@@ -54,7 +58,7 @@ struct BrickedGridWriter::Impl {
         std::copy(row, row + e[0], brick.data() + n);
         n += e[0];
       }
-    const std::uint64_t first = grid.first_value(i, j, k);
+    const std::uint64_t first = g.first_value(i, j, k);
     if (!options.predicted) {
       WriteOptions w;
       w.zstd_level = options.zstd_level;
@@ -93,10 +97,15 @@ struct BrickedGridWriter::Impl {
 
   const Dims& dims() const { return dims_; }
 
+  // Encodes a layer of bricks on the writer's threads, in brick order.
+  std::vector<EncodedBlock> encode_layer(const std::uint16_t* values, const Dims& d, const detail::BrickGrid& g,
+                                         std::uint32_t k) const;
+
   BrickedOptions options;
   detail::BrickGrid grid;
   Dims dims_{};
   FileWriter file;
+  detail::StoredLevels levels;
   std::uint32_t next_layer = 0;  // brick layer index along z
   std::uint64_t decoded_bytes = 0;
   std::chrono::steady_clock::time_point start;
@@ -144,20 +153,18 @@ std::uint32_t BrickedGridWriter::next_layer_count() const {
   return impl_->grid.extent(0, 0, impl_->next_layer)[2];
 }
 
-void BrickedGridWriter::add_layer(const std::uint16_t* values) {
-  Impl& m = *impl_;
-  if (next_layer_count() == 0) throw Error(ErrorClass::InvalidArgument, "bricked grid: a layer after the last");
-  const std::uint32_t k = m.next_layer;
-  const std::uint32_t nx = m.grid.bricks()[0], ny = m.grid.bricks()[1];
+std::vector<EncodedBlock> BrickedGridWriter::Impl::encode_layer(const std::uint16_t* values, const Dims& d,
+                                                                const detail::BrickGrid& g, std::uint32_t k) const {
+  const std::uint32_t nx = g.bricks()[0], ny = g.bricks()[1];
   const std::size_t count = std::size_t{nx} * ny;
   std::vector<EncodedBlock> blocks(count);
   std::atomic<std::size_t> next{0};
   auto work = [&] {
-    for (std::size_t b; (b = next++) < count;) blocks[b] = m.encode(values, b % nx, b / nx, k);
+    for (std::size_t b; (b = next++) < count;) blocks[b] = encode(values, d, g, b % nx, b / nx, k);
   };
   const unsigned hardware = std::max(1u, std::thread::hardware_concurrency());
   const unsigned threads =
-      static_cast<unsigned>(std::min<std::size_t>(m.options.threads ? m.options.threads : hardware, count));
+      static_cast<unsigned>(std::min<std::size_t>(options.threads ? options.threads : hardware, count));
   std::vector<std::thread> pool;
   std::exception_ptr failure;
   std::mutex failure_lock;
@@ -180,9 +187,60 @@ void BrickedGridWriter::add_layer(const std::uint16_t* values) {
   }
   for (auto& t : pool) t.join();
   if (failure) std::rethrow_exception(failure);
-  for (const EncodedBlock& b : merge_background_runs(std::move(blocks))) {
+  return merge_background_runs(std::move(blocks));
+}
+
+void BrickedGridWriter::add_layer(const std::uint16_t* values) {
+  Impl& m = *impl_;
+  if (next_layer_count() == 0) throw Error(ErrorClass::InvalidArgument, "bricked grid: a layer after the last");
+  // The stored levels of detail take the layer's voxels on a thread of
+  // their own while its bricks are encoded; a layer of a level's bricks is
+  // written once its last slice is summed (spec §15), after the layer.
+  struct LevelLayer {
+    unsigned level;
+    Dims dims;
+    std::uint32_t layer;
+    std::vector<std::uint16_t> values;
+  };
+  std::vector<LevelLayer> level_layers;
+  std::exception_ptr level_failure;
+  std::thread summing;
+  if (!m.levels.empty())
+    summing = std::thread([&, z0 = next_layer_first(), count = next_layer_count()] {
+      try {
+        m.levels.add(values, z0, count,
+                     [&](unsigned level, const Dims& d, std::uint32_t layer, const std::uint16_t* level_values) {
+                       const std::size_t n =
+                           std::size_t{d[0]} * d[1] *
+                           std::min<std::uint64_t>(std::uint64_t{1} << m.options.brick_log2,
+                                                   d[2] - (std::uint64_t{layer} << m.options.brick_log2));
+                       level_layers.push_back({level, d, layer, {level_values, level_values + n}});
+                     });
+      } catch (...) {
+        level_failure = std::current_exception();
+      }
+    });
+  std::vector<EncodedBlock> blocks;
+  try {
+    blocks = m.encode_layer(values, m.dims_, m.grid, m.next_layer);
+  } catch (...) {
+    if (summing.joinable()) summing.join();
+    throw;
+  }
+  if (summing.joinable()) summing.join();
+  if (level_failure) std::rethrow_exception(level_failure);
+  for (const EncodedBlock& b : blocks) {
     m.file.append(b);
     m.decoded_bytes += 2ull * b.element_count;
+  }
+  for (const LevelLayer& l : level_layers) {
+    const detail::BrickGrid level_grid(l.dims, m.options.brick_log2);
+    for (EncodedBlock& b : m.encode_layer(l.values.data(), l.dims, level_grid, l.layer)) {
+      b.stream = Stream::StoredLevel;
+      b.level = static_cast<std::uint8_t>(l.level);
+      m.file.append(b);
+      m.decoded_bytes += 2ull * b.element_count;
+    }
   }
   ++m.next_layer;
 }

@@ -91,7 +91,7 @@ void Reader::Impl::load_chunk(const std::vector<std::size_t>& todo) {
       try {
         data[n] = std::make_shared<const std::vector<std::uint8_t>>(detail::decode_stored_block(
             file.path(), b, todo[n], detail::stream_width(b.stream, info.layout.encoding), info.framed(),
-            detail::brick_of_block(info.layout, b.stream, b.first_element), std::move(stored[n])));
+            detail::brick_of_block(info.layout, b.stream, b.level, b.first_element), std::move(stored[n])));
       } catch (const Error& e) {
         errors[n] = e;
       }
@@ -119,6 +119,17 @@ void Reader::Impl::plan_box(const Box& box, unsigned lod) {
     full.hi[a] = static_cast<std::uint32_t>(std::min<std::uint64_t>(std::uint64_t{box.hi[a]} << lod, v.dims[a]));
   }
   std::vector<std::size_t> blocks;
+  if (v.kind == StructureKind::Bricked && lod > 0 && stored_level(lod)) {
+    // The stored level's bricks under the box (spec §8A.5), not the volume's.
+    const detail::BrickGrid bricks(lod_dims(v.dims, lod), v.cell_log2);
+    const auto slot = static_cast<std::uint8_t>(kStoredLevelSlot + lod);
+    for (std::uint32_t k = box.lo[2] >> v.cell_log2; k <= (box.hi[2] - 1) >> v.cell_log2; ++k)
+      for (std::uint32_t j = box.lo[1] >> v.cell_log2; j <= (box.hi[1] - 1) >> v.cell_log2; ++j)
+        for (std::uint32_t i = box.lo[0] >> v.cell_log2; i <= (box.hi[0] - 1) >> v.cell_log2; ++i)
+          blocks.push_back(block_of(slot, bricks.first_value(i, j, k)));
+    load_blocks(std::move(blocks));
+    return;
+  }
   if (v.kind == StructureKind::Bricked) {
     const detail::BrickGrid bricks(v.dims, v.cell_log2);
     for (std::uint32_t k = full.lo[2] >> v.cell_log2; k <= (full.hi[2] - 1) >> v.cell_log2; ++k)

@@ -29,6 +29,8 @@ const char* stream_name(std::uint8_t stream) {
       return "borders";
     case 5:
       return "cells";
+    case 7:
+      return "stored level";
     default:
       return "unknown stream";
   }
@@ -216,7 +218,8 @@ class StructureReader {
     if (v.kind == StructureKind::Nested && (v.cell_log2 < 1 || v.cell_log2 > 31))
       fail(ErrorClass::Malformed, "index", "cell_log2 " + std::to_string(v.cell_log2) + " is outside 1 .. 31");
     if (v.kind == StructureKind::Bricked && !info_.framed())
-      fail(ErrorClass::Malformed, "index", "a bricked regular grid (structure_kind 5) needs framed blocks (format 1.3)");
+      fail(ErrorClass::Malformed, "index",
+           "a bricked regular grid (structure_kind 5) needs framed blocks (format 1.3)");
     if (v.kind == StructureKind::Bricked && (v.cell_log2 < 1 || v.cell_log2 > layout::kMaxBrickLog2))
       fail(ErrorClass::Malformed, "index",
            "brick_log2 (byte 11) " + std::to_string(v.cell_log2) + " is outside 1 .. " +
@@ -328,11 +331,17 @@ class StructureReader {
               "stream " + std::to_string(blk.stream) + " is not known and the block is not marked ignorable");
         continue;  // an ignorable block of a stream we do not know: skipped
       }
-      if (blk.flags != 0) bad(ErrorClass::Malformed, "blocks of known streams must have flags 0");
+      // A stored level of detail (stream 7, spec §8A.5) is ignorable, so
+      // that readers that do not know it compute the level instead.
+      const bool stored_level = blk.stream == 7;
+      if (stored_level && blk.flags != layout::kFlagIgnorable)
+        bad(ErrorClass::Malformed, "blocks of stream 7 (stored levels of detail) must have the ignorable flag");
+      if (!stored_level && blk.flags != 0) bad(ErrorClass::Malformed, "blocks of known streams must have flags 0");
       if (blk.codec > 4) bad(ErrorClass::UnsupportedFeature, "codec " + std::to_string(blk.codec) + " is not known");
       // Codecs 3 and 4 hold a brick of 16-bit values (spec §7.2, §7.3).
       if ((blk.codec == 3 || blk.codec == 4) &&
-          (blk.stream != 3 || v.kind != StructureKind::Bricked || v.encoding == ValueEncoding::Float32))
+          ((blk.stream != 3 && blk.stream != 7) || v.kind != StructureKind::Bricked ||
+           v.encoding == ValueEncoding::Float32))
         bad(ErrorClass::Malformed,
             "codec " + std::to_string(blk.codec) + " is only for values blocks of a bricked grid of 16-bit values");
       const std::uint64_t width = stream_width(blk.stream, v.encoding);
@@ -368,7 +377,10 @@ class StructureReader {
       const bool octree = v.kind == StructureKind::Octree;
       if (blk.stream == 2 && !octree)
         bad(ErrorClass::Malformed, std::string("nodes blocks do not belong in a ") + kind_name(v.kind) + " file");
-      if (!octree && blk.level != 0) bad(ErrorClass::Malformed, "level must be 0 outside octrees");
+      if (stored_level && (blk.level < 1 || blk.level > v.depth))
+        bad(ErrorClass::Malformed, "a stored level of detail's level must be 1 .. D (" + std::to_string(v.depth) +
+                                       "), not " + std::to_string(blk.level));
+      if (!octree && !stored_level && blk.level != 0) bad(ErrorClass::Malformed, "level must be 0 outside octrees");
       if (blk.stream == 1) {
         ++metadata_blocks;
         if (blk.level != 0 || blk.first_element != 0)
@@ -376,7 +388,7 @@ class StructureReader {
         if (decoded > layout::kMaxMetadataBytes) bad(ErrorClass::Malformed, "metadata exceeds 16 MiB");
         continue;
       }
-      if (v.kind == StructureKind::Bricked && blk.stream == 3) check_one_brick(blk, part);
+      if (v.kind == StructureKind::Bricked && (blk.stream == 3 || stored_level)) check_one_brick(blk, part);
       if (!octree) continue;  // ranges are checked by coverage below
       if (blk.stream == 2) {
         lo = v.first_inner(blk.level);
@@ -414,6 +426,7 @@ class StructureReader {
           total *= v.dims[a];
         }
         check_coverage(3, total);
+        if (v.kind == StructureKind::Bricked) check_stored_levels();
         break;
       }
       case StructureKind::Rectilinear: {
@@ -438,14 +451,17 @@ class StructureReader {
 
   // Spec §8A.4: a values block of a bricked grid holds exactly one brick,
   // or (codec 4, §7.3) a run of whole bricks that follow one another.
+  // A block of stream 3 holds a brick of the volume; of stream 7, a brick
+  // of its level of detail (spec §8A.5).
   void check_one_brick(const BlockInfo& blk, const std::string& part) {
     const VolumeLayout& v = info_.layout;
+    const Dims dims = blk.stream == 7 ? lod_dims(v.dims, blk.level) : v.dims;
     std::uint64_t total = 1;  // more than 2^56 voxels is refused with the coverage below
     for (int a = 0; a < 3; ++a) {
-      if (total > (std::uint64_t{1} << 56) / v.dims[a]) return;
-      total *= v.dims[a];
+      if (total > (std::uint64_t{1} << 56) / dims[a]) return;
+      total *= dims[a];
     }
-    const BrickGrid grid(v.dims, v.cell_log2);
+    const BrickGrid grid(dims, v.cell_log2);
     std::array<std::uint32_t, 3> brick{};
     if (!grid.brick_at(blk.first_element, brick))
       fail(ErrorClass::Malformed, part,
@@ -466,28 +482,43 @@ class StructureReader {
                std::to_string(brick[2]) + ")");
   }
 
-  // Blocks of a stream, in order of first_element, cover 0 .. total exactly
-  // (any total with kAnyTotal: the caller checks it later). Returns the total.
+  // Each stored level of detail of a bricked grid is stored whole or not at
+  // all (spec §8A.5). One pass over the blocks per level that has any.
+  void check_stored_levels() {
+    const VolumeLayout& v = info_.layout;
+    std::vector<bool> stored(v.depth + 1, false);
+    for (const BlockInfo& b : info_.blocks)
+      if (b.stream == 7 && b.level >= 1 && b.level <= v.depth) stored[b.level] = true;
+    for (unsigned k = 1; k <= v.depth; ++k)
+      if (stored[k]) check_coverage(7, voxel_count(lod_dims(v.dims, k)), static_cast<int>(k));
+  }
+
+  // Blocks of a stream (and, with level ≥ 0, of that level), in order of
+  // first_element, cover 0 .. total exactly (any total with kAnyTotal: the
+  // caller checks it later). Returns the total.
   static constexpr std::uint64_t kAnyTotal = ~std::uint64_t{0};
-  std::uint64_t check_coverage(std::uint8_t stream, std::uint64_t total) {
+  std::uint64_t check_coverage(std::uint8_t stream, std::uint64_t total, int level = -1) {
     std::vector<const BlockInfo*> list;
     for (const auto& b : info_.blocks)
-      if (b.stream == stream) list.push_back(&b);
+      if (b.stream == stream && (level < 0 || b.level == level)) list.push_back(&b);
     std::sort(list.begin(), list.end(),
               [](const BlockInfo* a, const BlockInfo* b) { return a->first_element < b->first_element; });
     std::uint64_t next = 0;
     for (const BlockInfo* b : list) {
       if (b->first_element != next)
         fail(ErrorClass::Malformed, "block table",
-             std::string(stream_name(stream)) + " element " + std::to_string(next) +
+             what_stream(stream, level) + " element " + std::to_string(next) +
                  (b->first_element > next ? " is in no block" : " is in two blocks"));
       next += b->element_count;
     }
     if (total != kAnyTotal && next != total)
       fail(ErrorClass::Malformed, "block table",
-           std::string(stream_name(stream)) + ": blocks hold " + std::to_string(next) +
-               " elements, the structure needs " + std::to_string(total));
+           what_stream(stream, level) + ": blocks hold " + std::to_string(next) + " elements, the " +
+               (level < 0 ? "structure" : "level") + " needs " + std::to_string(total));
     return next;
+  }
+  static std::string what_stream(std::uint8_t stream, int level) {
+    return level < 0 ? std::string(stream_name(stream)) : "stored level " + std::to_string(level);
   }
 
   RandomAccessFile& file_;
@@ -503,6 +534,7 @@ bool is_known_stream(std::uint8_t stream) { return stream >= 1 && stream <= 5; }
 bool is_known_stream(std::uint8_t stream, StructureKind kind) {
   if (stream == 4) return kind == StructureKind::Rectilinear;
   if (stream == 5) return kind == StructureKind::Nested;
+  if (stream == 7) return kind == StructureKind::Bricked;
   return stream >= 1 && stream <= 3;
 }
 
@@ -513,6 +545,7 @@ std::size_t stream_width(std::uint8_t stream, ValueEncoding encoding) {
     case 2:
       return 8;
     case 3:
+    case 7:  // a stored level of detail (spec §8A.5)
       return encoding_width(encoding);
     case 4:
       return 4;

@@ -140,7 +140,8 @@ void FileWriter::append(const EncodedBlock& block) {
               block.crc,
               static_cast<std::uint8_t>(block.stream),
               static_cast<std::uint8_t>(block.codec),
-              block.level};
+              block.level,
+              block.stream == Stream::StoredLevel ? layout::kFlagIgnorable : std::uint8_t{0}};
   if (framed_) {
     // Framed here, not in encode_block, so that wherever a block was
     // compressed (another rank, block_encoder.hpp) the file is the same.
@@ -150,6 +151,7 @@ void FileWriter::append(const EncodedBlock& block) {
     info.stream = entry.stream;
     info.codec = entry.codec;
     info.level = entry.level;
+    info.flags = entry.flags;
     info.first_element = entry.first_element;
     info.element_count = entry.element_count;
     const auto header = detail::block_header(info, entry.stored_size, block.crc);
@@ -203,7 +205,7 @@ void FileWriter::finish(const Metadata& metadata, const std::vector<std::uint64_
     layout::store<std::uint32_t>(p + layout::kEntryCrc, e.crc);
     p[layout::kEntryStream] = e.stream;
     p[layout::kEntryCodec] = e.codec;
-    p[layout::kEntryFlags] = 0;
+    p[layout::kEntryFlags] = e.flags;
     p[layout::kEntryLevel] = e.level;
     p += layout::kBlockEntrySize;
   }

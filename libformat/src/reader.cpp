@@ -61,10 +61,31 @@ std::vector<float> physical_table(const VolumeLayout& v) {
 // of §12.3 (binary64, z then y then x) at coarser levels.
 // With `salvage`, a cell whose value cannot be read takes the stored code 0
 // (a grid has no coarser level to fall back on) and is logged.
+// Stored bits of `box` at level of detail `lod` from the level the file
+// stores (a bricked grid, spec §8A.5): the same bits as summing the
+// full-resolution voxels under it, without reading them.
+std::vector<std::uint32_t> stored_level_bits(Reader::Impl& impl, const Box& box, unsigned lod) {
+  const VolumeLayout& v = impl.info.layout;
+  const detail::BrickGrid level(lod_dims(v.dims, lod), v.cell_log2);
+  const auto slot = static_cast<std::uint8_t>(Reader::Impl::kStoredLevelSlot + lod);
+  impl.plan_box(box, lod);
+  std::vector<std::uint32_t> bits = output_for<std::uint32_t>(box);
+  const bool wide = encoding_width(v.encoding) == 4;
+  std::size_t n = 0;
+  for (std::uint32_t z = box.lo[2]; z < box.hi[2]; ++z)
+    for (std::uint32_t y = box.lo[1]; y < box.hi[1]; ++y)
+      for (std::uint32_t x = box.lo[0]; x < box.hi[0]; ++x) {
+        const std::uint8_t* p = impl.element(slot, level.value_index(x, y, z));
+        bits[n++] = wide ? layout::load<std::uint32_t>(p) : std::uint32_t{layout::load<std::uint16_t>(p)};
+      }
+  return bits;
+}
+
 std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigned lod,
                                      detail::SalvageLog* salvage = nullptr) {
   const VolumeLayout& v = impl.info.layout;
   const detail::GridStructure& grid = *impl.grid;
+  if (lod > 0 && !salvage && impl.stored_level(lod)) return stored_level_bits(impl, box, lod);
   if (lod == 0) {
     std::vector<std::uint32_t> bits = output_for<std::uint32_t>(box);
     grid.for_each_cell(box, [&](const Box& region, std::uint64_t index) {
@@ -332,8 +353,7 @@ void Reader::read_box_bits_into(const Box& box, void* out_bytes, unsigned lod, s
       detail::copy_grid(*impl_, box, reinterpret_cast<std::uint16_t*>(out),
                         [](std::uint32_t bits) { return static_cast<std::uint16_t>(bits); });
     else
-      detail::copy_grid(*impl_, box, reinterpret_cast<std::uint32_t*>(out),
-                        [](std::uint32_t bits) { return bits; });
+      detail::copy_grid(*impl_, box, reinterpret_cast<std::uint32_t*>(out), [](std::uint32_t bits) { return bits; });
     return;
   }
   const unsigned whole_level = damaged ? 0 : detail::whole_level_threads(*impl_, box, lod);
@@ -431,7 +451,7 @@ std::vector<std::uint8_t> Reader::read_block(std::size_t block_index) {
   return detail::read_and_decode_block(impl_->file, b, block_index,
                                        detail::stream_width(b.stream, impl_->info.layout.encoding),
                                        detail::is_known_stream(b.stream, impl_->info.layout.kind), impl_->info.framed(),
-                                       detail::brick_of_block(impl_->info.layout, b.stream, b.first_element));
+                                       detail::brick_of_block(impl_->info.layout, b.stream, b.level, b.first_element));
 }
 
 }  // namespace ivol

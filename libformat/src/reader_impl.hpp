@@ -32,8 +32,13 @@ struct Reader::Impl {
   std::uint64_t fetched_baseline = 0;               // file.bytes_fetched() at the last reset
   std::unordered_map<std::size_t, Error> failures;  // blocks that failed their checks
   std::optional<detail::GridStructure> grid;        // structures of spec §8A
-  // Blocks of the nodes and values streams, sorted by first element.
-  std::vector<std::size_t> stream_blocks[6];
+  // Blocks of the known streams, sorted by first element, by slot: the
+  // stream's number, or for a bricked grid's stored level of detail k
+  // (stream 7, spec §8A.5) kStoredLevelSlot + k, since the levels number
+  // their elements each from 0.
+  static constexpr std::uint8_t kStoredLevelSlot = 8;
+  static constexpr std::size_t kSlots = kStoredLevelSlot + 32;
+  std::vector<std::size_t> stream_blocks[kSlots];
   // The block last used for each stream and level, held here as well as in
   // the cache: walks stay within one block per level for long stretches, and
   // then find their element without a cache lookup.
@@ -43,9 +48,9 @@ struct Reader::Impl {
     std::uint64_t count = 0;
     detail::BlockData data;
   };
-  std::vector<Hint> hint[6];
-  std::size_t last_level[6] = {0, 0, 0, 0, 0, 0};  // the hint that served the last lookup
-  std::size_t width_[6] = {0, 0, 0, 0, 0, 0};      // bytes of an element of each stream, looked up once
+  std::vector<Hint> hint[kSlots];
+  std::size_t last_level[kSlots] = {};  // the hint that served the last lookup
+  std::size_t width_[kSlots] = {};      // bytes of an element of each slot, looked up once
 
   Impl(const std::string& path, const ReaderOptions& options)
       : file(path),
@@ -54,15 +59,21 @@ struct Reader::Impl {
         cache(options.cache_bytes),
         grid_lod_voxels(options.grid_lod_voxels),
         threads(options.threads) {
-    for (std::size_t b = 0; b < info.blocks.size(); ++b)
-      if (detail::is_known_stream(info.blocks[b].stream, info.layout.kind))
-        stream_blocks[info.blocks[b].stream].push_back(b);
+    for (std::size_t b = 0; b < info.blocks.size(); ++b) {
+      const BlockInfo& blk = info.blocks[b];
+      if (!detail::is_known_stream(blk.stream, info.layout.kind)) continue;
+      // A stored level is used only as a whole: a salvaged file's may not be.
+      if (blk.stream == 7 && !info.salvage && options.stored_levels)
+        stream_blocks[kStoredLevelSlot + blk.level].push_back(b);
+      if (blk.stream < kStoredLevelSlot && blk.stream != 7) stream_blocks[blk.stream].push_back(b);
+    }
     for (auto& list : stream_blocks)
       std::sort(list.begin(), list.end(), [&](std::size_t a, std::size_t b) {
         return info.blocks[a].first_element < info.blocks[b].first_element;
       });
     for (auto& h : hint) h.assign(info.layout.depth + 1, Hint{});
     for (std::uint8_t s = 1; s < 6; ++s) width_[s] = detail::stream_width(s, info.layout.encoding);
+    for (std::size_t s = kStoredLevelSlot; s < kSlots; ++s) width_[s] = width_[3];
     if (info.salvage) {
       // Checked when salvaged; none survived: the defaults (info.salvage says so).
       if (!salvaged_metadata.empty()) metadata = Metadata::parse(salvaged_metadata);
@@ -123,9 +134,9 @@ struct Reader::Impl {
     const BlockInfo& b = info.blocks[index];
     detail::BlockData data;
     try {
-      data = std::make_shared<const std::vector<std::uint8_t>>(
-          detail::read_and_decode_block(file, b, index, detail::stream_width(b.stream, info.layout.encoding), true,
-                                        info.framed(), detail::brick_of_block(info.layout, b.stream, b.first_element)));
+      data = std::make_shared<const std::vector<std::uint8_t>>(detail::read_and_decode_block(
+          file, b, index, detail::stream_width(b.stream, info.layout.encoding), true, info.framed(),
+          detail::brick_of_block(info.layout, b.stream, b.level, b.first_element)));
     } catch (const Error& e) {
       failures.emplace(index, e);
       throw;
@@ -205,7 +216,10 @@ struct Reader::Impl {
   // each gap once.
   [[noreturn]] void missing(std::uint8_t stream, std::uint64_t from, const BlockInfo* next) const {
     throw Error(info.salvage ? ErrorClass::Truncated : ErrorClass::Malformed,
-                file.path() + ": " + stream_name(stream) + " elements " + std::to_string(from) + " .. " +
+                file.path() + ": " +
+                    (stream >= kStoredLevelSlot ? "stored level " + std::to_string(stream - kStoredLevelSlot)
+                                                : std::string(stream_name(stream))) +
+                    " elements " + std::to_string(from) + " .. " +
                     (next ? std::to_string(next->first_element) : std::string("the end")) +
                     (info.salvage ? " were not found" : " are in no block"));
   }
@@ -258,6 +272,11 @@ struct Reader::Impl {
       for (unsigned c = 0; c < 8; ++c) bits[c] = layout::load<std::uint32_t>(p + 4 * c);
     else
       for (unsigned c = 0; c < 8; ++c) bits[c] = layout::load<std::uint16_t>(p + 2 * c);
+  }
+
+  // Whether the file stores level of detail `lod` (a bricked grid, §8A.5).
+  bool stored_level(unsigned lod) const {
+    return lod >= 1 && lod < kSlots - kStoredLevelSlot && !stream_blocks[kStoredLevelSlot + lod].empty();
   }
 
   std::uint32_t value_bits(std::uint64_t index) {

@@ -188,7 +188,7 @@ class Salvager {
     std::string why;
     const std::uint64_t width = stream_width(b.stream, v.encoding);
     // Codecs 3 and 4 only on a bricked grid's values, one brick per block (spec §7, §8A.4).
-    const bool brick_codec = (b.codec == 3 || b.codec == 4) && brick_of_block(v, b.stream, b.first_element) &&
+    const bool brick_codec = (b.codec == 3 || b.codec == 4) && brick_of_block(v, b.stream, b.level, b.first_element) &&
                              v.encoding != ValueEncoding::Float32;
     if (b.flags != 0 || (b.codec > 2 && !brick_codec) || b.element_count == 0)
       why = "flags, codec or element_count out of range";

@@ -40,14 +40,14 @@ BlockData SharedBlocks::get(std::size_t index) {
     }
     auto decoded = std::make_shared<std::vector<std::uint8_t>>(reuse(std::size_t{b.element_count} * width));
     decode_stored_into(impl_.file.path(), b, index, width, impl_.info.framed(),
-                       brick_of_block(impl_.info.layout, b.stream, b.first_element), stored.data(), b.stored_size,
-                       decoded->data());
+                       brick_of_block(impl_.info.layout, b.stream, b.level, b.first_element), stored.data(),
+                       b.stored_size, decoded->data());
     data = std::move(decoded);
   } catch (const Error& e) {
     error = e;
   } catch (const std::bad_alloc&) {
-    error = Error(ErrorClass::LimitExceeded, impl_.file.path() + ": block " + std::to_string(index) +
-                                                 " cannot be decoded: out of memory");
+    error = Error(ErrorClass::LimitExceeded,
+                  impl_.file.path() + ": block " + std::to_string(index) + " cannot be decoded: out of memory");
   }
 
   lock.lock();

@@ -10,6 +10,20 @@
 
 namespace ivol::cli {
 
+namespace {
+
+// A bricked grid's stored levels of detail (spec §8A.5), a line of `info`.
+std::string stored_levels_line(const nlohmann::json& d) {
+  if (d["structure"].get<std::string>() != "bricked") return {};
+  const auto& levels = d["stored_levels"];
+  if (levels.empty()) return "  levels stored  none: every level of detail is summed from full resolution\n";
+  std::string list;
+  for (const auto& k : levels) list += (list.empty() ? "" : ", ") + std::to_string(k.get<unsigned>());
+  return "  levels stored  " + list + " (levels of detail read from the file, not summed from full resolution)\n";
+}
+
+}  // namespace
+
 Runner add_info_command(CLI::App& app, const GlobalOptions& /*global*/) {
   auto* cmd = app.add_subcommand("info", "Show the structure, sizes, levels, blocks and metadata of an .ivol file");
   auto file = std::make_shared<std::string>();
@@ -45,9 +59,9 @@ Runner add_info_command(CLI::App& app, const GlobalOptions& /*global*/) {
               << (d["structure_reason"].get<std::string>().empty()
                       ? std::string()
                       : "  chosen because " + d["structure_reason"].get<std::string>() + "\n")
-              << "  dimensions     " << dims[0] << " x " << dims[1] << " x " << dims[2] << " voxels of "
-              << d["voxel_size"][0] << " x " << d["voxel_size"][1] << " x " << d["voxel_size"][2] << " "
-              << d["unit"].get<std::string>() << "\n"
+              << stored_levels_line(d) << "  dimensions     " << dims[0] << " x " << dims[1] << " x " << dims[2]
+              << " voxels of " << d["voxel_size"][0] << " x " << d["voxel_size"][1] << " x " << d["voxel_size"][2]
+              << " " << d["unit"].get<std::string>() << "\n"
               << "  values         " << d["value_encoding"].get<std::string>() << " (physical = " << d["value_offset"]
               << " + " << d["value_scale"] << " x stored), " << reader.metadata().quantity
               << (reader.metadata().value_unit.empty() ? "" : " in " + reader.metadata().value_unit) << "\n"

@@ -94,10 +94,18 @@ nlohmann::json to_json(const FileResult& r) {
   return j;
 }
 
+// An octree's inner averages, a bricked grid's stored levels of detail
+// (spec §8A.5): what check_file verified beyond the checksums.
+std::string what_was_verified(const CheckReport& report) {
+  if (!report.info || report.info->layout.kind == StructureKind::Octree) return "structure and averages verified";
+  if (report.info->layout.kind == StructureKind::Bricked) return "structure and stored levels verified";
+  return "structure verified";
+}
+
 void print_text(const FileResult& r, bool quiet) {
   if (r.status == "ok") {
     if (!quiet)
-      std::cout << r.path << ": OK (" << r.report->blocks_checked << " blocks, structure and averages verified"
+      std::cout << r.path << ": OK (" << r.report->blocks_checked << " blocks, " << what_was_verified(*r.report)
                 << (r.digest ? ", sha256 " + r.digest->sha256 : std::string()) << ")\n";
   } else if (r.status == "missing" || (!r.report && r.status == "unreadable")) {
     std::cout << r.path << ": " << (r.status == "missing" ? "MISSING" : "UNREADABLE") << " (" << r.message << ")\n";

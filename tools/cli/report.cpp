@@ -4,6 +4,7 @@
 
 #include <cstdio>
 #include <iostream>
+#include <set>
 
 #include "ivol/structures.hpp"
 
@@ -71,7 +72,13 @@ nlohmann::json describe_file(Reader& reader) {
   const nlohmann::json dense_json =
       dense_bytes < 0x1p64 ? nlohmann::json(4 * voxel_count(v.dims)) : nlohmann::json(dense_bytes);
   const std::uint64_t in_memory = v.total_inner() * 8 + v.total_values() * encoding_width(v.encoding);
+  // The levels of detail a bricked grid stores (spec §8A.5, stream 7).
+  std::set<unsigned> stored_levels;
+  if (v.kind == StructureKind::Bricked)
+    for (const BlockInfo& b : info.blocks)
+      if (b.stream == 7) stored_levels.insert(b.level);
   return {
+      {"stored_levels", std::vector<unsigned>(stored_levels.begin(), stored_levels.end())},
       {"file", reader.path()},
       {"format_version", std::to_string(info.version_major) + "." + std::to_string(info.version_minor)},
       {"structure", structure_name(v.kind)},

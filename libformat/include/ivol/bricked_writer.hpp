@@ -6,7 +6,10 @@
 // be predicted in 3-D.
 //
 // The volume arrives as layers of 2^b slices (z increasing); memory holds one
-// layer of 16-bit values and its encoded bricks.
+// layer of 16-bit values and its encoded bricks, and for each stored level
+// of detail k a slice of binary64 sums and a layer of its bricks
+// ((size_x · size_y / 4^k) · (8 + 2 · 2^b) bytes: 18 MB at 4000² for k = 3
+// and bricks of 32).
 #pragma once
 
 #include <cstdint>
@@ -27,6 +30,10 @@ struct BrickedOptions {
   int zstd_level = 3;
   bool predicted = true;  // false: zstd over byte planes (codec 2), for comparison
   unsigned threads = 0;   // 0: all hardware threads
+  // Levels of detail stored (spec §8A.5): every level from this one to the
+  // coarsest (0: none). From 3, 1/448 more values, and a 1/8 preview reads
+  // them instead of the whole file (bench/RESULTS.md, issue 20).
+  unsigned first_stored_level = 3;
 };
 
 class BrickedGridWriter {

@@ -61,6 +61,11 @@ struct ReaderOptions {
   // on; 0: the hardware's, at most 8. Other reads decode their blocks on as
   // many (fetch planning) and walk them on the caller's thread.
   unsigned threads = 0;
+  // A bricked grid's levels of detail come from the levels the file stores
+  // (spec §8A.5) where it has them: the same bits as summing the
+  // full-resolution voxels, without reading them. false: always summed (what
+  // check_file compares the stored levels with).
+  bool stored_levels = true;
 };
 
 // What a salvaging open found (FileInfo::salvage).

@@ -17,7 +17,9 @@ namespace ivol {
 
 class BlockEncoder;  // ivol/block_encoder.hpp
 
-enum class Stream : std::uint8_t { Metadata = 1, Nodes = 2, Values = 3, Borders = 4, Cells = 5 };
+// StoredLevel: a bricked grid's stored level of detail (spec §8A.5; format
+// 1.3), an ignorable stream: its blocks carry the ignorable flag.
+enum class Stream : std::uint8_t { Metadata = 1, Nodes = 2, Values = 3, Borders = 4, Cells = 5, StoredLevel = 7 };
 // Spec §7. ZstdBytePlanes: zstd over the elements' bytes regrouped by byte
 // position (since format 1.2). Predicted: a brick of 16-bit values, predicted
 // (ivol/predicted_codec.hpp; format 1.3).
@@ -96,6 +98,7 @@ class FileWriter {
     std::uint8_t stream;
     std::uint8_t codec;
     std::uint8_t level;
+    std::uint8_t flags;
   };
   void write_all(const void* data, std::size_t size, const char* what);
 
