@@ -229,6 +229,22 @@ RankStats rank_stats(const recon::FdkReport& fdk, std::chrono::steady_clock::tim
   return mine;
 }
 
+// After a distributed run whose ranks built their own slabs (dense or
+// octree): rank 0 ends the shared compression, the others serve it until
+// then; every rank's stats, with what it built, go to rank 0.
+template <class Built>
+std::vector<RankStats> gather_built(MpiRun& mpi, const Built& built, std::chrono::steady_clock::time_point start) {
+  if (mpi.rank() == 0)
+    mpi.end_compression();
+  else
+    mpi.serve_compression();
+  RankStats mine = rank_stats(built.fdk, start);
+  mine.slabs_built = built.slabs_built;
+  mine.slices_built = built.slices_built;
+  mine.build_seconds = built.build_seconds;
+  return mpi.gather(mine);
+}
+
 // The run's throughput: each rank's updates over its own backprojection time, summed.
 double total_gups(const std::vector<RankStats>& ranks) {
   double gups = 0;
@@ -416,15 +432,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
     distributed.every_slab_received = [&] { mpi->every_slab_received(); };
     const convert::DistributedStructureBuild built = convert::reconstruct_structure_distributed(
         reconstructor, grid, *structure, s.output, distributed, *mpi->exchange());
-    if (mpi->rank() == 0)
-      mpi->end_compression();
-    else
-      mpi->serve_compression();
-    RankStats mine = rank_stats(built.fdk, start);
-    mine.slabs_built = built.slabs_built;
-    mine.slices_built = built.slices_built;
-    mine.build_seconds = built.build_seconds;
-    ranks = mpi->gather(mine);
+    ranks = gather_built(*mpi, built, start);
     if (mpi->rank() != 0) return kExitOk;
     fdk = built.fdk;
     written = built.written;
@@ -790,15 +798,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       const convert::DistributedBuild built =
           convert::reconstruct_distributed(reconstructor, grid, s->output, import, *mpi->exchange(), s->slab_slices,
                                            [&] { mpi->every_slab_received(); });
-      if (root)
-        mpi->end_compression();
-      else
-        mpi->serve_compression();
-      RankStats mine = rank_stats(built.fdk, start);
-      mine.slabs_built = built.slabs_built;
-      mine.slices_built = built.slices_built;
-      mine.build_seconds = built.build_seconds;
-      ranks = mpi->gather(mine);
+      ranks = gather_built(*mpi, built, start);
       if (!root) return kExitOk;
       written = built.written;
       t = built.fdk.timings;
