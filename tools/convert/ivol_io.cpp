@@ -375,15 +375,25 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
   const StreamingOptions streaming = import_streaming_options(shape, options, report);
   const BuildOptions& build = streaming.build;
   // Samples, float32 (binary16 from another type), the 16-bit values and the
-  // encoded layer, for a layer of bricks (import_bricked); 128-bit so that no
+  // encoded layer, for a layer of bricks (import_bricked), and the stored
+  // levels' sums; 128-bit so that no
   // declared size overflows before it is compared.
   const bool codes = build.encoding == ValueEncoding::UInt16;
   const bool raw_binary16 = shape.type == SampleType::Float16 && !codes;
   __extension__ const unsigned __int128 layer_voxels =
       static_cast<unsigned __int128>(std::min<std::uint32_t>(shape.dims[2], 1u << options.brick_log2)) * shape.dims[0] *
       shape.dims[1];
+  // The stored levels of detail (spec §8A.5, from level 3): per level a
+  // slice of sums (8 bytes and a flag) and a layer of its bricks, and the
+  // 16-bit codes' tables.
+  __extension__ unsigned __int128 levels_bytes = 65536 * 17;
+  for (unsigned k = 3; k <= depth_for(shape.dims); ++k) {
+    const Dims level = lod_dims(shape.dims, k);
+    levels_bytes += static_cast<unsigned __int128>(level[0]) * level[1] *
+                    (9 + 2 * std::min<std::uint64_t>(level[2], std::uint64_t{1} << options.brick_log2));
+  }
   __extension__ const unsigned __int128 layer_bytes =
-      layer_voxels * (sample_size(shape.type) + (codes || raw_binary16 ? 0 : 4) + 2 + 2);
+      layer_voxels * (sample_size(shape.type) + (codes || raw_binary16 ? 0 : 4) + 2 + 2) + levels_bytes;
   const std::uint64_t layer =
       layer_bytes > ~std::uint64_t{0} ? ~std::uint64_t{0} : static_cast<std::uint64_t>(layer_bytes);
   const bool bricked = choose_bricked(options, build.encoding, layer, report);
