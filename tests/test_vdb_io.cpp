@@ -11,11 +11,13 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <string>
 
 #include "ivol/binary16.hpp"
 #include "ivol/error.hpp"
 #include "test_support.hpp"
+#include "vdb_grid.hpp"
 #include "vdb_io.hpp"
 
 namespace ivol::convert {
@@ -331,3 +333,44 @@ TEST(VdbRead, ClearErrors) {
 
 }  // namespace
 }  // namespace ivol::convert
+
+// The dense copy walks the tree node by node and clips each node to the
+// active box: tiles of every level (root 4096^3, upper 128^3, lower 8^3),
+// inactive tiles and voxels with their own values inside the box, nodes
+// that only partly meet it, at both ends of the 32-bit index space. Each
+// voxel must equal what OpenVDB's accessor gives there.
+TEST(VdbRead, DenseCopyMatchesTheAccessorAtTheIndexSpaceEdges) {
+  openvdb::initialize();
+  for (const int base : {0, std::numeric_limits<int>::min(), std::numeric_limits<int>::max() - 4095}) {
+    SCOPED_TRACE(base);
+    openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(-1.0f);
+    openvdb::FloatTree& tree = grid->tree();
+    const openvdb::Coord o(base, base, base);
+    tree.addTile(1, o.offsetBy(8, 0, 0), 2.0f, /*active=*/true);     // a lower node's 8^3 tile
+    tree.addTile(1, o.offsetBy(16, 0, 0), 3.0f, /*active=*/false);   // inactive, inside the box
+    tree.setValueOn(o.offsetBy(3, 4, 5), 4.0f);
+    tree.setValueOff(o.offsetBy(2, 2, 2), -0.0f);
+    tree.setValueOn(o.offsetBy(29, 21, 13), std::numeric_limits<float>::quiet_NaN());
+    tree.addTile(2, o.offsetBy(128, 0, 0), 5.0f, /*active=*/false);  // an upper node's 128^3 tile, outside
+    const ivol::convert::VdbVolume out = ivol::convert::volume_from_grid(*grid, "edges", 0);
+    // Active: the 8^3 tile (x 8..15, y 0..7, z 0..7) and two voxels.
+    ASSERT_EQ(out.volume.dims, (ivol::Dims{27, 22, 14}));
+    openvdb::FloatGrid::ConstAccessor look = grid->getConstAccessor();
+    std::uint64_t i = 0, from_tile = 0, active = 0, inactive_tile_voxels = 0;
+    for (int z = 0; z < 14; ++z)
+      for (int y = 0; y < 22; ++y)
+        for (int x = 0; x < 27; ++x, ++i) {
+          const openvdb::Coord c = o.offsetBy(3 + x, y, z);
+          const float want = look.getValue(c);
+          ASSERT_EQ(std::memcmp(&want, out.volume.data.data() + 4 * i, 4), 0) << c;
+          ASSERT_EQ(out.active[i] != 0, look.isValueOn(c)) << c;
+          ASSERT_EQ(out.from_tile[i] != 0, look.isValueOn(c) && !look.isVoxel(c)) << c;
+          from_tile += out.from_tile[i];
+          active += out.active[i];
+          inactive_tile_voxels += want == 3.0f;
+        }
+    EXPECT_EQ(from_tile, 512u);
+    EXPECT_EQ(active, 514u);
+    EXPECT_EQ(inactive_tile_voxels, 8u * 8 * 8);
+  }
+}

@@ -1,4 +1,5 @@
 #include "vdb_io.hpp"
+#include "vdb_grid.hpp"
 
 #include <openvdb/io/Archive.h>
 #include <openvdb/io/File.h>
@@ -48,7 +49,15 @@ void read_geometry(const openvdb::math::Transform& transform, const openvdb::Coo
   if (!transform.isLinear())
     throw Error(ErrorClass::InvalidArgument,
                 context + ": the transform is not linear (" + transform.mapType() + "); only scale and translation");
-  const openvdb::Mat4d matrix = transform.baseMap()->getAffineMap()->getMat4();
+  openvdb::Mat4d matrix;
+  try {
+    // getAffineMap inverts the matrix and throws when it is singular (a
+    // scale of 1e-310 in a file, found by fuzz_vdb_grid).
+    matrix = transform.baseMap()->getAffineMap()->getMat4();
+  } catch (const openvdb::Exception& e) {
+    throw Error(ErrorClass::InvalidArgument,
+                context + ": the transform cannot be used (" + transform.mapType() + ", OpenVDB: " + e.what() + ")");
+  }
   // OpenVDB multiplies row vectors: row i of the 3x3 part is the image of axis i.
   const double largest = std::max({std::abs(matrix[0][0]), std::abs(matrix[1][1]), std::abs(matrix[2][2])});
   for (int row = 0; row < 3; ++row)
@@ -130,48 +139,111 @@ void for_each_voxel(const Dims& dims, Visit&& visit) {
 
 // Copies the grid's values over the dense box (the background where the
 // tree holds nothing) and marks the active voxels, and which of them an
-// active tile covers. Coordinates are widened to 64 bits: a grid may sit
-// anywhere in OpenVDB's 32-bit index space, and tools::copyToDense loops
-// forever near INT_MIN and writes out of bounds when the box spans 2^31.
-void copy_values(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& box, VdbVolume& out) {
-  const std::int64_t min[3] = {box.min().x(), box.min().y(), box.min().z()};
-  const std::int64_t max[3] = {box.max().x(), box.max().y(), box.max().z()};
-  const std::int64_t nx = out.volume.dims[0], ny = out.volume.dims[1];
-  auto index = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
-    return static_cast<std::uint64_t>(((z - min[2]) * ny + (y - min[1])) * nx + (x - min[0]));
-  };
-  auto* dense = reinterpret_cast<float*>(out.volume.data.data());
-  std::fill_n(dense, out.volume.voxel_count(), grid.background());
-  for (auto value = grid.cbeginValueAll(); value; ++value) {
-    const bool on = value.isValueOn();
-    if (value.isVoxelValue()) {
-      const openvdb::Coord c = value.getCoord();
-      if (!box.isInside(c)) continue;
-      const std::uint64_t i = index(c.x(), c.y(), c.z());
-      dense[i] = *value;
-      out.active[i] = on;
-      continue;
+// active tile covers. The tree is walked node by node and a node that does
+// not meet the box is skipped whole, so the work is in proportion to the
+// box and the nodes that meet it, not to every tile slot of the tree (a
+// grid's value iterator visits all 32768 slots of every upper node, and
+// every slot of an upper node that meets the box would cost as much).
+// Coordinates are widened to 64 bits: a grid may sit anywhere in OpenVDB's
+// 32-bit index space, and tools::copyToDense loops forever near INT_MIN and
+// writes out of bounds when the box spans 2^31.
+class DenseCopy {
+ public:
+  DenseCopy(const openvdb::CoordBBox& box, VdbVolume& out)
+      : min_{box.min().x(), box.min().y(), box.min().z()},
+        max_{box.max().x(), box.max().y(), box.max().z()},
+        nx_(out.volume.dims[0]),
+        ny_(out.volume.dims[1]),
+        dense_(reinterpret_cast<float*>(out.volume.data.data())),
+        out_(out) {}
+
+  void copy(const openvdb::FloatGrid& grid) {
+    std::fill_n(dense_, out_.volume.voxel_count(), grid.background());
+    using Root = openvdb::FloatTree::RootNodeType;
+    using Upper = Root::ChildNodeType;
+    const Root& root = grid.tree().root();
+    for (auto tile = root.cbeginValueAll(); tile; ++tile) fill_tile(tile.getCoord(), Upper::DIM, *tile, tile.isValueOn());
+    for (auto upper = root.cbeginChildOn(); upper; ++upper) {
+      if (!fill_tiles(*upper)) continue;
+      for (auto lower = upper->cbeginChildOn(); lower; ++lower) {
+        if (!fill_tiles(*lower)) continue;
+        for (auto leaf = lower->cbeginChildOn(); leaf; ++leaf) copy_leaf(*leaf);
+      }
     }
-    openvdb::CoordBBox tile;
-    value.getBoundingBox(tile);
-    std::int64_t lo[3], hi[3];
+  }
+
+ private:
+  using Leaf = openvdb::FloatTree::LeafNodeType;
+
+  std::uint64_t index(std::int64_t x, std::int64_t y, std::int64_t z) const {
+    return static_cast<std::uint64_t>(((z - min_[2]) * ny_ + (y - min_[1])) * nx_ + (x - min_[0]));
+  }
+  // The part of the cube [origin, origin + side) inside the box.
+  bool clip(const openvdb::Coord& origin, openvdb::Index side, std::int64_t lo[3], std::int64_t hi[3]) const {
     bool inside = true;
     for (int a = 0; a < 3; ++a) {
-      lo[a] = std::max<std::int64_t>(tile.min()[a], min[a]);
-      hi[a] = std::min<std::int64_t>(tile.max()[a], max[a]);
+      lo[a] = std::max<std::int64_t>(origin[a], min_[a]);
+      hi[a] = std::min<std::int64_t>(std::int64_t{origin[a]} + side - 1, max_[a]);
       inside = inside && lo[a] <= hi[a];
     }
-    if (!inside) continue;
+    return inside;
+  }
+  // Fills the tiles of an internal node that meet the box, visiting only
+  // the slots that do; false when the node does not meet the box.
+  template <typename Node>
+  bool fill_tiles(const Node& node) {
+    constexpr std::int64_t side = Node::ChildNodeType::DIM;
+    const openvdb::Coord origin = node.origin();
+    std::int64_t lo[3], hi[3];
+    if (!clip(origin, Node::DIM, lo, hi)) return false;
+    std::int64_t first[3], last[3];
+    for (int a = 0; a < 3; ++a) {
+      first[a] = (lo[a] - origin[a]) / side;
+      last[a] = (hi[a] - origin[a]) / side;
+    }
+    for (std::int64_t i = first[0]; i <= last[0]; ++i)
+      for (std::int64_t j = first[1]; j <= last[1]; ++j)
+        for (std::int64_t k = first[2]; k <= last[2]; ++k) {
+          const openvdb::Coord slot(static_cast<int>(origin[0] + i * side), static_cast<int>(origin[1] + j * side),
+                                    static_cast<int>(origin[2] + k * side));
+          if (node.isChildMaskOn(Node::coordToOffset(slot))) continue;
+          fill_tile(slot, side, node.getValue(slot), node.isValueOn(slot));
+        }
+    return true;
+  }
+  void fill_tile(const openvdb::Coord& origin, openvdb::Index side, float value, bool on) {
+    std::int64_t lo[3], hi[3];
+    if (!clip(origin, side, lo, hi)) return;
     const auto length = static_cast<std::ptrdiff_t>(hi[0] - lo[0] + 1);
     for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
       for (std::int64_t y = lo[1]; y <= hi[1]; ++y) {
         const auto row = static_cast<std::ptrdiff_t>(index(lo[0], y, z));
-        std::fill_n(dense + row, length, *value);
-        std::fill_n(out.active.begin() + row, length, on);
-        std::fill_n(out.from_tile.begin() + row, length, on);
+        std::fill_n(dense_ + row, length, value);
+        std::fill_n(out_.active.begin() + row, length, on);
+        std::fill_n(out_.from_tile.begin() + row, length, on);
       }
   }
-}
+  void copy_leaf(const Leaf& leaf) {
+    const openvdb::Coord origin = leaf.origin();
+    std::int64_t lo[3], hi[3];
+    if (!clip(origin, Leaf::DIM, lo, hi)) return;
+    for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
+      for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
+        for (std::int64_t x = lo[0]; x <= hi[0]; ++x) {
+          const openvdb::Index offset = Leaf::coordToOffset(
+              openvdb::Coord(static_cast<int>(x), static_cast<int>(y), static_cast<int>(z)));
+          const std::uint64_t i = index(x, y, z);
+          dense_[i] = leaf.getValue(offset);
+          out_.active[i] = leaf.isValueOn(offset);
+          out_.from_tile[i] = 0;
+        }
+  }
+
+  std::int64_t min_[3], max_[3];
+  std::int64_t nx_, ny_;
+  float* dense_;
+  VdbVolume& out_;
+};
 
 // Writes as io::File::write does, the same bytes, but to a stream of ours
 // whose state is checked: File::write ignores write errors, and on a full
@@ -212,14 +284,16 @@ VdbVolume read_vdb(const std::string& path, const std::string& grid_name, std::u
   open_vdb(file, path);
   const openvdb::FloatGrid::Ptr grid = choose_float_grid(file, path, grid_name);
   file.close();
+  return volume_from_grid(*grid, grid_context(path, grid->getName()), memory_bytes);
+}
 
+VdbVolume volume_from_grid(const openvdb::FloatGrid& grid, const std::string& context, std::uint64_t memory_bytes) {
   VdbVolume out;
-  out.grid_name = grid->getName();
-  const std::string context = grid_context(path, out.grid_name);
-  out.background = grid->background();
-  out.was_half = grid->saveFloatAsHalf();
+  out.grid_name = grid.getName();
+  out.background = grid.background();
+  out.was_half = grid.saveFloatAsHalf();
 
-  const openvdb::CoordBBox box = grid->evalActiveVoxelBoundingBox();
+  const openvdb::CoordBBox box = grid.evalActiveVoxelBoundingBox();
   if (box.empty()) throw Error(ErrorClass::InvalidArgument, context + " has no active voxel: nothing to convert");
   // Extents in 64 bits: Coord's 32-bit dim() wraps to 0 for a box spanning
   // 2^32 voxels.
@@ -236,17 +310,17 @@ VdbVolume read_vdb(const std::string& path, const std::string& grid_name, std::u
   }
   // Geometry first: a refused transform should not cost a large allocation.
   DenseVolume geometry;
-  read_geometry(grid->transform(), box.min(), context, geometry);
+  read_geometry(grid.transform(), box.min(), context, geometry);
   geometry.voxel_size_from = "OpenVDB transform";
   geometry.origin_from = "OpenVDB transform at the first active voxel";
-  if (const auto unit = grid->getMetadata<openvdb::StringMetadata>("unit")) {
+  if (const auto unit = grid.getMetadata<openvdb::StringMetadata>("unit")) {
     geometry.unit = unit->value();
     geometry.unit_from = "OpenVDB grid metadata unit";
   }
   const std::pair<const char*, std::string*> texts[] = {
       {"quantity", &geometry.quantity}, {"value_unit", &geometry.value_unit}, {"provenance", &geometry.provenance}};
   for (const auto& [key, field] : texts)
-    if (const auto text = grid->getMetadata<openvdb::StringMetadata>(key)) *field = text->value();
+    if (const auto text = grid.getMetadata<openvdb::StringMetadata>(key)) *field = text->value();
   if (!geometry.quantity.empty() || !geometry.value_unit.empty())
     geometry.quantity_from = "OpenVDB grid metadata quantity, value_unit";
   // A grid ivol wrote from a volume of unknown voxel size has an identity
@@ -266,7 +340,7 @@ VdbVolume read_vdb(const std::string& path, const std::string& grid_name, std::u
   shape.data = std::move(out.volume.data);
   out.volume = std::move(shape);
   // The byte buffer comes from operator new, aligned for float.
-  copy_values(*grid, box, out);
+  DenseCopy(box, out).copy(grid);
   return out;
 }
 
