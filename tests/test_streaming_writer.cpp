@@ -237,3 +237,23 @@ TEST(BuiltSlabs, RefusedWhenTheyDoNotFit) {
 }
 
 }  // namespace
+
+// The writer holds a record and per-level counts for every subtree until
+// finish(): (dims / slab)^3 of them. The slab thickness is chosen with that
+// index counted (issue 23: at 2048^3, 8-slice slabs meant 16.8 M subtrees and
+// 3.4 GB of index beside a 172 MB slab budget). Nothing is written here.
+TEST(StreamingWriter, SlabThicknessCountsTheSubtreeIndex) {
+  const std::string path = test::temp_path("index-bytes.ivol");
+  ivol::StreamingOptions options;
+  options.slab_budget_bytes = 171824480;  // the recon's writer share at --memory 2048 and 2048^3
+  const ivol::StreamingOctreeWriter big(path, {2048, 2048, 2048}, options);
+  // 8 slices: 134 MB of samples and 3.5 GB of index; 32: 537 MB and 71 MB.
+  EXPECT_EQ(big.slab_slices(), 32u);
+  EXPECT_LT(big.index_bytes(), std::uint64_t{100} << 20);
+  // Where the budget holds both, the thickest slab that fits, as before.
+  options.slab_budget_bytes = std::uint64_t{512} << 20;
+  const ivol::StreamingOctreeWriter small(path, {512, 512, 512}, options);
+  EXPECT_EQ(small.slab_slices(), 256u);
+  EXPECT_LT(small.slab_slices() * std::uint64_t{512} * 512 * 4 + small.index_bytes(), options.slab_budget_bytes);
+  EXPECT_FALSE(std::filesystem::exists(path));
+}

@@ -19,22 +19,6 @@
 
 namespace ivol::detail {
 
-// Slab thickness in slices: the one asked for (a power of two), or the
-// largest whose float32 samples fit the budget (at least 8, or the volume).
-inline std::uint32_t choose_slab_slices(const Dims& dims, const StreamingOptions& options) {
-  const unsigned depth = depth_for(dims);
-  const std::uint32_t side = 1u << depth;
-  if (options.slab_slices) {
-    const std::uint32_t s = options.slab_slices;
-    if ((s & (s - 1)) != 0) throw Error(ErrorClass::InvalidArgument, "streaming: slab_slices must be a power of two");
-    return std::min(s, side);
-  }
-  const std::uint64_t slice_bytes = std::uint64_t{dims[0]} * dims[1] * 4;
-  std::uint32_t s = 8;
-  while (s < side && 2 * s * slice_bytes <= options.slab_budget_bytes) s *= 2;
-  return std::min(s, side);
-}
-
 inline void check_streaming_options(const Dims& dims, const StreamingOptions& options) {
   for (auto n : dims)
     if (n == 0 || n > (1u << 31))
@@ -74,6 +58,41 @@ struct SubtreeRecord {
   RegionStats stats;  // with a keep mask only: then the levels above may coarsen
   bool any_kept = false;
 };
+
+// What the streaming writer holds per subtree until finish(): its record
+// and spill offset, and per level its nodes' and values' element counts and
+// stored bytes. (dims / slab)^3 subtrees: at 2048^3 with 8-slice slabs,
+// 16.8 M of them took 3.4 GB (issue 23), more than the slabs themselves.
+inline std::uint64_t subtree_index_bytes(const Dims& dims, std::uint32_t slab) {
+  const SlabGrid grid(dims, slab);
+  const std::uint64_t subtrees = std::uint64_t{grid.grid[0]} * grid.grid[1] * grid.grid[2];
+  const std::uint64_t per_subtree = sizeof(SubtreeRecord) + sizeof(std::uint64_t) + std::uint64_t{grid.levels} * 2 * 2 * 8;
+  return subtrees * per_subtree;
+}
+
+// Slab thickness in slices: the one asked for (a power of two), or the
+// largest whose float32 samples and subtree index (subtree_index_bytes) fit
+// the budget (at least 8 slices, or the volume); when none fits, the one
+// that needs least of the two together.
+inline std::uint32_t choose_slab_slices(const Dims& dims, const StreamingOptions& options) {
+  const unsigned depth = depth_for(dims);
+  const std::uint32_t side = 1u << depth;
+  if (options.slab_slices) {
+    const std::uint32_t s = options.slab_slices;
+    if ((s & (s - 1)) != 0) throw Error(ErrorClass::InvalidArgument, "streaming: slab_slices must be a power of two");
+    return std::min(s, side);
+  }
+  const std::uint64_t slice_bytes = std::uint64_t{dims[0]} * dims[1] * 4;
+  std::uint32_t best_fit = 0, least = 0;
+  std::uint64_t least_bytes = ~std::uint64_t{0};
+  for (std::uint64_t s = std::min<std::uint32_t>(8, side); s <= side; s *= 2) {
+    const auto slices = static_cast<std::uint32_t>(s);
+    const std::uint64_t bytes = s * slice_bytes + subtree_index_bytes(dims, slices);
+    if (bytes <= options.slab_budget_bytes) best_fit = slices;
+    if (bytes < least_bytes) least_bytes = bytes, least = slices;
+  }
+  return best_fit ? best_fit : least;
+}
 
 // Receives subtree n = j * grid[0] + i of a slab, once built: its record and
 // its node words and values of levels subtree_level .. depth. Called on the

@@ -418,6 +418,10 @@ std::uint32_t StreamingOctreeWriter::slab_slices() const {
   return impl_ ? impl_->slab_slices : detail::choose_slab_slices(pending_->dims, pending_->options);
 }
 
+std::uint64_t StreamingOctreeWriter::index_bytes() const {
+  return detail::subtree_index_bytes(impl_ ? impl_->dims : pending_->dims, slab_slices());
+}
+
 std::uint32_t StreamingOctreeWriter::next_slab_first() const {
   return impl_ ? impl_->slabs_done * impl_->slab_slices : 0;
 }

@@ -266,6 +266,8 @@ void StructureStreamWriter::write_ready(std::uint32_t z_complete, StructureValue
 
 std::uint32_t StructureStreamWriter::slab_slices() const { return impl_->octree ? impl_->octree->slab_slices() : 1; }
 
+std::uint64_t StructureStreamWriter::index_bytes() const { return impl_->octree ? impl_->octree->index_bytes() : 0; }
+
 StreamingResult StructureStreamWriter::finish(const Metadata& metadata, StructureValueSource& values) {
   return impl_->finish(metadata, values);
 }

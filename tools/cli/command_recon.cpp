@@ -417,6 +417,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   window.memory_limit = memory_share(s);
   recon::FdkReport fdk;
   StreamingResult written;
+  std::uint64_t writer_index = 0;
   double writing = 0;
   double writing_during_fdk = 0;  // the writer works inside the FDK's slab hand-over
   double building = 0;            // distributed: filling and building rank 0's own slabs
@@ -456,6 +457,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
     // preview is done, less the structure's share): slabs are cut thinner
     // until they fit it.
     window.writer_slab_slices = writer.slab_slices();
+    writer_index = writer.index_bytes();
     fdk = reconstructor.reconstruct_structure(
         grid, *structure, values,
         [&](std::uint32_t z_complete) {
@@ -522,6 +524,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   report["memory"]["structure_held_bytes"] = structure_held;
   report["memory"]["reconstruction_part_bytes"] = part;
   report["memory"]["writer_slab_budget_bytes"] = part;
+  report["memory"]["writer_index_bytes"] = writer_index;
   report["memory"]["structure_bricks_bytes"] = structure->bricks().memory_bytes();
   report["memory"]["slab_index_bytes"] = fdk.slab_index_bytes;
   report["memory"]["slab_tasks_peak_bytes"] = fdk.slab_tasks_peak_bytes;

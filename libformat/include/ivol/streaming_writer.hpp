@@ -36,7 +36,8 @@ struct StreamingOptions {
   BuildOptions build;  // its keep_mask is ignored: masks come with each slab
   WriteOptions write;
   // Slab thickness in slices, a power of two; 0: the largest one whose float32
-  // samples fit in `slab_budget_bytes` (at least 8 slices, or the volume).
+  // samples and subtree index (index_bytes()) fit in `slab_budget_bytes` (at
+  // least 8 slices, or the volume; when none fits, the one needing least).
   std::uint32_t slab_slices = 0;
   std::uint64_t slab_budget_bytes = 512ull << 20;
   // Where the temporary spill file goes: this directory; empty: $TMPDIR when
@@ -68,6 +69,10 @@ class StreamingOctreeWriter {
   StreamingOctreeWriter& operator=(const StreamingOctreeWriter&) = delete;
 
   std::uint32_t slab_slices() const;
+  // Bytes it holds until finish() for each subtree of a slab (records,
+  // per-level counts): (dims / slab_slices)^3 of them; counted, with the
+  // samples, when the slab thickness is chosen.
+  std::uint64_t index_bytes() const;
   // Slices z0 .. z0 + slices of the next slab (the last slab may be thinner).
   std::uint32_t next_slab_first() const;
   std::uint32_t next_slab_count() const;

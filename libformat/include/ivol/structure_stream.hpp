@@ -130,6 +130,8 @@ class StructureStreamWriter {
   // Slices the writer writes at once (the octree's slab; 1 for the grids,
   // written value by value): how far behind z_complete it may release.
   std::uint32_t slab_slices() const;
+  // The octree writer's per-subtree index (StreamingOctreeWriter::index_bytes); 0 for the grids.
+  std::uint64_t index_bytes() const;
   // Writes the rest (every value must now be final) and renames the file
   // into place.
   StreamingResult finish(const Metadata& metadata, StructureValueSource& values);
