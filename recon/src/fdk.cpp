@@ -143,7 +143,7 @@ FdkReport FdkReconstructor::reconstruct(const VolumeGrid& grid, const SlabSink& 
   const VolumeGrid grid_copy = grid;
   detail::set_grid(m.problem, grid_copy);
   const SlabRange range{k_begin, k_end};
-  const SlabPlan plan = detail::plan_slabs(m.problem, m.handles, m.options, range);
+  const SlabPlan plan = detail::plan_slabs(m.problem, m.handles, m.options, range, /*dense_host_slabs=*/true);
   try {
     for (auto& device : m.devices) device->configure(plan.slices, plan.band_rows);
   } catch (const cl::Error& error) {

@@ -5,6 +5,7 @@
 #include <string>
 #include <thread>
 
+#include "fdk_native_backproject.hpp"
 #include "fdk_session.hpp"
 
 namespace ivol::recon::detail {
@@ -82,7 +83,7 @@ int widest_band(const FdkProblem& problem, SlabRange range, std::uint32_t slices
 }  // namespace
 
 SlabPlan plan_slabs(const FdkProblem& problem, const std::vector<detail::DeviceHandle>& devices,
-                    const FdkOptions& options, SlabRange range) {
+                    const FdkOptions& options, SlabRange range, bool dense_host_slabs) {
   std::uint64_t budget = ~std::uint64_t{0};
   std::uint64_t max_allocation = ~std::uint64_t{0};
   const int n = 1 << problem.log2n;
@@ -97,10 +98,33 @@ SlabPlan plan_slabs(const FdkProblem& problem, const std::vector<detail::DeviceH
   }
   const std::uint64_t slice_bytes =
       std::uint64_t{padded_row(problem.grid->size[0])} * problem.grid->size[1] * sizeof(float);
+  // On a CPU device the budget is host memory: with dense slabs it holds the
+  // native backprojector's columns (depth padded to its lanes) and, per
+  // device, its share of the slab copies in flight (issue 23: at 2048^3 the
+  // detection preview's slabs took 2 GB against a 512 MB share).
+  bool cpu_device = false, native = false;
+  for (const detail::DeviceHandle& d : devices)
+    if (!d.info.is_gpu) {
+      cpu_device = true;
+      native = native || (problem.native_cpu_backprojection && detail::native_backprojection_available());
+    }
+  const std::uint64_t copies_per_device =
+      (detail::host_slab_copies(devices.size()) + devices.size() - 1) / std::max<std::size_t>(devices.size(), 1);
+  auto host_bytes = [&](std::uint32_t slices) -> std::uint64_t {
+    if (!dense_host_slabs || !cpu_device) return 0;
+    const std::uint64_t area = std::uint64_t{problem.grid->size[0]} * problem.grid->size[1] * sizeof(float);
+    const std::uint64_t lanes = detail::NativeBackprojector::kLanes;
+    // The native backprojector holds its columns instead of the OpenCL slab
+    // slab_device_bytes counts.
+    const std::uint64_t opencl_slab = std::uint64_t{detail::padded_row(problem.grid->size[0])} *
+                                      problem.grid->size[1] * detail::padded_slices(slices) * sizeof(float);
+    const std::uint64_t columns = area * ((slices + lanes - 1) / lanes * lanes);
+    return copies_per_device * area * slices + (native && columns > opencl_slab ? columns - opencl_slab : 0);
+  };
   auto fits = [&](std::uint32_t slices, SlabPlan& plan, bool exact = false) {
     plan.slices = slices;
     plan.band_rows = widest_band(problem, range, slices, exact);
-    plan.bytes = detail::slab_device_bytes(problem, slices, plan.band_rows, any_global_fft);
+    plan.bytes = detail::slab_device_bytes(problem, slices, plan.band_rows, any_global_fft) + host_bytes(slices);
     return plan.bytes <= budget && slice_bytes * detail::padded_slices(slices) <= max_allocation;
   };
   std::uint32_t high = range.end - range.first;

@@ -36,9 +36,18 @@ struct SlabPlan {
   std::uint64_t bytes = 0;
 };
 
-// The thickest slab cutting `range` whose buffers fit every device.
+// The thickest slab cutting `range` whose buffers fit every device. With
+// dense_host_slabs (dense reconstruction, whose slabs come back to the host
+// whole), a CPU device's budget, being host memory, also holds the native
+// backprojector's slab and its share of the host copies for_each_slab keeps
+// in flight (host_slab_copies).
 SlabPlan plan_slabs(const FdkProblem& problem, const std::vector<DeviceHandle>& devices, const FdkOptions& options,
-                    SlabRange range);
+                    SlabRange range, bool dense_host_slabs = false);
+
+// Dense slabs for_each_slab holds on the host at once with `devices`
+// producing: one being built per device, as many waiting as the queue takes
+// (devices + 1), one being consumed.
+constexpr std::uint64_t host_slab_copies(std::size_t devices) { return 2 * std::uint64_t{devices} + 2; }
 
 // Runs produce(device, s, data) for s = 0 .. count − 1 on all devices at
 // once, and consume(s, data) on the calling thread in increasing s; at most
