@@ -162,6 +162,30 @@ TEST(Fdk, SlabsDoNotChangeBits) {
   EXPECT_EQ(0, std::memcmp(cut.data(), whole.data(), whole.size() * sizeof(float)));
 }
 
+// On a CPU device the device memory is the host's: a dense slab plan holds,
+// within the budget, the slabs that come back to the host and wait there
+// (one device: one being built, two queued, one consumed), not one slab
+// (issue 23: at 2048³ the detection preview's slabs took 2 GB of a 512 MB
+// share).
+TEST(Fdk, CpuDeviceBudgetHoldsTheHostSlabsInFlight) {
+  SmallCase c = small_case(2 * M_PI, 40, 1.0, 3.0);
+  // Slices large against the detector's buffers, so that the slab decides.
+  c.grid = VolumeGrid::centred({128, 128, 48}, Vec3{0.25, 0.25, 0.5});
+  InMemoryProjections p = project_ball(c.geometry, {0, 0, 0}, 12.0, 0.02);
+  FdkReport whole_report;
+  const std::vector<float> whole = reconstruct_fdk_dense(p, c.geometry, c.grid, {}, &whole_report);
+  const std::uint64_t slice_bytes = std::uint64_t{c.grid.size[0]} * c.grid.size[1] * sizeof(float);
+  FdkOptions options;
+  options.cpu_device_memory_limit = whole_report.device_bytes_per_slab / 2;
+  FdkReport report;
+  const std::vector<float> cut = reconstruct_fdk_dense(p, c.geometry, c.grid, options, &report);
+  ASSERT_FALSE(report.devices.empty());
+  EXPECT_LE(report.device_bytes_per_slab, options.cpu_device_memory_limit);
+  EXPECT_LE(4 * report.slab_slices * slice_bytes, options.cpu_device_memory_limit);
+  EXPECT_GE(report.slab_count, 2U);
+  EXPECT_EQ(0, std::memcmp(cut.data(), whole.data(), whole.size() * sizeof(float)));
+}
+
 TEST(Fdk, PartsOfAGridMatchTheWhole) {
   SmallCase c = small_case(2 * M_PI, 40, 1.0, 3.0);
   InMemoryProjections p = project_ball(c.geometry, {1, 2, -3}, 12.0, 0.02);
