@@ -2,9 +2,11 @@
 // finite binary16 values (ties to even), and exact decoding.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <vector>
 
 #include "ivol/binary16.hpp"
 #include "ivol/encoding.hpp"
@@ -79,6 +81,45 @@ TEST(Binary16, OverflowAndSpecials) {
   EXPECT_EQ(ivol::double_to_binary16(-0.0), 0x8000);
   EXPECT_EQ(ivol::double_to_binary16(std::ldexp(1.0, -25)), 0x0000);  // tie to even: zero
   EXPECT_EQ(ivol::double_to_binary16(std::ldexp(3.0, -25)), 0x0002);  // tie to even: 2 units
+}
+
+// The oracle for rounding upward: the least of every binary16 number
+// (infinities included, ordered as doubles) that is not below the float.
+TEST(Binary16, UpwardIsTheLeastNumberNotBelow) {
+  std::vector<double> all;
+  for (std::uint32_t h = 0; h < 65536; ++h) {
+    const double v = ivol::binary16_to_double(static_cast<std::uint16_t>(h));
+    if (!std::isnan(v)) all.push_back(v);
+  }
+  std::sort(all.begin(), all.end());
+  std::mt19937 rng(5);
+  auto check = [&](float f) {
+    const std::uint16_t up = ivol::float_to_binary16_upward(f);
+    if (std::isnan(f)) {
+      ASSERT_EQ(up, 0x7E00);
+      return;
+    }
+    const auto least = std::lower_bound(all.begin(), all.end(), static_cast<double>(f));
+    ASSERT_NE(least, all.end()) << f;
+    ASSERT_EQ(ivol::binary16_to_double(up), *least) << f;
+  };
+  for (int n = 0; n < 2000000; ++n) {
+    std::uint32_t bits = rng();
+    float f;
+    std::memcpy(&f, &bits, 4);
+    check(f);
+  }
+  // Every binary16 number and its float neighbours on either side.
+  for (std::uint32_t h = 0; h < 65536; ++h) {
+    const float v = ivol::binary16_to_float(static_cast<std::uint16_t>(h));
+    check(v);
+    check(std::nextafter(v, INFINITY));
+    check(std::nextafter(v, -INFINITY));
+  }
+  EXPECT_EQ(ivol::float_to_binary16_upward(65504.5F), 0x7C00);
+  EXPECT_EQ(ivol::float_to_binary16_upward(-65600.0F), 0xFBFF);
+  EXPECT_EQ(ivol::float_to_binary16_upward(-1e-30F), 0x8000);
+  EXPECT_EQ(ivol::float_to_binary16_upward(1e-30F), 0x0001);
 }
 
 TEST(Encoding, UInt16AndFloat32Rounding) {

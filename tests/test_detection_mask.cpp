@@ -5,14 +5,20 @@
 // same Otsu's threshold, whether the cell layers and Otsu's samples stay in
 // memory, all go to temporary files or part each, and however thin the
 // FDK's slabs; its mask (1 bit per cell) generates the same structures as
-// the byte mask; a budget below what it must hold is refused.
+// the byte mask; a budget below what it must hold is refused. The spool the
+// layers wait in gives back every record as put, compressed or not.
 #include <gtest/gtest.h>
 #include <stdlib.h>
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <random>
 #include <string>
+#include <vector>
 
+#include "host_spool.hpp"
 #include "ivol/error.hpp"
 #include "ivol/recon/fdk.hpp"
 #include "ivol/recon/phantom.hpp"
@@ -114,12 +120,16 @@ TEST(DetectionMask, AllSpilledWithThinSlabsIsTheWholePreviewsMask) {
     options.preview_memory = least;
     const DetectionMask spilled = detect_need_mask(scan.projections, scan.geometry, {}, scan.grid, options);
     EXPECT_EQ(spilled.peak_preview_bytes, least);
-    // Cells (float32 each) and one sample in eight of every even slice of samples.
+    // Cells (binary16 each) and one sample in eight of every even slice of
+    // samples (float32), before compression; compressed, no more than that.
     const VolumeGrid& cells = spilled.grid;
     const unsigned spacing = factor > 2 ? factor / 2 : factor;
     const std::uint64_t sx = (46 + spacing - 1) / spacing, sy = (38 + spacing - 1) / spacing,
                         sz = (43 + spacing - 1) / spacing;
-    EXPECT_EQ(spilled.spilled_bytes, 4 * (cells.voxel_count() + ((sx + 1) / 2) * ((sy + 1) / 2) * ((sz + 1) / 2)));
+    EXPECT_EQ(spilled.spilled_raw_bytes,
+              2 * cells.voxel_count() + 4 * ((sx + 1) / 2) * ((sy + 1) / 2) * ((sz + 1) / 2));
+    EXPECT_GT(spilled.spilled_bytes, 0U);
+    EXPECT_LE(spilled.spilled_bytes, spilled.spilled_raw_bytes);
   }
 }
 
@@ -128,7 +138,8 @@ TEST(DetectionMask, BudgetBelowWhatItHoldsIsRefused) {
   DetectionMaskOptions options = rule_options(2);
   const std::uint64_t least = detection_fixed_bytes(scan.grid, options);
   // The ring of 1 + 1 + 2·2 slices of 23×19 cells, the slice buffers and 1 bit per cell.
-  const std::uint64_t ring = 6 * 23 * 19 * 4, along_x = 23 * 19 * 4, cells = 23 * 19 * 4, otsu_row = 12 * 10 * 4;
+  // A layer of cells as floats and as binary16, a row of Otsu's samples.
+  const std::uint64_t ring = 6 * 23 * 19 * 4, along_x = 23 * 19 * 4, cells = 23 * 19 * (4 + 2), otsu_row = 12 * 10 * 4;
   const std::uint64_t mask = (23 * 19 * 22 + 63) / 64 * 8;
   EXPECT_EQ(least, ring + along_x + cells + otsu_row + mask);
   options.preview_memory = least - 1;
@@ -174,7 +185,7 @@ TEST(DetectionMask, PartlySpilledWithAGivenThreshold) {
   DetectionMaskOptions all;
   all.margin_voxels = 3;
   const DetectionMask held = detect_need_mask(scan.projections, scan.geometry, {}, scan.grid, all);
-  const std::uint64_t layer_bytes = 23 * 19 * sizeof(float);
+  const std::uint64_t layer_bytes = 23 * 19 * sizeof(std::uint16_t);
   const std::uint64_t layers = 22;  // ceil(43 / 2)
   EXPECT_EQ(held.spilled_bytes, 0U);
   ASSERT_GT(held.peak_preview_bytes, layers * layer_bytes);
@@ -185,10 +196,52 @@ TEST(DetectionMask, PartlySpilledWithAGivenThreshold) {
   expect_same_as_whole_preview(scan, 2, budget, 2, 0.01F, true);
   all.preview_memory = budget;
   const DetectionMask partly = detect_need_mask(scan.projections, scan.geometry, {}, scan.grid, all);
-  EXPECT_GE(partly.spilled_bytes, (layers - 3) * layer_bytes);
-  EXPECT_LE(partly.spilled_bytes, (layers - 3) * layer_bytes + 2 * layer_bytes);
+  EXPECT_GE(partly.spilled_raw_bytes, (layers - 3) * layer_bytes);
+  EXPECT_LE(partly.spilled_raw_bytes, (layers - 3) * layer_bytes + 2 * layer_bytes);
+  EXPECT_LE(partly.spilled_bytes, partly.spilled_raw_bytes);
   EXPECT_LE(partly.peak_preview_bytes, budget);
-  EXPECT_EQ(partly.peak_preview_bytes + partly.spilled_bytes, held.peak_preview_bytes);
+  EXPECT_EQ(partly.peak_preview_bytes + partly.spilled_raw_bytes, held.peak_preview_bytes);
+}
+
+// Records held, then spilled: smooth ones (compressed) and random ones
+// (stored as they are), read back out of order, bit for bit.
+TEST(RecordSpool, GivesBackEveryRecordCompressedOrNot) {
+  TempDir temp;
+  constexpr std::size_t kFloats = 4096;
+  detail::HostAllowance allowance{3 * kFloats * sizeof(float), 0};
+  detail::RecordSpool spool(kFloats * sizeof(float), sizeof(float), allowance, temp.path, "the test's records");
+  std::mt19937 rng(11);
+  std::vector<std::vector<float>> put(12, std::vector<float>(kFloats));
+  for (std::size_t r = 0; r < put.size(); ++r) {
+    for (std::size_t i = 0; i < kFloats; ++i) {
+      if (r % 2 == 0) {
+        put[r][i] = 0.01F * static_cast<float>(i % 64) + static_cast<float>(r);
+      } else {
+        std::uint32_t bits = rng();
+        std::memcpy(&put[r][i], &bits, 4);
+      }
+    }
+    spool.put(r, put[r].data());
+  }
+  // A held record may be put again; a spilled one, or one out of order, not.
+  put[1][7] = 42.0F;
+  spool.put(1, put[1].data());
+  EXPECT_THROW(spool.put(5, put[5].data()), std::logic_error);
+  EXPECT_THROW(spool.put(13, put[5].data()), std::logic_error);
+  EXPECT_EQ(spool.held_bytes(), 3 * kFloats * sizeof(float));
+  EXPECT_EQ(spool.spilled_raw_bytes(), 9 * kFloats * sizeof(float));
+  // The four smooth records spilled (4, 6, 8, 10) compress; the five random
+  // ones are stored as they are.
+  EXPECT_LT(spool.spilled_bytes(), 5 * kFloats * sizeof(float) + 4 * kFloats * sizeof(float) / 4);
+  EXPECT_GE(spool.spilled_bytes(), 5 * kFloats * sizeof(float));
+  std::vector<float> got(kFloats);
+  for (std::size_t r : {11, 0, 7, 4, 1, 10, 2, 3, 5, 6, 8, 9}) {
+    spool.get(r, got.data());
+    ASSERT_EQ(std::memcmp(got.data(), put[r].data(), kFloats * sizeof(float)), 0) << r;
+  }
+  EXPECT_THROW(spool.get(12, got.data()), std::logic_error);
+  spool.release();
+  EXPECT_EQ(allowance.held, 0U);
 }
 
 }  // namespace

@@ -71,6 +71,26 @@ std::uint16_t float_to_binary16_keep_nan(float value) {
   return static_cast<std::uint16_t>(((x >> 16) & 0x8000u) | 0x7C00u | payload);
 }
 
+std::uint16_t float_to_binary16_upward(float value) {
+  // Binary16's normal range (2^-14 up to below 2^16, where a positive value
+  // carries into +inf): rebias the exponent and keep the top 10 mantissa
+  // bits; a positive value with any lower bit set goes one step up, a
+  // negative one's magnitude is cut (toward +inf either way).
+  const std::uint32_t x = float_bits(value);
+  const std::uint32_t a = x & 0x7FFFFFFFu;
+  if (a >= 0x38800000u && a < 0x47800000u) {
+    const std::uint32_t kept = (a - 0x38000000u) >> 13;
+    if (x & 0x80000000u) return static_cast<std::uint16_t>(0x8000u | kept);
+    return static_cast<std::uint16_t>(kept + ((a & 0x1FFFu) != 0));
+  }
+  std::uint16_t h = float_to_binary16(value);
+  if (std::isnan(value) || !(binary16_to_float(h) < value)) return h;
+  // The next binary16 number up: -0 goes to the least positive subnormal,
+  // a negative one's magnitude shrinks, a positive one's grows (65504 to +inf).
+  if (h == 0x8000) return 0x0001;
+  return static_cast<std::uint16_t>(h & 0x8000 ? h - 1 : h + 1);
+}
+
 std::uint16_t double_to_binary16(double value) {
   if (std::isnan(value)) return kCanonicalNan;
   const std::uint16_t sign = std::signbit(value) ? 0x8000 : 0;

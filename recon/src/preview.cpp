@@ -13,6 +13,7 @@
 #include <utility>
 
 #include "host_spool.hpp"
+#include "ivol/binary16.hpp"
 #include "ivol/error.hpp"
 #include "ivol/keep_mask.hpp"
 
@@ -81,6 +82,12 @@ void pool_line(const float* in, std::size_t n, std::size_t stride, unsigned rati
   }
 }
 
+// A cell's value as the detection rule compares it: its largest sample
+// rounded up to binary16. Rounding up never drops a cell the float would
+// keep, and it halves what waits for Otsu's threshold (issue 23).
+std::uint16_t cell_bits(float largest) { return float_to_binary16_upward(largest); }
+float cell_value(float largest) { return binary16_to_float(cell_bits(largest)); }
+
 void check_factor(unsigned factor, unsigned smallest) {
   if (factor < smallest || !is_power_of_two(factor))
     throw std::invalid_argument("preview: the factor must be a power of two, at least " + std::to_string(smallest));
@@ -147,6 +154,7 @@ Preview reconstruct_detection_preview(ProjectionSource& projections, const ScanG
   for (std::size_t j = 0; j < cy; ++j)
     for (std::size_t i = 0; i < cx; ++i)
       pool_line(&pooled_xy[j * cx + i], sz, cx * cy, ratio, reach, &preview.values[j * cx + i], cz, cx * cy);
+  for (float& cell : preview.values) cell = cell_value(cell);
   // Otsu's threshold of the samples, not of the maxima: the samples are a
   // reconstruction of the object, whose histogram the maxima would bias.
   preview.otsu_threshold = otsu_threshold(otsu_samples.data(), otsu_samples.size());
@@ -190,16 +198,17 @@ std::uint64_t detection_fixed_bytes(const VolumeGrid& full, const DetectionMaskO
   const std::uint64_t area = std::uint64_t{shape.cells.size[0]} * shape.cells.size[1];
   const std::uint64_t floats = shape.ring_layers * area + std::uint64_t{shape.cells.size[0]} * shape.samples.size[1] +
                                area + shape.otsu_row_floats;
-  return floats * sizeof(float) + packed_mask_bytes(shape.cells);
+  return floats * sizeof(float) + area * sizeof(std::uint16_t) + packed_mask_bytes(shape.cells);
 }
 
 std::uint64_t detection_temp_bytes(const ScanGeometry& geometry, const FdkOptions& options, const VolumeGrid& full,
                                    const DetectionMaskOptions& detection) {
   const DetectionShape shape = detection_shape(full, detection);
   const std::uint64_t fixed = detection_fixed_bytes(full, detection);
+  // As they are: the spool stores a record compressed only where that is smaller.
   const std::uint64_t records =
-      (shape.cells.voxel_count() + shape.otsu_row_floats * ((std::uint64_t{shape.samples.size[2]} + 1) / 2)) *
-      sizeof(float);
+      shape.cells.voxel_count() * sizeof(std::uint16_t) +
+      shape.otsu_row_floats * ((std::uint64_t{shape.samples.size[2]} + 1) / 2) * sizeof(float);
   const std::uint64_t room = detection.preview_memory > fixed ? detection.preview_memory - fixed : 0;
   const auto [view_step, bin] = thinned_steps(geometry, detection.rule.thinning);
   return (records > room ? records - room : 0) +
@@ -233,13 +242,15 @@ DetectionMask detect_need_mask(ProjectionSource& projections, const ScanGeometry
   std::vector<float> ring(ring_layers * area);
   std::vector<float> along_x(cx * sy);
   std::vector<float> cells(area);
+  std::vector<std::uint16_t> cell_layer(area);
   std::vector<float> otsu_row(shape.otsu_row_floats);
   // What the budget leaves beyond those is shared by the finished cell
   // layers and the samples for Otsu's threshold (one in eight, every even
   // slice's), first come first held; the rest goes to temporary files.
   detail::HostAllowance allowance{detection.preview_memory - fixed_bytes, 0};
-  detail::RecordSpool layers(area, allowance, detection.temp_directory, "the detection preview's cells");
-  detail::RecordSpool otsu_samples(otsu_row.size(), allowance, detection.temp_directory,
+  detail::RecordSpool layers(area * sizeof(std::uint16_t), sizeof(std::uint16_t), allowance, detection.temp_directory,
+                             "the detection preview's cells");
+  detail::RecordSpool otsu_samples(otsu_row.size() * sizeof(float), sizeof(float), allowance, detection.temp_directory,
                                    "the detection preview's samples for Otsu's threshold");
   // Otsu's range, as otsu_threshold finds it (NaN ignored).
   float lo = std::numeric_limits<float>::infinity(), hi = -std::numeric_limits<float>::infinity();
@@ -255,7 +266,8 @@ DetectionMask detect_need_mask(ProjectionSource& projections, const ScanGeometry
         const float* pooled = &ring[(z % ring_layers) * area];
         for (std::size_t i = 0; i < area; ++i) cells[i] = std::max(cells[i], pooled[i]);
       }
-      layers.put(c, cells.data());
+      for (std::size_t i = 0; i < area; ++i) cell_layer[i] = cell_bits(cells[i]);
+      layers.put(c, cell_layer.data());
     }
   };
   reconstruct_thinned(projections, geometry, options, shape.samples, detection.rule.thinning,
@@ -282,6 +294,7 @@ DetectionMask detect_need_mask(ProjectionSource& projections, const ScanGeometry
   if (producer && next_layer != cz) throw std::logic_error("detection preview: not every cell layer was pooled");
   result.peak_preview_bytes = fixed_bytes + allowance.held;
   result.spilled_bytes = layers.spilled_bytes() + otsu_samples.spilled_bytes();
+  result.spilled_raw_bytes = layers.spilled_raw_bytes() + otsu_samples.spilled_raw_bytes();
   // Otsu's threshold of the samples, as otsu_threshold over all of them at
   // once: the same range and the same 256 bins, the histogram added to
   // record by record (the samples are not all held: issue 23).
@@ -307,8 +320,13 @@ DetectionMask detect_need_mask(ProjectionSource& projections, const ScanGeometry
   result.mask.factor = detection.rule.factor;
   result.mask.cells = Dims{result.grid.size[0], result.grid.size[1], result.grid.size[2]};
   result.mask.bits.assign(packed_mask_bytes(result.grid) / 8, 0);
+  std::vector<float> decoded(std::size_t{1} << 16);
+  for (std::size_t h = 0; h < decoded.size(); ++h) decoded[h] = binary16_to_float(static_cast<std::uint16_t>(h));
   for (std::size_t c = 0; c < cz; ++c) {
-    if (producer) layers.get(c, cells.data());
+    if (producer) {
+      layers.get(c, cell_layer.data());
+      for (std::size_t i = 0; i < area; ++i) cells[i] = decoded[cell_layer[i]];
+    }
     share(options, cells);
     const std::uint64_t first = std::uint64_t{c} * area;
     for (std::size_t i = 0; i < area; ++i)

@@ -183,7 +183,8 @@ std::string refinement_rule(bool detection, unsigned factor) {
   return "a " + cell + " cell is full resolution where the largest sample of a 1/" +
          std::to_string(factor > 2 ? factor / 2 : factor) + " reconstruction (one view in " +
          std::to_string(kDetection.thinning) + ", " + std::to_string(kDetection.thinning) + "x" +
-         std::to_string(kDetection.thinning) + " pixels merged) within the margin of the cell exceeds the threshold";
+         std::to_string(kDetection.thinning) +
+         " pixels merged) within the margin of the cell, rounded up to binary16, exceeds the threshold";
 }
 
 double seconds_since(std::chrono::steady_clock::time_point start) {
@@ -271,6 +272,7 @@ struct FoundObject {
   double seconds = 0.0;
   std::uint64_t preview_bytes = 0;  // preview values held at once
   std::uint64_t preview_spilled_bytes = 0;
+  std::uint64_t preview_spilled_raw_bytes = 0;  // before the spool's compression
 };
 
 recon::DetectionMaskOptions detection_options(const ReconSettings& s, const recon::FdkOptions& fdk_options,
@@ -308,6 +310,7 @@ FoundObject find_object(const ReconSettings& s, const recon::VolumeGrid& grid, c
     found.seconds = detected.seconds;
     found.preview_bytes = detected.peak_preview_bytes;
     found.preview_spilled_bytes = detected.spilled_bytes;
+    found.preview_spilled_raw_bytes = detected.spilled_raw_bytes;
     return found;
   }
   const recon::Preview preview =
@@ -358,7 +361,8 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   if (!global.quiet && (!mpi || mpi->rank() == 0))
     std::cerr << std::fixed << std::setprecision(1) << "ivol recon: preview " << found.seconds << " s (held "
               << human_bytes(found.preview_bytes) << ", spilled " << human_bytes(found.preview_spilled_bytes)
-              << "); structure generated in " << generating << " s: " << structure->bricks().size() << " bricks ("
+              << " compressed from " << human_bytes(found.preview_spilled_raw_bytes) << "); structure generated in "
+              << generating << " s: " << structure->bricks().size() << " bricks ("
               << human_bytes(structure->bricks().memory_bytes()) << "), " << structure->voxel_count() << " voxels\n";
 
   metadata.provenance["reconstruction"]["structure"] = {
@@ -515,6 +519,7 @@ int run_structure(const ReconSettings& s, const GlobalOptions& global, const rec
   report["memory"] = memory_json(s, fdk, reconstructor.device_names().size());
   report["memory"]["preview_bytes"] = found.preview_bytes;
   report["memory"]["preview_spilled_bytes"] = found.preview_spilled_bytes;
+  report["memory"]["preview_spilled_raw_bytes"] = found.preview_spilled_raw_bytes;
   report["memory"]["value_window_bytes"] = value_window_peak;
   report["memory"]["value_window_model_bytes"] = fdk.value_window_model_bytes;
   report["memory"]["value_window_budget_bytes"] = window.memory_limit;

@@ -21,4 +21,10 @@ std::uint16_t double_to_binary16(double value);
 // binary16 gives back every one of the 65 536 bit patterns.
 std::uint16_t float_to_binary16_keep_nan(float value);
 
+// The least binary16 number not below `value` (rounded toward +infinity):
+// binary16_to_float of it is >= value, so a comparison "above t" that holds
+// for the float holds for it too (the detection preview's cells, issue 23).
+// Above 65504 gives +infinity; any NaN gives the canonical 0x7E00.
+std::uint16_t float_to_binary16_upward(float value);
+
 }  // namespace ivol

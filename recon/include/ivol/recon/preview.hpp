@@ -48,7 +48,11 @@ struct DetectionRule {
 // cell's face without adding whole cells. Samples arrive slice by slice and
 // are pooled at once: host memory is the cells pooled along x and y plus one
 // sample in eight. otsu_threshold is Otsu's over that one in eight (not over
-// the maxima, which would bias it). factor: a power of two, at least 2.
+// the maxima, which would bias it). Each cell's largest sample is then
+// rounded up to binary16 (float_to_binary16_upward): never below the float,
+// so no cell the float would keep is dropped, and the cells waiting for
+// Otsu's threshold take half the bytes (issue 23). factor: a power of two,
+// at least 2.
 Preview reconstruct_detection_preview(ProjectionSource& projections, const ScanGeometry& geometry,
                                       const FdkOptions& options, const VolumeGrid& full, unsigned factor,
                                       unsigned thinning, unsigned margin_voxels);
@@ -61,7 +65,9 @@ Preview reconstruct_detection_preview(ProjectionSource& projections, const ScanG
 // `preview_memory` holds, first come first held, the finished layers of
 // cells and the samples for Otsu's threshold (one in eight), and what does
 // not fit goes to unlinked temporary files in `temp_directory` (TMPDIR, else
-// /tmp, when empty). Otsu's threshold needs every sample first, so it is
+// /tmp, when empty), each record compressed (byte planes, zstd) where that
+// makes it smaller; cells wait as binary16, rounded up. Otsu's threshold
+// needs every sample first, so it is
 // found after the reconstruction: the samples' range is tracked as they
 // arrive and a 256-bin histogram over it is added to record by record
 // (add_to_otsu_histogram, the binning of otsu_threshold), so the threshold
@@ -86,6 +92,7 @@ struct DetectionMask {
   double seconds = 0.0;
   std::uint64_t peak_preview_bytes = 0;  // held at once: ring, cell layers, Otsu's samples, the need mask
   std::uint64_t spilled_bytes = 0;       // cell layers and Otsu's samples written to temporary files
+  std::uint64_t spilled_raw_bytes = 0;   // the same records before compression
 };
 
 // What detect_need_mask holds whatever its budget (the ring, the slice
