@@ -41,6 +41,8 @@ std::vector<Case> cases() {
   ScanGeometry full = circular_scan({48, 40, 1.6, 1.6}, 60, 300.0, 600.0, 2 * M_PI, 0.3, 2.0, -1.5);
   full.views[3].source_offset_u = 1.0;  // one odd view
   list.push_back({"full scan, offsets", full, VolumeGrid::centred({24, 22, 20}, 1.5), 0});
+  // A slab of more than 32 slices: summed by columns, not as fine tasks.
+  list.push_back({"thick slab, columns", full, VolumeGrid::centred({20, 18, 40}, 0.7), 0});
   list.push_back({"short scan (Parker)", circular_scan({48, 40, 1.6, 1.6}, 50, 300.0, 600.0, M_PI * 1.3, 0.3),
                   VolumeGrid::centred({21, 24, 19}, 1.5), 0});
   // Coarse detector rows: every sixteen slices take the strip.

@@ -163,6 +163,9 @@ __attribute__((target("avx512f,fma"))) void backproject_rows(const BatchArgs& a,
 
 constexpr int kDepth = IVOL_BACKPROJECT_DEPTH;
 constexpr int kRun = IVOL_FINE_RUN;
+// Slabs up to this many slices are summed as fine tasks (start_slab);
+// measured in bench/RESULTS.md, "Thin dense slabs on the CPU".
+constexpr std::uint32_t kThinSlab = 32;
 
 // Lane x's scalar in vector lanes 0-7 and lane y's in lanes 8-15.
 __attribute__((target("avx512f"))) inline __m512 lane_pair(const float (&lanes)[kRun], int x, int y) {
@@ -391,7 +394,21 @@ void NativeBackprojector::start_slab(std::uint32_t nx, std::uint32_t ny, std::ui
   k_first_ = k_first;
   slices_ = slices;
   depth_ = (slices + kLanes - 1) / kLanes * kLanes;
-  columns_.assign(std::size_t{nx} * ny * depth_, 0.0F);
+  tiles_i_ = (nx + kRun - 1) / kRun;
+  stacks_ = (slices + kDepth - 1) / kDepth;
+  // Tasks where they hold no more floats than the columns would (so the
+  // slab plan's count of the columns still bounds them) and the slab is
+  // thin enough that the columns' per-view scalars would dominate.
+  const std::uint64_t column_floats = std::uint64_t{nx} * ny * depth_;
+  const std::uint64_t task_floats = std::uint64_t{tiles_i_} * kRun * ny * stacks_ * kDepth;
+  thin_ = slices <= kThinSlab && task_floats <= column_floats;
+  if (thin_) {
+    std::vector<float>().swap(columns_);
+    task_sums_.assign(task_floats, 0.0F);
+  } else {
+    std::vector<float>().swap(task_sums_);
+    columns_.assign(column_floats, 0.0F);
+  }
 }
 
 void NativeBackprojector::transpose(const float* filtered, int stride_cols, int stride_rows) {
@@ -416,6 +433,37 @@ void NativeBackprojector::add_batch(const float* filtered, int stride_cols, int 
                                     const BackprojectView* views) {
   transpose(filtered, stride_cols, stride_rows);
   const BatchArgs args = batch_args(transposed_.data(), stride_cols, stride_rows, band_first_row, views);
+  if (thin_) {
+    // Task t = (stack·ny + j)·tiles_i + tile: columns [16·tile, 16·tile + 16)
+    // of row j, slices [8·stack, 8·stack + 8) of the slab, made a few
+    // hundred at a time (a slab's tasks are never all held).
+    const std::size_t tasks = std::size_t{stacks_} * ny_ * tiles_i_;
+    on_threads(threads_, [&](unsigned t) {
+      constexpr std::size_t kChunk = 256;
+      FineTask chunk[kChunk];
+      const std::size_t first = tasks * t / threads_, last = tasks * (t + 1) / threads_;
+      for (std::size_t c0 = first; c0 < last; c0 += kChunk) {
+        const std::size_t n = std::min(kChunk, last - c0);
+        for (std::size_t c = 0; c < n; ++c) {
+          const std::size_t task = c0 + c;
+          const auto tile = static_cast<std::uint32_t>(task % tiles_i_);
+          const auto j = static_cast<std::uint32_t>(task / tiles_i_ % ny_);
+          const auto stack = static_cast<std::uint32_t>(task / (std::size_t{tiles_i_} * ny_));
+          const std::uint32_t along_i = std::min<std::uint32_t>(kRun, nx_ - tile * kRun);
+          const std::uint32_t along_k = std::min<std::uint32_t>(kDepth, slices_ - stack * kDepth);
+          FineTask& f = chunk[c];
+          f.i = static_cast<float>(tile * kRun);
+          f.j = static_cast<float>(j);
+          f.k = static_cast<float>(k_first_ + stack * kDepth);
+          f.step_i = f.step_j = f.step_k = 1.0F;
+          f.run_i = kRun;
+          f.count = along_i | (1u << 8) | (along_k << 16);
+        }
+        backproject_fine_tasks(args, chunk, 0, n, task_sums_.data() + c0 * (kDepth * kRun));
+      }
+    });
+    return;
+  }
   on_threads(threads_, [&](unsigned t) {
     const std::uint32_t j_begin = static_cast<std::uint32_t>(std::uint64_t{ny_} * t / threads_);
     const std::uint32_t j_end = static_cast<std::uint32_t>(std::uint64_t{ny_} * (t + 1) / threads_);
@@ -448,6 +496,20 @@ void NativeBackprojector::add_lone_batch(const float* filtered, int stride_cols,
 
 void NativeBackprojector::finish_slab(std::vector<float>& out) const {
   out.resize(std::size_t{nx_} * ny_ * slices_);
+  if (thin_) {
+    on_threads(threads_, [&](unsigned t) {
+      const std::uint32_t j_begin = static_cast<std::uint32_t>(std::uint64_t{ny_} * t / threads_);
+      const std::uint32_t j_end = static_cast<std::uint32_t>(std::uint64_t{ny_} * (t + 1) / threads_);
+      for (std::uint32_t k = 0; k < slices_; ++k)
+        for (std::uint32_t j = j_begin; j < j_end; ++j) {
+          const float* task = task_sums_.data() + ((std::size_t{k / kDepth} * ny_ + j) * tiles_i_) * (kDepth * kRun) +
+                              (k % kDepth) * kRun;
+          float* row = out.data() + (std::size_t{k} * ny_ + j) * nx_;
+          for (std::uint32_t i = 0; i < nx_; ++i) row[i] = task[(i / kRun) * (kDepth * kRun) + i % kRun];
+        }
+    });
+    return;
+  }
   on_threads(threads_, [&](unsigned t) {
     const std::uint32_t j_begin = static_cast<std::uint32_t>(std::uint64_t{ny_} * t / threads_);
     const std::uint32_t j_end = static_cast<std::uint32_t>(std::uint64_t{ny_} * (t + 1) / threads_);

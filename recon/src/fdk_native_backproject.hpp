@@ -62,7 +62,14 @@ class NativeBackprojector {
   unsigned threads_;
   std::uint32_t nx_ = 0, ny_ = 0, k_first_ = 0, slices_ = 0, depth_ = 0;  // depth_: slices in whole lanes
   std::vector<float> columns_;                                            // [j][i][k], depth_ per column
-  std::vector<float> transposed_;  // per view [column][row], then a strip's overrun of zeros
+  // A thin slab (a few slices, as a tight --memory gives at 2048^3) is
+  // summed as fine tasks of 16 columns by 8 slices instead of columns: a
+  // column's per-view scalars then serve 8 points, not a vector of 16 lanes
+  // most of which lie past the slab, and they are computed 16 at a time.
+  bool thin_ = false;
+  std::uint32_t tiles_i_ = 0, stacks_ = 0;  // tasks along i (16 columns) and k (8 slices)
+  std::vector<float> task_sums_;            // [stack][j][tile][d][x]
+  std::vector<float> transposed_;           // per view [column][row], then a strip's overrun of zeros
 
   // The batch's bands into transposed_ (columns contiguous).
   void transpose(const float* filtered, int stride_cols, int stride_rows);
