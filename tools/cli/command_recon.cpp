@@ -683,9 +683,12 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     // quarter each for the writer's slab, the filtered detector rows (the
     // rest of them go to a temporary file) and, on CPU devices, whose memory
     // is the host's, the device's slabs; the preview and the structure's
-    // value window take the last quarter.
+    // value window take the last quarter. A dense run has neither, so its
+    // CPU devices take that quarter too: their slabs are twice as thick,
+    // and a thin slab costs the native backprojector far more per voxel
+    // (bench/RESULTS.md, "Thin dense slabs on the CPU").
     options.filtered_rows_memory_limit = memory_share(*s);
-    options.cpu_device_memory_limit = memory_share(*s);
+    options.cpu_device_memory_limit = s->structure.empty() ? 2 * memory_share(*s) : memory_share(*s);
     // Filtered rows beyond their share go where the writer's spill goes:
     // --temp-dir, else $TMPDIR, else the output's directory.
     options.temp_directory = s->temp_dir;
