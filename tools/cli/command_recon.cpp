@@ -302,8 +302,13 @@ FoundObject find_object(const ReconSettings& s, const recon::VolumeGrid& grid, c
   FoundObject found;
   if (detection) {
     const recon::DetectionMaskOptions options = detection_options(s, fdk_options, factor, given_threshold);
+    // The writer's quarter of --memory is not in use before the structure
+    // exists: the preview's CPU devices take it beside their own, for
+    // thicker slabs (bench/RESULTS.md, "Thin dense slabs on the CPU").
+    recon::FdkOptions preview_fdk = fdk_options;
+    if (preview_fdk.cpu_device_memory_limit > 0) preview_fdk.cpu_device_memory_limit += memory_share(s);
     recon::DetectionMask detected =
-        recon::detect_need_mask(*scan.projections, scan.geometry, fdk_options, grid, options);
+        recon::detect_need_mask(*scan.projections, scan.geometry, preview_fdk, grid, options);
     found.mask = std::move(detected.mask);
     found.otsu_threshold = detected.otsu_threshold;
     found.threshold = detected.threshold;
