@@ -78,6 +78,10 @@ for side in 8 64 128; do
   "$IVOL" -q convert "$work/b16.raw" "$work/b$side.ivol" --dims 128,128,8 --type u16 --structure bricked --brick "$side" -f
   case_ "convert-brick-$side" 0 "\"brick\": $side" -- "$IVOL" info --json "$work/b$side.ivol"
 done
+# A bricked grid's info speaks of bricks and stored levels, not of the
+# octree's inner nodes (it once said "2 B (0 inner nodes, 1 values)").
+case_ info-bricked       0 "16 x 16 x 1 bricks at full resolution" -- "$IVOL" info "$work/b8.ivol"
+case_ info-bricked-no-nodes 1 "" -- bash -c "'$IVOL' info '$work/b8.ivol' | grep -q 'inner nodes'"
 /usr/bin/python3 -c "import struct; open('$work/f.raw','wb').write(struct.pack('<4096f', *[i * 0.001 for i in range(4096)]))"
 case_ convert-lossy      0 "lossy: f32 rounded to binary16" -- "$IVOL" convert "$work/f.raw" "$work/h.ivol" --dims 16,16,16 --encoding binary16 --allow-lossy
 case_ convert-keep       0 "coarsened"               -- "$IVOL" convert "$work/v.raw" "$work/k.ivol" --dims 32,32,32 --keep threshold=otsu,margin=1

@@ -1,6 +1,8 @@
 // ivol info FILE [--json]: what a file holds and how it is laid out.
+#include <cstdio>
 #include <iostream>
 #include <optional>
+#include <string>
 
 #include "commands.hpp"
 #include "ivol/error.hpp"
@@ -20,6 +22,38 @@ std::string stored_levels_line(const nlohmann::json& d) {
   std::string list;
   for (const auto& k : levels) list += (list.empty() ? "" : ", ") + std::to_string(k.get<unsigned>());
   return "  levels stored  " + list + " (levels of detail read from the file, not summed from full resolution)\n";
+}
+
+std::string in_memory_line(const nlohmann::json& d) {
+  const std::string bytes = human_bytes(d["in_memory_bytes"].get<double>());
+  if (d["structure"].get<std::string>() == "bricked") {
+    const auto& b = d["bricks"];
+    return "  in memory      " + bytes + " decoded (every voxel); " + std::to_string(b[0].get<std::uint64_t>()) +
+           " x " + std::to_string(b[1].get<std::uint64_t>()) + " x " + std::to_string(b[2].get<std::uint64_t>()) +
+           " bricks at full resolution\n";
+  }
+  return "  in memory      " + bytes + " (" + d["inner_nodes"].dump() + " inner nodes, " +
+         d["values"].dump() + " values)\n";
+}
+
+// A bricked grid's levels: full resolution and each stored level of detail.
+void print_bricked_levels(const nlohmann::json& d) {
+  std::cout << "  levels         level  dimensions            bricks           blocks   bytes\n";
+  for (const auto& l : d["levels"]) {
+    const auto& n = l["dims"];
+    const auto& b = l["bricks"];
+    const std::string dims = std::to_string(n[0].get<std::uint64_t>()) + " x " +
+                             std::to_string(n[1].get<std::uint64_t>()) + " x " +
+                             std::to_string(n[2].get<std::uint64_t>());
+    const std::string bricks = std::to_string(b[0].get<std::uint64_t>()) + " x " +
+                               std::to_string(b[1].get<std::uint64_t>()) + " x " +
+                               std::to_string(b[2].get<std::uint64_t>());
+    char line[200];
+    std::snprintf(line, sizeof line, "                 %5u  %-20s  %-15s %8llu   %s\n", l["level"].get<unsigned>(),
+                  dims.c_str(), bricks.c_str(), l["blocks"].get<unsigned long long>(),
+                  human_bytes(l["bytes"].get<std::uint64_t>()).c_str());
+    std::cout << line;
+  }
 }
 
 }  // namespace
@@ -68,11 +102,14 @@ Runner add_info_command(CLI::App& app, const GlobalOptions& /*global*/) {
               << "  file           " << human_bytes(d["file_bytes"].get<std::uint64_t>()) << " (dense float32 "
               << human_bytes(d["dense_float32_bytes"].get<double>()) << ", ratio "
               << d["ratio_vs_float32"].get<double>() << ")\n"
-              << "  in memory      " << human_bytes(d["in_memory_bytes"].get<std::uint64_t>()) << " ("
-              << d["inner_nodes"] << " inner nodes, " << d["values"] << " values)\n"
-              << "  blocks         " << d["blocks"] << " (index " << human_bytes(d["index_bytes"].get<std::uint64_t>())
-              << ")\n"
-              << "  levels         level  side   inner nodes        leaves   blocks   bytes\n";
+              << in_memory_line(d) << "  blocks         " << d["blocks"] << " (index "
+              << human_bytes(d["index_bytes"].get<std::uint64_t>()) << ")\n";
+    if (d["structure"].get<std::string>() == "bricked") {
+      print_bricked_levels(d);
+      std::cout << "  metadata       " << d["metadata"].dump() << "\n";
+      return kExitOk;
+    }
+    std::cout << "  levels         level  side   inner nodes        leaves   blocks   bytes\n";
     for (const auto& l : d["levels"]) {
       char line[160];
       std::snprintf(line, sizeof line, "                 %5u %5llu %13llu %13llu %8llu   %s\n",

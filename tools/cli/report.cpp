@@ -56,7 +56,32 @@ nlohmann::json describe_file(Reader& reader) {
       ++per_level_blocks[b.level];
     }
   }
-  for (unsigned l = 0; l <= v.depth; ++l) {
+  const bool bricked = v.kind == StructureKind::Bricked;
+  // A bricked grid has no inner nodes: its rows are full resolution (level
+  // 0, stream 3) and each stored level of detail (stream 7), in bricks.
+  std::uint64_t bricked_blocks[64] = {};
+  std::uint64_t bricked_bytes[64] = {};
+  if (bricked)
+    for (const BlockInfo& b : info.blocks)
+      if ((b.stream == 3 || b.stream == 7) && b.level < 64) {
+        ++bricked_blocks[b.level];
+        bricked_bytes[b.level] += b.stored_size;
+      }
+  const std::uint64_t brick = std::uint64_t{1} << v.cell_log2;
+  auto bricks_of = [&](const Dims& d) {
+    return nlohmann::json::array(
+        {(d[0] + brick - 1) / brick, (d[1] + brick - 1) / brick, (d[2] + brick - 1) / brick});
+  };
+  for (unsigned l = 0; bricked && l <= v.depth && l < 64; ++l) {
+    if (l > 0 && bricked_blocks[l] == 0) continue;
+    const Dims d = lod_dims(v.dims, l);
+    levels.push_back({{"level", l},
+                      {"dims", {d[0], d[1], d[2]}},
+                      {"bricks", bricks_of(d)},
+                      {"blocks", bricked_blocks[l]},
+                      {"bytes", bricked_bytes[l]}});
+  }
+  for (unsigned l = 0; !bricked && l <= v.depth; ++l) {
     levels.push_back({{"level", l},
                       {"voxel_side", std::uint64_t{1} << (v.depth - l)},
                       {"inner_nodes", v.inner_count[l]},
@@ -71,10 +96,20 @@ nlohmann::json describe_file(Reader& reader) {
   const double dense_bytes = 4.0 * voxel_count_approx(v.dims);
   const nlohmann::json dense_json =
       dense_bytes < 0x1p64 ? nlohmann::json(4 * voxel_count(v.dims)) : nlohmann::json(dense_bytes);
-  const std::uint64_t in_memory = v.total_inner() * 8 + v.total_values() * encoding_width(v.encoding);
+  // Decoded, an octree is its node words and values; a bricked grid every
+  // voxel (a JSON double where the count passes 64 bits, as above).
+  nlohmann::json in_memory = v.total_inner() * 8 + v.total_values() * encoding_width(v.encoding);
+  nlohmann::json value_count = v.total_values();
+  if (bricked) {
+    const double voxels = voxel_count_approx(v.dims);
+    const bool fits = voxels * encoding_width(v.encoding) < 0x1p64;
+    value_count = fits ? nlohmann::json(voxel_count(v.dims)) : nlohmann::json(voxels);
+    in_memory = fits ? nlohmann::json(voxel_count(v.dims) * encoding_width(v.encoding))
+                     : nlohmann::json(voxels * encoding_width(v.encoding));
+  }
   // The levels of detail a bricked grid stores (spec §8A.5, stream 7).
   std::set<unsigned> stored_levels;
-  if (v.kind == StructureKind::Bricked)
+  if (bricked)
     for (const BlockInfo& b : info.blocks)
       if (b.stream == 7) stored_levels.insert(b.level);
   return {
@@ -83,7 +118,8 @@ nlohmann::json describe_file(Reader& reader) {
       {"format_version", std::to_string(info.version_major) + "." + std::to_string(info.version_minor)},
       {"structure", structure_name(v.kind)},
       {"nested_cell", v.kind == StructureKind::Nested ? (std::uint64_t{1} << v.cell_log2) : 0},
-      {"brick", v.kind == StructureKind::Bricked ? (std::uint64_t{1} << v.cell_log2) : 0},
+      {"brick", bricked ? brick : 0},
+      {"bricks", bricked ? bricks_of(v.dims) : nlohmann::json::array()},
       {"structure_reason", reader.metadata().structure.is_object()
                                ? reader.metadata().structure.value("chosen_because", std::string())
                                : std::string()},
@@ -100,7 +136,7 @@ nlohmann::json describe_file(Reader& reader) {
       {"ratio_vs_float32", dense_bytes / static_cast<double>(info.file_size)},
       {"in_memory_bytes", in_memory},
       {"inner_nodes", v.total_inner()},
-      {"values", v.total_values()},
+      {"values", value_count},
       {"blocks", info.blocks.size()},
       {"metadata_bytes", metadata_bytes},
       {"index_bytes", info.index_size},
