@@ -236,16 +236,40 @@ void FdkReconstructor::set_cpu_device_memory_limit(std::uint64_t bytes) {
   impl_->options.cpu_device_memory_limit = bytes;
 }
 
-std::uint64_t filtered_rows_disk_bound(const ScanGeometry& geometry, const FdkOptions& options) {
-  if (!options.cache_filtered_rows) return 0;
-  // Rows are kept in pairs, a pair of every view at a time (fdk_filtered_rows.hpp).
-  const std::uint64_t pair_bytes =
+namespace {
+
+// How the filtered rows of a scan split between host and temporary file:
+// rows are kept in pairs, a pair of every view at a time
+// (fdk_filtered_rows.hpp), in host memory while the budget lasts.
+struct RowPairs {
+  std::uint64_t pair_bytes = 0;
+  std::uint64_t pairs = 0;
+  std::uint64_t pairs_held = 0;
+};
+
+RowPairs row_pairs(const ScanGeometry& geometry, const FdkOptions& options) {
+  RowPairs r;
+  r.pair_bytes =
       std::uint64_t{geometry.view_count()} * 2 * static_cast<std::uint64_t>(geometry.detector.columns) * sizeof(float);
-  const std::uint64_t pairs = (static_cast<std::uint64_t>(geometry.detector.rows) + 1) / 2;
+  r.pairs = (static_cast<std::uint64_t>(geometry.detector.rows) + 1) / 2;
   const std::uint64_t host = options.filtered_rows_memory_limit > 0 ? options.filtered_rows_memory_limit
                                                                     : detail::default_filtered_rows_budget();
-  const std::uint64_t pairs_held = host / pair_bytes;
-  return pairs > pairs_held ? (pairs - pairs_held) * pair_bytes : 0;
+  r.pairs_held = r.pair_bytes > 0 ? host / r.pair_bytes : r.pairs;
+  return r;
+}
+
+}  // namespace
+
+std::uint64_t filtered_rows_disk_bound(const ScanGeometry& geometry, const FdkOptions& options) {
+  if (!options.cache_filtered_rows) return 0;
+  const RowPairs r = row_pairs(geometry, options);
+  return r.pairs > r.pairs_held ? (r.pairs - r.pairs_held) * r.pair_bytes : 0;
+}
+
+std::uint64_t filtered_rows_host_bound(const ScanGeometry& geometry, const FdkOptions& options) {
+  if (!options.cache_filtered_rows) return 0;
+  const RowPairs r = row_pairs(geometry, options);
+  return std::min(r.pairs, r.pairs_held) * r.pair_bytes;
 }
 
 }  // namespace ivol::recon

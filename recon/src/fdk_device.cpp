@@ -73,6 +73,7 @@ FdkDevice::FdkDevice(const DeviceHandle& handle, const FdkProblem& problem)
                          const_cast<float*>(problem.response.data()));
   twiddles_ = cl::Buffer(context_, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, problem.twiddles.size() * sizeof(float),
                          const_cast<float*>(problem.twiddles.data()));
+  on_gpu_ = handle.info.is_gpu;
   if (!handle.info.is_gpu && problem.native_cpu_backprojection && native_backprojection_available())
     native_ = std::make_unique<NativeBackprojector>(std::max(1u, std::thread::hardware_concurrency()));
   native_filter_ = !handle.info.is_gpu && problem.native_cpu_backprojection && native_filter_available();

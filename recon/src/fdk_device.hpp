@@ -72,6 +72,7 @@ class FdkDevice {
   const DeviceTimings& timings() const { return timings_; }
   const std::string& name() const { return name_; }
   bool fft_in_global() const { return fft_in_global_; }
+  bool on_gpu() const { return on_gpu_; }
   // "native-avx512" when dense slabs are backprojected in native code, else "opencl".
   const char* backprojector() const { return native_ ? "native-avx512" : "opencl"; }
 
@@ -101,6 +102,7 @@ class FdkDevice {
   const FdkProblem& problem_;
   std::string name_;
   bool fft_in_global_ = false;
+  bool on_gpu_ = false;
   int filter_local_size_ = 64;
   cl::Context context_;
   cl::CommandQueue queue_;

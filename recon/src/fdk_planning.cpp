@@ -109,7 +109,7 @@ SlabPlan plan_slabs(const FdkProblem& problem, const std::vector<detail::DeviceH
       native = native || (problem.native_cpu_backprojection && detail::native_backprojection_available());
     }
   const std::uint64_t copies_per_device =
-      (detail::host_slab_copies(devices.size()) + devices.size() - 1) / std::max<std::size_t>(devices.size(), 1);
+      (detail::host_slab_copies(devices.size(), cpu_device) + devices.size() - 1) / std::max<std::size_t>(devices.size(), 1);
   auto host_bytes = [&](std::uint32_t slices) -> std::uint64_t {
     if (!dense_host_slabs || !cpu_device) return 0;
     const std::uint64_t area = std::uint64_t{problem.grid->size[0]} * problem.grid->size[1] * sizeof(float);
@@ -229,7 +229,9 @@ void for_each_slab(const std::vector<FdkDevice*>& devices, std::size_t count,
   for (std::size_t s = 0; s < count; ++s)
     if (!distributed || exchange->owner(s, count) == rank) mine.push_back(s);
 
-  SlabQueue queue(devices.size() + 1);
+  bool any_cpu_device = false;
+  for (const FdkDevice* device : devices) any_cpu_device = any_cpu_device || !device->on_gpu();
+  SlabQueue queue(std::max<std::size_t>(1, slabs_waiting(devices.size(), any_cpu_device)));
   std::atomic<std::size_t> next_position{0};
   std::vector<std::thread> workers;
   for (FdkDevice* device : devices) {

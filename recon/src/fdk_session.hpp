@@ -44,10 +44,22 @@ struct SlabPlan {
 SlabPlan plan_slabs(const FdkProblem& problem, const std::vector<DeviceHandle>& devices, const FdkOptions& options,
                     SlabRange range, bool dense_host_slabs = false);
 
+// Finished slabs for_each_slab lets wait for the consumer: one more than the
+// devices where all are GPUs, so that a GPU never idles while the writer
+// catches up; as many as the devices where any is a CPU device, whose cores
+// the writer shares (a slab waiting there buys no speed, and its memory,
+// taken from the slab budget, makes every slab thinner: bench/RESULTS.md,
+// "Thin dense slabs on the CPU").
+constexpr std::size_t slabs_waiting(std::size_t devices, bool any_cpu_device) {
+  return any_cpu_device ? devices : devices + 1;
+}
+
 // Dense slabs for_each_slab holds on the host at once with `devices`
 // producing: one being built per device, as many waiting as the queue takes
-// (devices + 1), one being consumed.
-constexpr std::uint64_t host_slab_copies(std::size_t devices) { return 2 * std::uint64_t{devices} + 2; }
+// (slabs_waiting), one being consumed.
+constexpr std::uint64_t host_slab_copies(std::size_t devices, bool any_cpu_device) {
+  return std::uint64_t{devices} + slabs_waiting(devices, any_cpu_device) + 1;
+}
 
 // Runs produce(device, s, data) for s = 0 .. count − 1 on all devices at
 // once, and consume(s, data) on the calling thread in increasing s; at most

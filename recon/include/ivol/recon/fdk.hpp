@@ -200,6 +200,13 @@ class FdkReconstructor {
 // without cache_filtered_rows. For the disk check before a run.
 std::uint64_t filtered_rows_disk_bound(const ScanGeometry& geometry, const FdkOptions& options);
 
+// The most host memory the filtered rows of a scan of `geometry` can take
+// with `options`: every row of every view where they fit the host budget
+// (FdkOptions::filtered_rows_memory_limit, or the default), else the budget
+// in whole row pairs; 0 without cache_filtered_rows. What the budget holds
+// beyond this is never used, and recon gives it to a CPU device's slabs.
+std::uint64_t filtered_rows_host_bound(const ScanGeometry& geometry, const FdkOptions& options);
+
 FdkReport reconstruct_fdk(ProjectionSource& projections, const ScanGeometry& geometry, const VolumeGrid& grid,
                           const FdkOptions& options, const SlabSink& sink);
 
