@@ -155,7 +155,7 @@ TEST(ReconBuiltSlabs, SameFileAsOneProcess) {
     const std::string one_path = test::temp_path("recon-one.ivol");
     {
       recon::FdkReconstructor reconstructor(scan.projections, scan.geometry);
-      convert::ReconstructionSlabs slabs(reconstructor, scan.grid);
+      convert::ReconstructionSlabs slabs(reconstructor, scan.grid, keep ? options.keep->margin : 0);
       convert::import_to_ivol(slabs, one_path, options);  // the writer's own slabs: one, of 64 slices
     }
     // Writer slabs of 4 slices (9 of them, 3 per rank), each with its margin.

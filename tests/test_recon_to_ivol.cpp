@@ -38,7 +38,7 @@ TEST(ReconToIvol, DenseFileHoldsTheReconstruction) {
   recon::FdkReconstructor reconstructor(scan.projections, scan.geometry);
   for (const ValueEncoding encoding : {ValueEncoding::Binary16, ValueEncoding::Float32}) {
     const std::string path = temp_path("dense.ivol");
-    convert::ReconstructionSlabs slabs(reconstructor, scan.grid);
+    convert::ReconstructionSlabs slabs(reconstructor, scan.grid, 0);
     convert::ImportOptions options;
     options.encoding = encoding;
     options.slab_budget_bytes = 8 * 40 * 36 * 4;  // slabs of 8 slices: several reconstructions
@@ -64,12 +64,15 @@ TEST(ReconToIvol, KeptRegionEqualsDenseWithinBinary16) {
   EXPECT_GT(preview.otsu_threshold, 0.002F);
   EXPECT_LT(preview.otsu_threshold, 0.02F);
   const std::string path = temp_path("kept.ivol");
-  convert::ReconstructionSlabs slabs(reconstructor, scan.grid);
+  convert::ReconstructionSlabs slabs(reconstructor, scan.grid, 2);
   convert::ImportOptions options;
   options.encoding = ValueEncoding::Binary16;
   options.keep = convert::KeepRule{false, preview.otsu_threshold, 2};
   options.slab_budget_bytes = 8 * 40 * 36 * 4;
   const convert::ImportReport report = convert::import_to_ivol(slabs, path, options);
+  // Each slab is read with 2 slices on either side; the 4 read again by the
+  // next slab come from the previous read, so no slice is made twice.
+  EXPECT_EQ(slabs.slices_reconstructed(), scan.grid.size[2]);
   EXPECT_LT(report.kept_voxels, scan.grid.voxel_count() / 2);
   EXPECT_GT(report.kept_voxels, 0U);
   const std::vector<float> stored = read_all(path, scan.grid);

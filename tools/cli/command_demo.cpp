@@ -120,7 +120,7 @@ Runner add_demo_command(CLI::App& app, const GlobalOptions& global) {
 
     // Dense: every voxel, written slab by slab as it is reconstructed.
     start = Clock::now();
-    convert::ReconstructionSlabs slabs(reconstructor, grid);
+    convert::ReconstructionSlabs slabs(reconstructor, grid, 0);  // no keep rule
     convert::ImportOptions dense_options;
     dense_options.encoding = ValueEncoding::Binary16;
     dense_options.metadata = metadata;

@@ -803,7 +803,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     std::vector<RankStats> ranks;
     recon::FdkReport fdk_totals;  // rows filtered and memory peaks
     if (!mpi) {
-      convert::ReconstructionSlabs slabs(reconstructor, grid);
+      convert::ReconstructionSlabs slabs(reconstructor, grid, import.keep ? import.keep->margin : 0);
       written = convert::import_to_ivol(slabs, s->output, import);
       t = slabs.timings();
       gups = slabs.gups();

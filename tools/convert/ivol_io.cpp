@@ -420,6 +420,10 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
                            sample_type_name(shape.type);
   const std::uint64_t slice = slice_voxels(shape.dims, what);
   const bool need_values = !codes || options.keep;
+  // float32 samples are their own float32 values: no second copy (at 2048³
+  // from recon, 512 MiB that the budget did not count).
+  const bool samples_are_values = shape.type == SampleType::Float32;
+  const bool copy_values = need_values && !samples_are_values;
   // What slabs of `slices` hold: samples (and floats, and the keep mask)
   // with their margins, the codes and the writer's own share.
   const auto needed_for = [&](std::uint32_t slices) {
@@ -427,7 +431,7 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
         checked_mul(std::min<std::uint64_t>(std::uint64_t{slices} + 2ull * margin, shape.dims[2]), slice, what);
     const std::uint64_t slab_voxels = checked_mul(std::min(slices, shape.dims[2]), slice, what);
     const std::uint64_t held =
-        checked_mul(most, sample_size(shape.type) + (need_values ? 4 : 0) + (options.keep ? 1 : 0), what);
+        checked_mul(most, sample_size(shape.type) + (copy_values ? 4 : 0) + (options.keep ? 1 : 0), what);
     return checked_add(held, checked_mul(slab_voxels, (codes ? 2 : 0) + kWriterBytesPerVoxel, what), what);
   };
   const std::uint64_t most =
@@ -444,7 +448,8 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
   std::vector<std::uint8_t> samples;
   checked_resize(samples, most * sample_size(shape.type), what + " (samples)");
   std::vector<float> values;
-  checked_resize(values, need_values ? most : 0, what + " (as float32)");
+  checked_resize(values, copy_values ? most : 0, what + " (as float32)");
+  const float* value_data = samples_are_values ? reinterpret_cast<const float*>(samples.data()) : values.data();
   std::vector<std::uint16_t> code_values;
   checked_resize(code_values, codes ? slab_voxels : 0, what + " (as uint16 codes)");
   ProgressTicker ticker(options.progress, shape.dims[2]);
@@ -455,16 +460,16 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
     const std::uint32_t hi = std::min(shape.dims[2], z0 + n + margin);
     source.read(lo, hi - lo, samples.data());
     const std::uint64_t centre = (z0 - lo) * slice;
-    if (!values.empty()) to_float(shape, samples.data(), (hi - lo) * slice, values.data());
+    if (copy_values) to_float(shape, samples.data(), (hi - lo) * slice, values.data());
     std::vector<std::uint8_t> keep;
-    if (options.keep) keep = slab_keep_mask(values.data(), shape.dims, lo, hi, z0, n, report.threshold, margin);
+    if (options.keep) keep = slab_keep_mask(value_data, shape.dims, lo, hi, z0, n, report.threshold, margin);
     if (codes) {
       to_codes(shape.type, samples.data() + centre * sample_size(shape.type), n * slice, build.value_offset,
                code_values.data());
       writer.add_slab(code_values.data(), options.keep ? keep.data() : nullptr);
     } else {
-      tally_encoding(build.encoding, values.data() + centre, n * slice, report.encoding_loss);
-      writer.add_slab(values.data() + centre, options.keep ? keep.data() : nullptr);
+      tally_encoding(build.encoding, value_data + centre, n * slice, report.encoding_loss);
+      writer.add_slab(value_data + centre, options.keep ? keep.data() : nullptr);
     }
     ticker.update(z0 + n);
   }

@@ -31,8 +31,9 @@ void add(recon::FdkTimings& into, const recon::FdkTimings& t) {
 
 }  // namespace
 
-ReconstructionSlabs::ReconstructionSlabs(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid)
-    : reconstructor_(reconstructor), grid_(grid) {
+ReconstructionSlabs::ReconstructionSlabs(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid,
+                                         unsigned keep_margin)
+    : reconstructor_(reconstructor), grid_(grid), reread_slices_(2 * keep_margin) {
   shape_ = float_volume_of(grid);
 }
 
@@ -63,8 +64,9 @@ void ReconstructionSlabs::read(std::uint32_t z0, std::uint32_t count, void* out)
     device_bytes_per_slab_ = std::max(device_bytes_per_slab_, report.device_bytes_per_slab);
     slices_reconstructed_ += z0 + count - first;
   }
-  cache_first_ = z0;
-  cache_.assign(target, target + count * slice);
+  const std::uint32_t kept = std::min(count, reread_slices_);
+  cache_first_ = z0 + count - kept;
+  cache_.assign(target + (count - kept) * slice, target + count * slice);
   read_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 

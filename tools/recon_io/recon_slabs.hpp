@@ -19,10 +19,13 @@ DenseVolume float_volume_of(const recon::VolumeGrid& grid);
 
 class ReconstructionSlabs final : public SlabReader {
  public:
-  // float32 samples, the grid's voxel size and origin in mm.
-  ReconstructionSlabs(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid);
-  // Slices read twice in a row (import_to_ivol re-reads a keep mask's margin)
-  // are kept from the previous read, not reconstructed again.
+  // float32 samples, the grid's voxel size and origin in mm. `keep_margin`:
+  // the margin of import_to_ivol's keep rule (0 without one).
+  ReconstructionSlabs(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid, unsigned keep_margin);
+  // import_to_ivol reads each slab with `keep_margin` slices on either side,
+  // so a read's last 2 × keep_margin slices are read again next: they are
+  // kept, not reconstructed again, and nothing else is (at 2048³ a copy of
+  // every read was 512 MiB that --memory did not count).
   void read(std::uint32_t z0, std::uint32_t count, void* out) override;
 
   // Sums over every reconstruction so far.
@@ -48,8 +51,9 @@ class ReconstructionSlabs final : public SlabReader {
   std::uint64_t filtered_rows_disk_bytes_ = 0;
   std::uint64_t device_bytes_per_slab_ = 0;
   double read_seconds_ = 0.0;
+  std::uint32_t reread_slices_ = 0;
   std::uint32_t cache_first_ = 0;
-  std::vector<float> cache_;  // the last read's slices
+  std::vector<float> cache_;  // the last read's last reread_slices_ slices
 };
 
 }  // namespace ivol::convert
