@@ -10,6 +10,8 @@
 #include <cstring>
 #include <stdexcept>
 
+#include "ivol/error.hpp"
+
 namespace ivol::recon::detail {
 
 namespace {
@@ -125,8 +127,8 @@ void RecordSpool::get(std::size_t record, void* bytes) {
   planes_.resize(bytes_);
   const std::size_t got = ZSTD_decompress(planes_.data(), bytes_, packed_.data(), stored.size);
   if (ZSTD_isError(got) || got != bytes_)
-    throw std::runtime_error(what_ + ": a record read back from the temporary file in '" + directory_ +
-                             "' does not decompress to its size");
+    throw Error(ErrorClass::Io, what_ + ": a record read back from the temporary file in '" + directory_ +
+                                    "' does not decompress to its size");
   join_planes(planes_.data(), out, bytes_ / element_, element_);
 }
 
@@ -136,9 +138,9 @@ void RecordSpool::open_file() {
   std::string name = directory_ + "/ivol-preview-XXXXXX";
   fd_ = ::mkstemp(name.data());
   if (fd_ < 0)
-    throw std::runtime_error(what_ + " exceed the preview's memory budget of " + std::to_string(allowance_.limit) +
-                             " bytes and no temporary file can be made in '" + directory_ +
-                             "': " + std::strerror(errno));
+    throw Error(ErrorClass::Io, what_ + " exceed the preview's memory budget of " + std::to_string(allowance_.limit) +
+                                    " bytes and no temporary file can be made in '" + directory_ +
+                                    "': " + std::strerror(errno));
   ::unlink(name.c_str());
 }
 
@@ -148,8 +150,9 @@ void RecordSpool::transfer(bool write, std::uint64_t offset, char* at, std::uint
     const ssize_t n = write ? ::pwrite(fd_, at, size, where) : ::pread(fd_, at, size, where);
     if (n < 0 && errno == EINTR) continue;
     if (n <= 0)
-      throw std::runtime_error(what_ + ": " + std::string(write ? "writing" : "reading") + " the temporary file in '" +
-                               directory_ + "' failed: " + (n < 0 ? std::strerror(errno) : "end of file"));
+      throw Error(ErrorClass::Io, what_ + ": " + std::string(write ? "writing" : "reading") +
+                                      " the temporary file in '" + directory_ +
+                                      "' failed: " + (n < 0 ? std::strerror(errno) : "end of file"));
     at += n, size -= static_cast<std::uint64_t>(n), where += n;
   }
 }

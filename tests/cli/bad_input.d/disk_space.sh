@@ -32,6 +32,16 @@ if mount -t tmpfs -o size=256k tmpfs "$ds_small" 2>/dev/null; then
     "$IVOL" convert "$ds/noise16.raw" "$out/x.ivol" --dims 64,64,64 --type u16 --structure octree --temp-dir "$ds_small"
   bad disk-space-tmpfs-unchecked 2 "No space left" -- \
     "$IVOL" convert "$ds/noise16.raw" "$out/x.ivol" --dims 64,64,64 --type u16 --structure octree --temp-dir "$ds_small" --no-disk-check
+  # The detection preview's cells beyond its quarter of a 4 MiB --memory
+  # spill (compressed) to the same full tmpfs: an io error naming the
+  # directory, no output, nothing left in the tmpfs.
+  rm -f "$out/x.ivol"
+  bad disk-space-tmpfs-preview-spill 2 "error (io): the detection preview's cells: writing the temporary file in '$ds_small' failed: No space left on device" -- \
+    "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 256 --voxel 0.09 --structure octree --memory 4 -o "$out/x.ivol" --temp-dir "$ds_small" --no-disk-check
+  if [ -e "$out/x.ivol" ]; then
+    echo "FAIL disk-space-tmpfs-preview-output: $out/x.ivol was left behind"
+    failed=$((failed + 1))
+  fi
   if [ -n "$(ls -A "$ds_small")" ]; then
     echo "FAIL disk-space-tmpfs-clean: the spill directory holds $(ls -A "$ds_small" | tr '\n' ' ')"
     failed=$((failed + 1))
