@@ -41,7 +41,8 @@ void read_all(int fd, void* data, std::size_t bytes, std::uint64_t offset, const
   while (bytes > 0) {
     const ssize_t n = ::pread(fd, p, bytes, static_cast<off_t>(offset));
     if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) throw Error(ErrorClass::Io, system_error("FDK: reading filtered rows from a temporary file in " + where));
+    if (n <= 0)
+      throw Error(ErrorClass::Io, system_error("FDK: reading filtered rows from a temporary file in " + where));
     p += n;
     bytes -= static_cast<std::size_t>(n);
     offset += static_cast<std::uint64_t>(n);
@@ -82,9 +83,9 @@ void FilteredRows::open_file() {
   std::string name = temp_directory_ + "/ivol-filtered-rows-XXXXXX";
   fd_ = ::mkstemp(name.data());
   if (fd_ < 0)
-    throw Error(ErrorClass::Io, system_error("FDK: the filtered rows exceed their memory budget of " +
-                                            std::to_string(host_budget_) +
-                                            " bytes and no temporary file can be made in '" + temp_directory_ + "'"));
+    throw Error(ErrorClass::Io,
+                system_error("FDK: the filtered rows exceed their memory budget of " + std::to_string(host_budget_) +
+                             " bytes and no temporary file can be made in '" + temp_directory_ + "'"));
   ::unlink(name.c_str());
 }
 

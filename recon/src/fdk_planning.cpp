@@ -108,8 +108,8 @@ SlabPlan plan_slabs(const FdkProblem& problem, const std::vector<detail::DeviceH
       cpu_device = true;
       native = native || (problem.native_cpu_backprojection && detail::native_backprojection_available());
     }
-  const std::uint64_t copies_per_device =
-      (detail::host_slab_copies(devices.size(), cpu_device) + devices.size() - 1) / std::max<std::size_t>(devices.size(), 1);
+  const std::uint64_t copies_per_device = (detail::host_slab_copies(devices.size(), cpu_device) + devices.size() - 1) /
+                                          std::max<std::size_t>(devices.size(), 1);
   auto host_bytes = [&](std::uint32_t slices) -> std::uint64_t {
     if (!dense_host_slabs || !cpu_device) return 0;
     const std::uint64_t area = std::uint64_t{problem.grid->size[0]} * problem.grid->size[1] * sizeof(float);

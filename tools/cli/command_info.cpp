@@ -32,8 +32,8 @@ std::string in_memory_line(const nlohmann::json& d) {
            " x " + std::to_string(b[1].get<std::uint64_t>()) + " x " + std::to_string(b[2].get<std::uint64_t>()) +
            " bricks at full resolution\n";
   }
-  return "  in memory      " + bytes + " (" + d["inner_nodes"].dump() + " inner nodes, " +
-         d["values"].dump() + " values)\n";
+  return "  in memory      " + bytes + " (" + d["inner_nodes"].dump() + " inner nodes, " + d["values"].dump() +
+         " values)\n";
 }
 
 // A bricked grid's levels: full resolution and each stored level of detail.

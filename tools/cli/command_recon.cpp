@@ -699,9 +699,9 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     // (at 2048³ from 120 views of 384², 71 MB of its 512 MiB) goes to the CPU
     // devices' slabs as well.
     options.filtered_rows_memory_limit = memory_share(*s);
-    s->rows_spare = memory_share(*s) - std::min(memory_share(*s), recon::filtered_rows_host_bound(scan.geometry, options));
-    options.cpu_device_memory_limit =
-        (s->structure.empty() ? 2 * memory_share(*s) : memory_share(*s)) + s->rows_spare;
+    s->rows_spare =
+        memory_share(*s) - std::min(memory_share(*s), recon::filtered_rows_host_bound(scan.geometry, options));
+    options.cpu_device_memory_limit = (s->structure.empty() ? 2 * memory_share(*s) : memory_share(*s)) + s->rows_spare;
     // Filtered rows beyond their share go where the writer's spill goes:
     // --temp-dir, else $TMPDIR, else the output's directory.
     options.temp_directory = s->temp_dir;

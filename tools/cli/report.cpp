@@ -69,8 +69,7 @@ nlohmann::json describe_file(Reader& reader) {
       }
   const std::uint64_t brick = std::uint64_t{1} << v.cell_log2;
   auto bricks_of = [&](const Dims& d) {
-    return nlohmann::json::array(
-        {(d[0] + brick - 1) / brick, (d[1] + brick - 1) / brick, (d[2] + brick - 1) / brick});
+    return nlohmann::json::array({(d[0] + brick - 1) / brick, (d[1] + brick - 1) / brick, (d[2] + brick - 1) / brick});
   };
   for (unsigned l = 0; bricked && l <= v.depth && l < 64; ++l) {
     if (l > 0 && bricked_blocks[l] == 0) continue;
