@@ -24,14 +24,17 @@ std::string stored_levels_line(const nlohmann::json& d) {
   return "  levels stored  " + list + " (levels of detail read from the file, not summed from full resolution)\n";
 }
 
+// "X x Y x Z" of a JSON triple of counts.
+std::string times(const nlohmann::json& n) {
+  return std::to_string(n[0].get<std::uint64_t>()) + " x " + std::to_string(n[1].get<std::uint64_t>()) + " x " +
+         std::to_string(n[2].get<std::uint64_t>());
+}
+
 std::string in_memory_line(const nlohmann::json& d) {
   const std::string bytes = human_bytes(d["in_memory_bytes"].get<double>());
-  if (d["structure"].get<std::string>() == "bricked") {
-    const auto& b = d["bricks"];
-    return "  in memory      " + bytes + " decoded (every voxel); " + std::to_string(b[0].get<std::uint64_t>()) +
-           " x " + std::to_string(b[1].get<std::uint64_t>()) + " x " + std::to_string(b[2].get<std::uint64_t>()) +
+  if (d["structure"].get<std::string>() == "bricked")
+    return "  in memory      " + bytes + " decoded (every voxel); " + times(d["bricks"]) +
            " bricks at full resolution\n";
-  }
   return "  in memory      " + bytes + " (" + d["inner_nodes"].dump() + " inner nodes, " + d["values"].dump() +
          " values)\n";
 }
@@ -40,14 +43,8 @@ std::string in_memory_line(const nlohmann::json& d) {
 void print_bricked_levels(const nlohmann::json& d) {
   std::cout << "  levels         level  dimensions            bricks           blocks   bytes\n";
   for (const auto& l : d["levels"]) {
-    const auto& n = l["dims"];
-    const auto& b = l["bricks"];
-    const std::string dims = std::to_string(n[0].get<std::uint64_t>()) + " x " +
-                             std::to_string(n[1].get<std::uint64_t>()) + " x " +
-                             std::to_string(n[2].get<std::uint64_t>());
-    const std::string bricks = std::to_string(b[0].get<std::uint64_t>()) + " x " +
-                               std::to_string(b[1].get<std::uint64_t>()) + " x " +
-                               std::to_string(b[2].get<std::uint64_t>());
+    const std::string dims = times(l["dims"]);
+    const std::string bricks = times(l["bricks"]);
     char line[200];
     std::snprintf(line, sizeof line, "                 %5u  %-20s  %-15s %8llu   %s\n", l["level"].get<unsigned>(),
                   dims.c_str(), bricks.c_str(), l["blocks"].get<unsigned long long>(),

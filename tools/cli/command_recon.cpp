@@ -55,9 +55,6 @@ struct ReconSettings {
   std::uint32_t nested_cell = 16;
   unsigned preview_factor = 0;   // 0: the rule's own (2 for detection, 4 for the preview rule and --keep)
   std::uint64_t memory_mib = 0;  // 0: memory_budget's default
-  // The part of the filtered rows' quarter of --memory they cannot use
-  // (recon::filtered_rows_host_bound); CPU devices' slabs take it.
-  std::uint64_t rows_spare = 0;
   MemoryBudget memory;           // what the run uses (set when it starts)
   std::string temp_dir;          // the octree writer's spill file (--temp-dir)
   bool no_disk_check = false;
@@ -703,9 +700,9 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     // (at 2048³ from 120 views of 384², 71 MB of its 512 MiB) goes to the CPU
     // devices' slabs as well.
     options.filtered_rows_memory_limit = memory_share(*s);
-    s->rows_spare =
+    const std::uint64_t rows_spare =
         memory_share(*s) - std::min(memory_share(*s), recon::filtered_rows_host_bound(scan.geometry, options));
-    options.cpu_device_memory_limit = (s->structure.empty() ? 2 * memory_share(*s) : memory_share(*s)) + s->rows_spare;
+    options.cpu_device_memory_limit = (s->structure.empty() ? 2 * memory_share(*s) : memory_share(*s)) + rows_spare;
     // Filtered rows beyond their share go where the writer's spill goes:
     // --temp-dir, else $TMPDIR, else the output's directory.
     options.temp_directory = s->temp_dir;
