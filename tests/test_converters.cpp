@@ -239,7 +239,7 @@ TEST(Converters, AutoStructureChoosesBrickedGridsWithinTheMemoryBudget) {
   const std::string path = test::temp_path("auto.ivol");
   ImportReport report = import_to_ivol(v, path, options);
   EXPECT_EQ(report.structure, "bricked");
-  EXPECT_NE(report.structure_reason.find("lossless every-voxel 16-bit"), std::string::npos);
+  EXPECT_NE(report.structure_reason.find("every voxel kept, as 16-bit"), std::string::npos);
   {
     Reader reader(path);
     EXPECT_EQ(reader.layout().kind, StructureKind::Bricked);

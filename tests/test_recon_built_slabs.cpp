@@ -21,6 +21,7 @@
 #include "ivol/recon/fdk.hpp"
 #include "ivol/recon/phantom.hpp"
 #include "ivol_io.hpp"
+#include "recon_built_layers.hpp"
 #include "recon_built_slabs.hpp"
 #include "recon_built_structure.hpp"
 #include "recon_slabs.hpp"
@@ -147,10 +148,16 @@ std::vector<StructureRankOutcome> run_structure_ranks(Scan& scan, int ranks, con
 
 TEST(ReconBuiltSlabs, SameFileAsOneProcess) {
   Scan scan;
-  for (const bool keep : {false, true}) {
+  enum Kind { kOctree, kKeep, kBricked };
+  for (const Kind kind : {kOctree, kKeep, kBricked}) {
+    const bool keep = kind == kKeep;
     convert::ImportOptions options;
     options.encoding = ValueEncoding::Binary16;
-    options.structure = convert::StructureChoice::Octree;  // as ivol recon asks: ranks build octree subtrees
+    // Octree: the ranks build its subtrees; with a keep mask, ivol recon's
+    // choice. Bricked: ivol recon's dense default, the ranks' slabs its
+    // stored values; layers of 16 (16, 16 and 1 slices) in slabs of 4.
+    options.structure = kind == kOctree ? convert::StructureChoice::Octree : convert::StructureChoice::Auto;
+    if (kind == kBricked) options.brick_log2 = 4;
     if (keep) options.keep = convert::KeepRule{false, 0.01F, 2};
     const std::string one_path = test::temp_path("recon-one.ivol");
     {
@@ -170,8 +177,11 @@ TEST(ReconBuiltSlabs, SameFileAsOneProcess) {
     }
     EXPECT_EQ(slices, scan.grid.size[2]);
     EXPECT_EQ(ranks[0].built.written.slab_slices, 4U);
+    EXPECT_EQ(ranks[0].built.written.structure, kind == kBricked ? "bricked" : "octree");
+    EXPECT_FALSE(ranks[0].built.written.lossless);  // float32 as binary16, counted on every rank
+    EXPECT_GT(ranks[0].built.written.max_abs_error, 0.0);
     EXPECT_GT(mailbox.bytes_to_rank0, 0U);
-    EXPECT_EQ(test::read_bytes(path), test::read_bytes(one_path)) << (keep ? "with" : "without") << " a keep mask";
+    EXPECT_EQ(test::read_bytes(path), test::read_bytes(one_path)) << "kind " << kind;
   }
 }
 
@@ -186,21 +196,34 @@ TEST(ReconBuiltSlabs, WriterSlabsGiveEveryRankOne) {
 
 TEST(ReconBuiltSlabs, RankFailingWhileBuildingEndsTheRun) {
   Scan scan;
-  convert::ImportOptions options;
-  const std::string path = test::temp_path("recon-fails.ivol");
-  std::filesystem::remove(path);
-  ::setenv("IVOL_TEST_FAIL_BUILD_RANK", "2", 1);
-  Mailbox mailbox;
-  const std::vector<RankOutcome> ranks = run_ranks(scan, 3, path, options, 4, mailbox);
-  ::unsetenv("IVOL_TEST_FAIL_BUILD_RANK");
-  EXPECT_EQ(ranks[0].error, "rank 2: building the subtrees of slab 2: failure injected (IVOL_TEST_FAIL_BUILD_RANK)");
-  EXPECT_EQ(ranks[2].error, "building the subtrees of slab 2: failure injected (IVOL_TEST_FAIL_BUILD_RANK)");
-  EXPECT_EQ(ranks[1].error, "");
-  EXPECT_FALSE(std::filesystem::exists(path));
-  const std::string directory = std::filesystem::path(path).parent_path().string();
-  for (const auto& entry : std::filesystem::directory_iterator(directory))
-    EXPECT_EQ(entry.path().filename().string().rfind(".recon-fails.ivol.tmp-", 0), std::string::npos)
-        << entry.path() << " left behind";
+  for (const bool bricked : {false, true}) {
+    convert::ImportOptions options;  // float32: an octree
+    if (bricked) options.encoding = ValueEncoding::Binary16;
+    const std::string path = test::temp_path("recon-fails.ivol");
+    std::filesystem::remove(path);
+    ::setenv("IVOL_TEST_FAIL_BUILD_RANK", "2", 1);
+    Mailbox mailbox;
+    const std::vector<RankOutcome> ranks = run_ranks(scan, 3, path, options, 4, mailbox);
+    ::unsetenv("IVOL_TEST_FAIL_BUILD_RANK");
+    const std::string step = bricked ? "storing the values of slab 2" : "building the subtrees of slab 2";
+    EXPECT_EQ(ranks[0].error, "rank 2: " + step + ": failure injected (IVOL_TEST_FAIL_BUILD_RANK)");
+    EXPECT_EQ(ranks[2].error, step + ": failure injected (IVOL_TEST_FAIL_BUILD_RANK)");
+    EXPECT_EQ(ranks[1].error, "");
+    EXPECT_FALSE(std::filesystem::exists(path));
+    const std::string directory = std::filesystem::path(path).parent_path().string();
+    for (const auto& entry : std::filesystem::directory_iterator(directory))
+      EXPECT_EQ(entry.path().filename().string().rfind(".recon-fails.ivol.tmp-", 0), std::string::npos)
+          << entry.path() << " left behind";
+  }
+}
+
+TEST(ReconBuiltSlabs, LayerSlabsGiveEveryRankOne) {
+  EXPECT_EQ(convert::distributed_layer_slab_slices(32, 33, 1, 0), 32U);  // layers of 32 and 1
+  EXPECT_EQ(convert::distributed_layer_slab_slices(32, 33, 2, 0), 32U);  // 2 slabs already
+  EXPECT_EQ(convert::distributed_layer_slab_slices(32, 33, 4, 0), 8U);   // 16, 16 and 1 are 3: 4 x 8 and 1
+  EXPECT_EQ(convert::distributed_layer_slab_slices(32, 33, 2, 3), 2U);   // at most 3: 2
+  EXPECT_EQ(convert::distributed_layer_slab_slices(24, 24, 4, 0), 6U);   // a layer of 24 in 4
+  EXPECT_EQ(convert::distributed_layer_slab_slices(2, 2, 8, 0), 1U);     // never below one slice
 }
 
 TEST(ReconBuiltStructure, SameOctreeFileAsOneProcess) {

@@ -2,10 +2,10 @@
 # ivol recon under mpirun (docs/distributed.md): 2 and 4 ranks on this one
 # machine must give the single process's file byte for byte (dense, --keep
 # otsu with its distributed preview, --structure octree and nested), the
-# ranks other than 0 must build the octree subtrees of their slabs (dense,
-# keep, octree)
-# and compress blocks of it, rank 0 must receive fewer bytes than the float32
-# slabs, and a rank that fails (while reconstructing, building or
+# ranks other than 0 must build the octree subtrees of their slabs (keep,
+# octree) and compress blocks of it, or turn their slabs into a bricked
+# grid's stored values (dense), rank 0 must receive fewer bytes than the
+# float32 slabs, and a rank that fails (while reconstructing, building or
 # compressing) must end the whole run with its message, a non-zero exit and
 # nothing left behind. --structure octree: every rank fills and builds the
 # writer's slabs it owns, and the file is the same with coarse leaves that
@@ -96,16 +96,23 @@ import json, os, sys, subprocess
 mode, ranks = os.environ['MODE'], int(os.environ['RANKS'])
 report = json.load(open('$work/report.json'))
 r = report['ranks']
-blocks = json.loads(subprocess.run(['$IVOL', 'info', '--json', 'json-%s-%d.ivol' % (mode, ranks)],
-                                   capture_output=True, check=True).stdout)['blocks']
+info = json.loads(subprocess.run(['$IVOL', 'info', '--json', 'json-%s-%d.ivol' % (mode, ranks)],
+                                 capture_output=True, check=True).stdout)
+blocks = info['blocks']
 checks = [len(r) == ranks, r[1]['bytes_sent'] > 0,
-          sum(k['bytes_sent'] for k in r[1:]) == r[0]['bytes_received'],
-          # every block but the metadata block, compressed somewhere
-          sum(k['blocks_compressed'] for k in r) == blocks - 1,
-          all(k['block_bytes_sent'] > 0 and k['blocks_compressed'] > 0 for k in r[1:]) or mode == 'nested']
+          sum(k['bytes_sent'] for k in r[1:]) == r[0]['bytes_received']]
+if mode == 'dense':
+    # a bricked grid: the ranks send their slabs' stored 16-bit values, and
+    # rank 0's writer encodes the bricks on its own threads
+    checks += [info['structure'] == 'bricked', report['structure'] == 'bricked',
+               sum(k['blocks_compressed'] for k in r) == 0]
+else:
+    # every block but the metadata block, compressed somewhere
+    checks += [info['structure'] != 'bricked', sum(k['blocks_compressed'] for k in r) == blocks - 1,
+               all(k['block_bytes_sent'] > 0 and k['blocks_compressed'] > 0 for k in r[1:]) or mode == 'nested']
 if mode in ('dense', 'keep', 'octree'):
-    # every rank built the subtrees of its writer slabs, and every slice
-    # was built once
+    # every rank built its writer slabs (the subtrees of an octree's, a
+    # bricked grid's stored values), and every slice was built once
     checks += [all(k['slabs_built'] > 0 and k['build_seconds'] > 0 for k in r),
                sum(k['slices_built'] for k in r) == 24]
 if mode in ('octree', 'nested'):
@@ -127,8 +134,9 @@ sys.exit(0 if all(checks) else 1)" >>"$work/log" 2>&1; then
   done
 done
 
-# What rank 0 receives: built subtrees (binary16 values and node words),
-# fewer bytes than the float32 slices they were built from. The writer's own
+# What rank 0 receives: built subtrees (binary16 values and node words), or
+# a bricked grid's binary16 values, fewer bytes than the float32 slices they
+# were built from. The writer's own
 # slabs (16 slices here, two of them): with thin slabs of tiny subtrees the
 # subtrees' records would outweigh their voxels.
 for mode in dense keep; do
@@ -174,9 +182,12 @@ injected_failure() {
     done
   done
 }
-# While building its subtrees, and while compressing blocks for rank 0.
-injected_failure IVOL_TEST_FAIL_BUILD_RANK "building the subtrees of slab @" build dense keep octree
-injected_failure IVOL_TEST_FAIL_COMPRESSION_RANK "compressing blocks for rank 0" compression dense octree
+# While building its subtrees (its stored values, for a bricked grid), and
+# while compressing blocks for rank 0 (an octree's: a bricked grid's bricks
+# are encoded by rank 0's writer).
+injected_failure IVOL_TEST_FAIL_BUILD_RANK "building the subtrees of slab @" build keep octree
+injected_failure IVOL_TEST_FAIL_BUILD_RANK "storing the values of slab @" build dense
+injected_failure IVOL_TEST_FAIL_COMPRESSION_RANK "compressing blocks for rank 0" compression keep octree
 
 # Rank 1 reads a copy of the scan whose compressed chunks are damaged: it
 # fails while reconstructing its slabs, tells rank 0, which removes its

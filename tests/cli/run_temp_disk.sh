@@ -44,11 +44,15 @@ check convert-keep-temp-within-1.2x within "$(field "$work/keep.json" temp_bytes
 "$IVOL" convert -q --json --dims 48,48,48 --type u16 "$work/noisy.raw" "$work/bricked.ivol" > "$work/bricked.json"
 check convert-bricked-no-temp [ "$(field "$work/bricked.json" temp_bytes)" = 0 ]
 
-# recon: dense (octree writer) and --structure octree
+# recon: dense (a bricked grid: no spill), dense with --keep (the octree
+# writer) and --structure octree
 "$IVOL" -q phantom pencil-holder --views 24 --detector 48 --radius 12 -o "$work/p.raw"
 scan=(--geometry "$work/p.xml" --pitch 1.5 --detector 48,48 --views 24)
-"$IVOL" recon "$work/p.raw" "${scan[@]}" --size 32 --voxel 0.8 -o "$work/r.ivol" --temp-dir "$work/opt" --json \
-  > "$work/r.json" 2> "$work/r.err"
+"$IVOL" recon "$work/p.raw" "${scan[@]}" --size 32 --voxel 0.8 -o "$work/d.ivol" --temp-dir "$work/opt" --json \
+  > "$work/d.json" 2> "$work/d.err"
+check recon-dense-bricked-no-temp [ "$(field "$work/d.json" structure)/$(field "$work/d.json" temp_bytes)" = bricked/0 ]
+"$IVOL" recon "$work/p.raw" "${scan[@]}" --size 32 --voxel 0.8 --keep threshold=otsu,margin=2 -o "$work/r.ivol" \
+  --temp-dir "$work/opt" --json > "$work/r.json" 2> "$work/r.err"
 check recon-temp-bytes-within-1.2x within "$(field "$work/r.json" temp_bytes)" "$(field "$work/r.json" file_bytes)"
 "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 32 --voxel 0.8 --structure octree -o "$work/s.ivol" \
   --temp-dir "$work/opt" --json > "$work/s.json" 2> "$work/s.err"

@@ -1,5 +1,6 @@
 // ivol recon PROJECTIONS -o OUT.ivol: cone-beam FDK on OpenCL, written
 // straight into an .ivol file slab by slab.
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #if defined(__GLIBC__)
@@ -10,7 +11,9 @@
 #include <iostream>
 #include <optional>
 #include <sstream>
+#include <utility>
 
+#include "bricked_import.hpp"
 #include "commands.hpp"
 #include "disk_space.hpp"
 #include "fixity.hpp"
@@ -100,6 +103,48 @@ nlohmann::json memory_json(const ReconSettings& s, const recon::FdkReport& fdk, 
           {"filtered_rows_host_bytes", fdk.filtered_rows_host_bytes},
           {"filtered_rows_disk_bytes", fdk.filtered_rows_disk_bytes},
           {"writer_slab_budget_bytes", memory_share(s)}};
+}
+
+// A dense run's writer: import_to_ivol's options for the reconstruction.
+convert::ImportOptions dense_import_options(const ReconSettings& s) {
+  convert::ImportOptions import;
+  // What convert would write for float32 samples as binary16: a bricked grid
+  // (bricked_import.hpp), an octree with --keep, float32 or format 1.2.
+  // Distributed, the ranks make the same file (recon_built_slabs.hpp).
+  import.structure = convert::StructureChoice::Auto;
+  import.encoding = parse_encoding(s.encoding);
+  import.framed_blocks = s.format_version == "1.3";
+  import.slab_budget_bytes = memory_share(s);
+  import.layer_budget_bytes = memory_share(s);
+  import.memory_bytes = s.memory.bytes;  // the writer's own checks, by the same budget
+  import.temp_directory = s.temp_dir;
+  import.check_disk_space = false;  // checked before the reconstruction
+  return import;
+}
+
+// A bricked grid's layer holds its 16-bit values and, at worst, as many
+// bytes of encoded bricks: at 2048² a layer of 32 slices needs 1 GiB, more
+// than the writer's quarter of a 2 GiB --memory. Where it does not fit the
+// quarter, the layer takes what the filtered rows leave unused (`spare`), up
+// to its samples read 8 slices at a time; returns what it takes beyond the
+// quarter (the CPU devices' slabs do without it) and whether the output is
+// a bricked grid.
+std::pair<std::uint64_t, bool> take_layer_budget(const recon::VolumeGrid& grid, convert::ImportOptions& import,
+                                                 std::uint64_t spare) {
+  const convert::DenseVolume shape = convert::float_volume_of(grid);
+  const ValueEncoding encoding = *import.encoding;
+  convert::ImportReport choice;
+  if (convert::choose_bricked(shape, import, encoding, choice)) return {0, true};
+  const std::uint64_t share = import.layer_budget_bytes;
+  import.layer_budget_bytes = share + spare;
+  if (!convert::choose_bricked(shape, import, encoding, choice)) {
+    import.layer_budget_bytes = share;
+    return {0, false};
+  }
+  const std::uint32_t layer = std::min<std::uint32_t>(shape.dims[2], 1u << import.brick_log2);
+  import.layer_budget_bytes = std::clamp(convert::bricked_layer_bytes(shape, import, encoding, std::min(layer, 8u)),
+                                         convert::bricked_layer_bytes(shape, import, encoding, 1), share + spare);
+  return {import.layer_budget_bytes - share, true};
 }
 
 recon::VolumeGrid make_grid(const ReconSettings& s) {
@@ -702,7 +747,12 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     options.filtered_rows_memory_limit = memory_share(*s);
     const std::uint64_t rows_spare =
         memory_share(*s) - std::min(memory_share(*s), recon::filtered_rows_host_bound(scan.geometry, options));
-    options.cpu_device_memory_limit = (s->structure.empty() ? 2 * memory_share(*s) : memory_share(*s)) + rows_spare;
+    convert::ImportOptions import = dense_import_options(*s);
+    const auto [layer_extra, bricked_output] = s->structure.empty() && s->keep.empty()
+                                                   ? take_layer_budget(grid, import, rows_spare)
+                                                   : std::pair<std::uint64_t, bool>{0, false};
+    options.cpu_device_memory_limit =
+        (s->structure.empty() ? 2 * memory_share(*s) : memory_share(*s)) + rows_spare - layer_extra;
     // Filtered rows beyond their share go where the writer's spill goes:
     // --temp-dir, else $TMPDIR, else the output's directory.
     options.temp_directory = s->temp_dir;
@@ -722,9 +772,9 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       if (!s->structure.empty() && s->refine == "detection")
         detection =
             detection_options(*s, options, s->preview_factor ? s->preview_factor : kDetection.factor, std::nullopt);
-      const ReconDiskNeeds needs =
-          recon_disk_needs(scan.geometry, grid, options, detection, parse_encoding(s->encoding),
-                           s->structure.empty() || s->structure == "octree", s->output, s->temp_dir);
+      const ReconDiskNeeds needs = recon_disk_needs(
+          scan.geometry, grid, options, detection, parse_encoding(s->encoding),
+          (s->structure.empty() && !bricked_output) || s->structure == "octree", s->output, s->temp_dir);
       convert::require_disk_space(needs.reconstruction);
       convert::require_disk_space(needs.preview);
     }
@@ -743,16 +793,6 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     for (const std::string& n : scan.notes)
       if (!quiet) std::cerr << "ivol recon: " << n << "\n";
 
-    convert::ImportOptions import;
-    // Ranks under mpirun build octree subtrees of their slabs; one process
-    // writes the same octree (not a grid convert might choose).
-    import.structure = convert::StructureChoice::Octree;
-    import.encoding = parse_encoding(s->encoding);
-    import.framed_blocks = s->format_version == "1.3";
-    import.slab_budget_bytes = memory_share(*s);
-    import.memory_bytes = s->memory.bytes;  // the writer's own checks, by the same budget
-    import.temp_directory = s->temp_dir;
-    import.check_disk_space = false;  // checked above
     double preview_seconds = 0.0;
     const unsigned keep_factor = s->preview_factor ? s->preview_factor : 4;
     if (!s->keep.empty()) {
@@ -840,6 +880,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
                              {"views", scan.geometry.view_count()},
                              {"devices", reconstructor.device_names()},
                              {"file_bytes", written.file_bytes},
+                             {"structure", written.structure},
+                             {"structure_reason", written.structure_reason},
                              {"temp_bytes", written.temp_bytes},
                              {"kept_voxels", written.kept_voxels},
                              {"gups", gups},
@@ -865,7 +907,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
                 << reconstructor.device_names().front() << " in " << total << " s (filtering " << t.filtering
                 << " s, backprojection " << t.backprojection << " s = " << gups << " GUPS, writing " << writing << " s";
       if (mpi) std::cerr << ", building rank 0's slabs " << building << " s";
-      std::cerr << "); " << s->output << ": " << human_bytes(written.file_bytes) << "\n";
+      std::cerr << "); " << s->output << ": " << human_bytes(written.file_bytes)
+                << (written.structure == "bricked" ? ", a bricked grid" : ", an octree") << "\n";
       if (mpi) print_ranks(ranks);
     }
     return kExitOk;

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <functional>
 
+#include "bricked_import.hpp"
 #include "disk_space.hpp"
 #include "ivol/binary16.hpp"
 #include "ivol/bricked_writer.hpp"
@@ -15,6 +16,7 @@
 #include "ivol/keep_mask.hpp"
 #include "ivol/streaming_writer.hpp"
 #include "ivol/writer.hpp"
+#include "sample_values.hpp"
 #include "sizes.hpp"
 
 namespace ivol::convert {
@@ -63,41 +65,6 @@ ValueEncoding lossless_encoding(SampleType type) {
 
 namespace {
 
-// Samples of one slab of any type as float32 and, for the uint16 encoding,
-// as codes (sample - offset).
-void to_float(const DenseVolume& shape, const std::uint8_t* samples, std::uint64_t count, float* out) {
-  const std::size_t size = sample_size(shape.type);
-  for (std::uint64_t i = 0; i < count; ++i) {
-    const std::uint8_t* p = samples + i * size;
-    switch (shape.type) {
-      case SampleType::UInt8:
-        out[i] = *p;
-        break;
-      case SampleType::UInt16: {
-        std::uint16_t v;
-        std::memcpy(&v, p, 2);
-        out[i] = v;
-        break;
-      }
-      case SampleType::Int16: {
-        std::int16_t v;
-        std::memcpy(&v, p, 2);
-        out[i] = v;
-        break;
-      }
-      case SampleType::Float16: {
-        std::uint16_t v;
-        std::memcpy(&v, p, 2);
-        out[i] = binary16_to_float(v);
-        break;
-      }
-      case SampleType::Float32:
-        std::memcpy(&out[i], p, 4);
-        break;
-    }
-  }
-}
-
 // Otsu's threshold of a volume read slab by slab: one pass for the range, one
 // for the histogram.
 float streamed_otsu(SlabReader& source, std::uint32_t slab) {
@@ -131,25 +98,6 @@ float streamed_otsu(SlabReader& source, std::uint32_t slab) {
 }
 
 // Integer samples as the uint16 encoding's codes (sample - offset).
-void to_codes(SampleType type, const std::uint8_t* samples, std::uint64_t count, double offset, std::uint16_t* out) {
-  for (std::uint64_t i = 0; i < count; ++i) {
-    const std::uint8_t* p = samples + i * sample_size(type);
-    double v = 0;
-    if (type == SampleType::UInt8) {
-      v = *p;
-    } else if (type == SampleType::UInt16) {
-      std::uint16_t u;
-      std::memcpy(&u, p, 2);
-      v = u;
-    } else {
-      std::int16_t t;
-      std::memcpy(&t, p, 2);
-      v = t;
-    }
-    out[i] = static_cast<std::uint16_t>(v - offset);
-  }
-}
-
 // Bytes per voxel of a slab that the streaming writer holds besides the
 // samples given to it (its stored values and the subtrees it builds): about
 // 2 measured on a 16384^2 uint16 slice (1.39 GB peak in all); 4 leaves room.
@@ -265,105 +213,41 @@ std::uint64_t memory_that_would_do(const Dims& dims, const ImportOptions& option
   return memory;
 }
 
-// StructureChoice::Auto's rule, and whether a bricked grid can hold the file.
-// `layer_bytes`: what import_bricked holds for one layer of bricks.
-bool choose_bricked(const ImportOptions& options, ValueEncoding encoding, std::uint64_t layer_bytes,
-                    ImportReport& report) {
-  std::string against;
-  if (options.keep) against = "a keep rule coarsens regions, which only an octree holds";
-  if (encoding == ValueEncoding::Float32) against = "float32 values (codecs 3 and 4 hold 16-bit values)";
-  if (!options.byte_planes) against = "--codec zstd (codec 1 only, for format 1.0/1.1 readers)";
-  if (!options.framed_blocks) against = "format 1.2 (a bricked grid needs format 1.3)";
-  if (options.structure == StructureChoice::Bricked) {
-    if (!against.empty()) throw Error(ErrorClass::InvalidArgument, "--structure bricked: " + against);
-    return true;
-  }
-  // An explicit choice records no reason (the command in the provenance
-  // says it), so that a file asked for as an octree is the one ivol.write
-  // and every other octree writer make from the same samples.
-  if (options.structure == StructureChoice::Octree) return false;
-  if (against.empty() && layer_bytes > memory_budget(options.memory_bytes))
-    against = "a layer of bricks (" + mib_text(layer_bytes) +
-              ") exceeds the memory budget (--memory), a slab of the "
-              "octree writer does not";
-  if (!against.empty()) {
-    report.structure_reason = against;
-    return false;
-  }
-  report.structure_reason =
-      "lossless every-voxel 16-bit values: bricks predicted in 3-D (codec 3) or masked around their background "
-      "(codec 4) are smaller than an octree of one-voxel leaves (--structure octree overrides)";
-  return true;
-}
-
-// The bricked regular grid, a layer of bricks at a time.
+// The bricked regular grid, a layer of bricks at a time, its samples read
+// as many slices at once as the layer's budget allows.
 void import_bricked(SlabReader& source, const std::string& path, const ImportOptions& options,
                     const StreamingOptions& streaming, ImportReport& report) {
   const DenseVolume& shape = source.shape();
   const BuildOptions& build = streaming.build;
-  BrickedOptions bricked;
-  bricked.brick_log2 = options.brick_log2;
-  bricked.zstd_level = options.zstd_level;
-  bricked.encoding = build.encoding;
-  bricked.value_scale = build.value_scale;
-  bricked.value_offset = build.value_offset;
-  BrickedGridWriter writer(path, shape.dims, bricked);
-  const bool codes = build.encoding == ValueEncoding::UInt16;
-  const std::uint32_t layer = std::min<std::uint32_t>(shape.dims[2], 1u << options.brick_log2);
+  BrickedImport writer(shape, path, options, streaming);
+  const std::uint32_t layer = writer.layer_slices();
+  const std::uint32_t read = bricked_read_slices(shape, options, build.encoding);
   const std::string what = path + ": a layer of " + std::to_string(layer) + " slices of " +
                            std::to_string(shape.dims[0]) + "x" + std::to_string(shape.dims[1]) + " " +
                            sample_type_name(shape.type);
-  const std::uint64_t voxels = checked_mul(layer, slice_voxels(shape.dims, what), what);
-  // Samples, float32 (binary16 from another type), the stored values, and the encoded layer.
-  const bool raw_binary16 = shape.type == SampleType::Float16 && !codes;
-  const std::uint64_t per_voxel = sample_size(shape.type) + (codes || raw_binary16 ? 0 : 4) + 2 + 2;
-  require_within_budget(checked_mul(voxels, per_voxel, what), memory_budget(options.memory_bytes), what);
+  require_within_budget(bricked_layer_bytes(shape, options, build.encoding, std::max(read, 1u)),
+                        bricked_layer_budget(options), what);
+  const std::uint64_t slice = slice_voxels(shape.dims, what);
   std::vector<std::uint8_t> samples;
-  checked_resize(samples, voxels * sample_size(shape.type), what + " (samples)");
-  std::vector<float> values;
-  checked_resize(values, codes || raw_binary16 ? 0 : voxels, what + " (as float32)");
+  checked_resize(samples, checked_mul(checked_mul(read, slice, what), sample_size(shape.type), what),
+                 what + " (samples)");
+  std::vector<float> scratch;
   std::vector<std::uint16_t> stored;
-  checked_resize(stored, voxels, what + " (as 16-bit values)");
+  checked_resize(stored, checked_mul(layer, slice, what), what + " (as 16-bit values)");
+  LossTally loss;
   ProgressTicker ticker(options.progress, shape.dims[2]);
   while (writer.next_layer_count() > 0) {
     const std::uint32_t z0 = writer.next_layer_first(), n = writer.next_layer_count();
-    const std::uint64_t count = std::uint64_t{n} * shape.dims[0] * shape.dims[1];
-    source.read(z0, n, samples.data());
-    if (codes) {
-      to_codes(shape.type, samples.data(), count, build.value_offset, stored.data());
-    } else if (raw_binary16) {  // every bit as it is: -0 and NaN payloads included
-      std::memcpy(stored.data(), samples.data(), count * 2);
-    } else {
-      to_float(shape, samples.data(), count, values.data());
-      tally_encoding(build.encoding, values.data(), count, report.encoding_loss);
-      for (std::uint64_t i = 0; i < count; ++i) stored[i] = float_to_binary16_keep_nan(values[i]);
+    for (std::uint32_t z = 0; z < n; z += read) {
+      const std::uint32_t count = std::min(read, n - z);
+      source.read(z0 + z, count, samples.data());
+      samples_to_stored(shape, build, samples.data(), std::uint64_t{count} * slice, scratch,
+                        stored.data() + std::uint64_t{z} * slice, loss);
+      ticker.update(z0 + z + count);
     }
     writer.add_layer(stored.data());
-    ticker.update(z0 + n);
   }
-  if (!options.allow_lossy)
-    refuse_loss(report.encoding_loss, shape.voxel_count(),
-                (options.what.empty() ? path : options.what) + ": " + sample_type_name(shape.type) + " samples as " +
-                    encoding_name(build.encoding),
-                encoding_name(build.encoding),
-                "--encoding " + std::string(encoding_name(lossless_encoding(shape.type))));
-  Metadata metadata = options.metadata;
-  if (options.complete_metadata) options.complete_metadata(metadata);
-  if (shape.has_geometry) {
-    metadata.voxel_size = shape.voxel_size;
-    metadata.origin = shape.origin;
-    metadata.unit = shape.unit;
-  }
-  report.lossless = report.encoding_loss.exact();
-  report.max_abs_error = report.encoding_loss.max_error;
-  metadata.structure["kind"] = "bricked";
-  metadata.structure["brick"] = 1u << options.brick_log2;
-  metadata.structure["chosen_because"] = report.structure_reason;
-  metadata.structure["source_encoding"] = sample_type_name(shape.type);
-  metadata.structure["lossless"] = report.lossless;
-  metadata.structure["max_abs_error"] = report.max_abs_error;
-  report.file_bytes = writer.finish(metadata).file_bytes;
-  report.kept_voxels = shape.voxel_count();
+  writer.finish(loss, report);
 }
 
 }  // namespace
@@ -374,33 +258,11 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
   ImportReport report;
   const StreamingOptions streaming = import_streaming_options(shape, options, report);
   const BuildOptions& build = streaming.build;
-  // Samples, float32 (binary16 from another type), the 16-bit values and the
-  // encoded layer, for a layer of bricks (import_bricked), and the stored
-  // levels' sums; 128-bit so that no
-  // declared size overflows before it is compared.
   const bool codes = build.encoding == ValueEncoding::UInt16;
-  const bool raw_binary16 = shape.type == SampleType::Float16 && !codes;
-  __extension__ const unsigned __int128 layer_voxels =
-      static_cast<unsigned __int128>(std::min<std::uint32_t>(shape.dims[2], 1u << options.brick_log2)) * shape.dims[0] *
-      shape.dims[1];
-  // The stored levels of detail (spec §8A.5, from level 3): per level a
-  // slice of sums (8 bytes and a flag) and a layer of its bricks, and the
-  // 16-bit codes' tables.
-  __extension__ unsigned __int128 levels_bytes = 65536 * 17;
-  for (unsigned k = 3; k <= depth_for(shape.dims); ++k) {
-    const Dims level = lod_dims(shape.dims, k);
-    levels_bytes += static_cast<unsigned __int128>(level[0]) * level[1] *
-                    (9 + 2 * std::min<std::uint64_t>(level[2], std::uint64_t{1} << options.brick_log2));
-  }
-  __extension__ const unsigned __int128 layer_bytes =
-      layer_voxels * (sample_size(shape.type) + (codes || raw_binary16 ? 0 : 4) + 2 + 2) + levels_bytes;
-  const std::uint64_t layer =
-      layer_bytes > ~std::uint64_t{0} ? ~std::uint64_t{0} : static_cast<std::uint64_t>(layer_bytes);
-  const bool bricked = choose_bricked(options, build.encoding, layer, report);
+  const bool bricked = choose_bricked(shape, options, build.encoding, report);
   if (options.check_disk_space)
     require_disk_space(ivol_disk_needs(shape.dims, build.encoding, !bricked, path, options.temp_directory));
   if (bricked) {
-    report.structure = "bricked";
     import_bricked(source, path, options, streaming, report);
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return report;

@@ -50,6 +50,7 @@ struct ImportOptions {
   bool framed_blocks = true;              // format 1.3 framing (salvageable); false: format 1.2
   std::uint64_t slab_budget_bytes = 0;    // 0: the library's default
   std::uint64_t memory_bytes = 0;         // all the conversion may hold (--memory); 0: kDefaultMemoryBytes
+  std::uint64_t layer_budget_bytes = 0;   // a bricked grid's layer (bricked_import.hpp); 0: memory_bytes
   std::shared_ptr<BlockEncoder> encoder;  // where blocks are compressed; null: here (ivol/block_encoder.hpp)
   std::string temp_directory;             // the octree writer's spill (--temp-dir); empty: TMPDIR, else the output's
   bool check_disk_space = true;           // refuse before any work when the disks lack room (disk_space.hpp)

@@ -7,8 +7,10 @@
 #include <stdexcept>
 #include <vector>
 
+#include "bricked_import.hpp"
 #include "ivol/octree_slab_builder.hpp"
 #include "ivol/streaming_writer.hpp"
+#include "recon_built_layers.hpp"
 #include "recon_slabs.hpp"
 
 namespace ivol::convert {
@@ -18,8 +20,9 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-// A later slab's report into the first's (which says the devices and plan).
-void add(recon::FdkReport& into, const recon::FdkReport& report) {
+}  // namespace
+
+void add_fdk_report(recon::FdkReport& into, const recon::FdkReport& report) {
   recon::FdkTimings& t = into.timings;
   t.setup += report.timings.setup;
   t.reading += report.timings.reading;
@@ -34,8 +37,6 @@ void add(recon::FdkReport& into, const recon::FdkReport& report) {
   into.filtered_rows_host_bytes = std::max(into.filtered_rows_host_bytes, report.filtered_rows_host_bytes);
   into.filtered_rows_disk_bytes = std::max(into.filtered_rows_disk_bytes, report.filtered_rows_disk_bytes);
 }
-
-}  // namespace
 
 int rank_told_to_fail_building() {
   const char* value = std::getenv("IVOL_TEST_FAIL_BUILD_RANK");
@@ -57,8 +58,17 @@ DistributedBuild reconstruct_distributed(recon::FdkReconstructor& reconstructor,
                                          const std::function<void()>& every_slab_received) {
   const auto start = std::chrono::steady_clock::now();
   const DenseVolume shape = float_volume_of(grid);
+  // Every rank must make the same choice (they could differ only in
+  // --memory): a bricked grid's layers or the octree writer's slabs.
+  ImportReport choice;
+  const ValueEncoding encoding = import_streaming_options(shape, options, choice).build.encoding;
+  if (exchange.agree(choose_bricked(shape, options, encoding, choice) ? 1 : 0,
+                     "the output's structure (1: a bricked grid, 0: an octree)") == 1)
+    return reconstruct_distributed_bricked(reconstructor, grid, path, options, exchange, most_slab_slices,
+                                           every_slab_received);
   DistributedBuild result;
   ImportReport& report = result.written;
+  report.structure_reason = choice.structure_reason;  // finish_import records it, as import_to_ivol's does
   StreamingOptions streaming = import_streaming_options(shape, options, report);
   streaming.slab_slices = static_cast<std::uint32_t>(
       exchange.agree(distributed_slab_slices(shape.dims, streaming, exchange.size(), most_slab_slices),
@@ -93,7 +103,7 @@ DistributedBuild reconstruct_distributed(recon::FdkReconstructor& reconstructor,
     if (result.slabs_built == 0)
       result.fdk = fdk;
     else
-      add(result.fdk, fdk);
+      add_fdk_report(result.fdk, fdk);
     result.reconstruction_seconds += seconds_since(reconstructing);
     const auto building = std::chrono::steady_clock::now();
     std::vector<std::uint8_t> keep;

@@ -39,6 +39,9 @@ struct DistributedBuild {
   double waiting_seconds = 0;         // rank 0: waiting for the other ranks' slabs
 };
 
+// A later slab's report into the first's (which says the devices and plan).
+void add_fdk_report(recon::FdkReport& into, const recon::FdkReport& report);
+
 // The writer's slab thickness for a distributed run: its own choice for the
 // volume and options, halved until every rank has `slabs_per_rank` slabs
 // (while slabs are thicker than one slice) and until it is at most
@@ -50,7 +53,9 @@ std::uint32_t distributed_slab_slices(const Dims& dims, const StreamingOptions& 
 // building its first slab, or -1.
 int rank_told_to_fail_building();
 
-// This rank's part; collective over `exchange`'s ranks. `reconstructor` must
+// This rank's part; collective over `exchange`'s ranks. Where import_to_ivol
+// would write a bricked grid (choose_bricked), the ranks make its layers
+// instead (recon_built_layers.hpp). `reconstructor` must
 // have no exchange of its own: each rank reconstructs its slabs by itself.
 // Rank 0 writes `path`, calling every_slab_received() once every slab is in
 // (then the other ranks can compress its blocks), and options.encoder for its

@@ -17,8 +17,10 @@ bad disk-space-recon-structure 2 "not enough free disk" -- \
   env IVOL_TEST_FREE_BYTES=1000 "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 16 --voxel 0.4 --structure octree -o "$out/x.ivol"
 bad temp-dir-missing-convert 2 "$ds/nowhere: cannot write the octree writer's spill file there" -- \
   "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,16 --temp-dir "$ds/nowhere"
+# (--keep: an octree; a dense recon without it is a bricked grid, with no spill)
 bad temp-dir-missing-recon 2 "$ds/nowhere: cannot write the octree writer's spill file there" -- \
-  "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 16 --voxel 0.4 -o "$out/x.ivol" --temp-dir "$ds/nowhere"
+  "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 16 --voxel 0.4 --keep threshold=otsu,margin=2 -o "$out/x.ivol" \
+  --temp-dir "$ds/nowhere"
 bad tmpdir-missing-convert 2 "$ds/nowhere: cannot write the octree writer's spill file there" -- \
   env TMPDIR="$ds/nowhere" "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,16
 # The real free space: a 256 KiB tmpfs as the spill directory of a 256 KiB

@@ -1,0 +1,161 @@
+#include "bricked_import.hpp"
+
+#include <algorithm>
+#include <cstring>
+
+#include "ivol/binary16.hpp"
+#include "ivol/error.hpp"
+#include "ivol/geometry.hpp"
+#include "sample_values.hpp"
+#include "sizes.hpp"
+
+namespace ivol::convert {
+namespace {
+
+BrickedOptions bricked_options(const ImportOptions& options, const StreamingOptions& streaming) {
+  BrickedOptions bricked;
+  bricked.brick_log2 = options.brick_log2;
+  bricked.zstd_level = options.zstd_level;
+  bricked.encoding = streaming.build.encoding;
+  bricked.value_scale = streaming.build.value_scale;
+  bricked.value_offset = streaming.build.value_offset;
+  return bricked;
+}
+
+std::uint32_t layer_slices_of(const DenseVolume& shape, const ImportOptions& options) {
+  return std::min<std::uint32_t>(shape.dims[2], 1u << std::min(options.brick_log2, 31u));
+}
+
+// Bytes per sample read: the sample, and a float32 copy where binary16
+// rounds a type other than float32.
+std::uint64_t read_bytes_per_voxel(const DenseVolume& shape, ValueEncoding encoding) {
+  const bool codes = encoding == ValueEncoding::UInt16;
+  const bool raw_binary16 = shape.type == SampleType::Float16 && !codes;
+  const bool float_copy = !codes && !raw_binary16 && shape.type != SampleType::Float32;
+  return sample_size(shape.type) + (float_copy ? 4 : 0);
+}
+
+}  // namespace
+
+std::uint64_t bricked_layer_bytes(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding,
+                                  std::uint32_t slices) {
+  // 128-bit, so that no declared size overflows before it is compared.
+  __extension__ using Wide = unsigned __int128;
+  const Wide slice = Wide{shape.dims[0]} * shape.dims[1];
+  const Wide layer = slice * layer_slices_of(shape, options);
+  // The stored levels of detail (spec §8A.5, from level 3): per level a
+  // slice of sums (8 bytes and a flag) and a layer of its bricks, and the
+  // 16-bit codes' tables.
+  Wide levels = 65536 * 17;
+  for (unsigned k = 3; k <= depth_for(shape.dims); ++k) {
+    const Dims level = lod_dims(shape.dims, k);
+    levels += Wide{level[0]} * level[1] *
+              (9 + 2 * std::min<std::uint64_t>(level[2], std::uint64_t{1} << std::min(options.brick_log2, 31u)));
+  }
+  const Wide bytes = layer * (2 + 2) + slice * slices * read_bytes_per_voxel(shape, encoding) + levels;
+  return bytes > ~std::uint64_t{0} ? ~std::uint64_t{0} : static_cast<std::uint64_t>(bytes);
+}
+
+std::uint64_t bricked_layer_budget(const ImportOptions& options) {
+  return options.layer_budget_bytes ? options.layer_budget_bytes : memory_budget(options.memory_bytes);
+}
+
+std::uint32_t bricked_read_slices(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding) {
+  const std::uint64_t budget = bricked_layer_budget(options);
+  std::uint32_t slices = layer_slices_of(shape, options);
+  if (bricked_layer_bytes(shape, options, encoding, 1) > budget) return 0;
+  // Halving keeps the reads whole divisions of a layer of 2^b slices.
+  while (slices > 1 && bricked_layer_bytes(shape, options, encoding, slices) > budget) slices = (slices + 1) / 2;
+  return slices;
+}
+
+bool choose_bricked(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding,
+                    ImportReport& report) {
+  std::string against;
+  if (options.keep) against = "a keep rule coarsens regions, which only an octree holds";
+  if (encoding == ValueEncoding::Float32) against = "float32 values (codecs 3 and 4 hold 16-bit values)";
+  if (!options.byte_planes) against = "--codec zstd (codec 1 only, for format 1.0/1.1 readers)";
+  if (!options.framed_blocks) against = "format 1.2 (a bricked grid needs format 1.3)";
+  if (options.structure == StructureChoice::Bricked) {
+    if (!against.empty()) throw Error(ErrorClass::InvalidArgument, "--structure bricked: " + against);
+    report.structure = "bricked";
+    return true;
+  }
+  // An explicit choice records no reason (the command in the provenance
+  // says it), so that a file asked for as an octree is the one ivol.write
+  // and every other octree writer make from the same samples.
+  if (options.structure == StructureChoice::Octree) {
+    report.structure = "octree";
+    return false;
+  }
+  if (against.empty() && bricked_read_slices(shape, options, encoding) == 0)
+    against = "a layer of bricks (" + mib_text(bricked_layer_bytes(shape, options, encoding, 1)) +
+              ") exceeds the memory budget (--memory), a slab of the octree writer does not";
+  if (!against.empty()) {
+    report.structure = "octree";
+    report.structure_reason = against;
+    return false;
+  }
+  report.structure = "bricked";
+  report.structure_reason =
+      "every voxel kept, as 16-bit values: bricks predicted in 3-D (codec 3) or masked around their background "
+      "(codec 4) are smaller than an octree of one-voxel leaves (--structure octree overrides)";
+  return true;
+}
+
+void samples_to_stored(const DenseVolume& shape, const BuildOptions& build, const std::uint8_t* samples,
+                       std::uint64_t count, std::vector<float>& scratch, std::uint16_t* stored, LossTally& loss) {
+  if (build.encoding == ValueEncoding::UInt16) {
+    to_codes(shape.type, samples, count, build.value_offset, stored);
+    return;
+  }
+  if (shape.type == SampleType::Float16) {  // every bit as it is: -0 and NaN payloads included
+    std::memcpy(stored, samples, count * 2);
+    return;
+  }
+  const float* values = reinterpret_cast<const float*>(samples);
+  if (shape.type != SampleType::Float32) {
+    checked_resize(scratch, count, "a slab of samples as float32");
+    to_float(shape, samples, count, scratch.data());
+    values = scratch.data();
+  }
+  tally_encoding(build.encoding, values, count, loss);
+  for (std::uint64_t i = 0; i < count; ++i) stored[i] = float_to_binary16_keep_nan(values[i]);
+}
+
+BrickedImport::BrickedImport(const DenseVolume& shape, const std::string& path, const ImportOptions& options,
+                             const StreamingOptions& streaming)
+    : shape_(shape),
+      options_(options),
+      path_(path),
+      encoding_(streaming.build.encoding),
+      layer_slices_(layer_slices_of(shape, options)),
+      writer_(path, shape.dims, bricked_options(options, streaming)) {}
+
+void BrickedImport::finish(const LossTally& loss, ImportReport& report) {
+  report.encoding_loss = loss;
+  if (!options_.allow_lossy)
+    refuse_loss(loss, shape_.voxel_count(),
+                (options_.what.empty() ? path_ : options_.what) + ": " + sample_type_name(shape_.type) +
+                    " samples as " + encoding_name(encoding_),
+                encoding_name(encoding_), "--encoding " + std::string(encoding_name(lossless_encoding(shape_.type))));
+  Metadata metadata = options_.metadata;
+  if (options_.complete_metadata) options_.complete_metadata(metadata);
+  if (shape_.has_geometry) {
+    metadata.voxel_size = shape_.voxel_size;
+    metadata.origin = shape_.origin;
+    metadata.unit = shape_.unit;
+  }
+  report.lossless = loss.exact();
+  report.max_abs_error = loss.max_error;
+  metadata.structure["kind"] = "bricked";
+  metadata.structure["brick"] = 1u << options_.brick_log2;
+  metadata.structure["chosen_because"] = report.structure_reason;
+  metadata.structure["source_encoding"] = sample_type_name(shape_.type);
+  metadata.structure["lossless"] = report.lossless;
+  metadata.structure["max_abs_error"] = report.max_abs_error;
+  report.file_bytes = writer_.finish(metadata).file_bytes;
+  report.kept_voxels = shape_.voxel_count();
+}
+
+}  // namespace ivol::convert

@@ -1,0 +1,165 @@
+#include "recon_built_layers.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <stdexcept>
+#include <vector>
+
+#include "bricked_import.hpp"
+#include "recon_slabs.hpp"
+
+namespace ivol::convert {
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+struct LayerSlab {
+  std::uint32_t z0, count;
+  bool last_of_layer;
+};
+
+// The slabs in z order: each layer cut into slabs of `slices` (its last
+// slab thinner where the layer is).
+std::vector<LayerSlab> layer_slabs(std::uint32_t depth, std::uint32_t layer, std::uint32_t slices) {
+  std::vector<LayerSlab> slabs;
+  for (std::uint32_t l0 = 0; l0 < depth; l0 += layer) {
+    const std::uint32_t end = std::min(depth, l0 + layer);
+    for (std::uint32_t z = l0; z < end; z += slices) slabs.push_back({z, std::min(slices, end - z), z + slices >= end});
+  }
+  return slabs;
+}
+
+// A slab's stored values, then what rounding them changed, as bytes: the
+// ranks run the same binary, so LossTally travels as it is in memory.
+std::vector<std::uint8_t> pack(const std::uint16_t* stored, std::uint64_t count, const LossTally& loss) {
+  std::vector<std::uint8_t> bytes(count * 2 + sizeof loss);
+  std::memcpy(bytes.data(), stored, count * 2);
+  std::memcpy(bytes.data() + count * 2, &loss, sizeof loss);
+  return bytes;
+}
+
+}  // namespace
+
+std::uint32_t distributed_layer_slab_slices(std::uint32_t layer_slices, std::uint32_t depth, int ranks,
+                                            std::uint32_t most_slices) {
+  std::uint32_t slab = std::max(layer_slices, 1u);
+  const auto slabs = [&](std::uint32_t slices) { return layer_slabs(depth, layer_slices, slices).size(); };
+  while (slab > 1 && slabs(slab) < static_cast<std::size_t>(ranks)) slab = (slab + 1) / 2;
+  while (most_slices > 0 && slab > most_slices) slab = (slab + 1) / 2;
+  return slab;
+}
+
+DistributedBuild reconstruct_distributed_bricked(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid,
+                                                 const std::string& path, const ImportOptions& options,
+                                                 recon::SlabExchange& exchange, std::uint32_t most_slab_slices,
+                                                 const std::function<void()>& every_slab_received) {
+  const auto start = std::chrono::steady_clock::now();
+  const DenseVolume shape = float_volume_of(grid);
+  DistributedBuild result;
+  ImportReport& report = result.written;
+  const StreamingOptions streaming = import_streaming_options(shape, options, report);
+  if (!choose_bricked(shape, options, streaming.build.encoding, report))
+    throw std::logic_error("a distributed bricked grid needs a volume that import_to_ivol writes as one");
+  const std::uint32_t depth = shape.dims[2];
+  const std::uint32_t layer = std::min<std::uint32_t>(depth, 1u << options.brick_log2);
+  // Within the layer's budget, as one process reads it (bricked_read_slices).
+  const std::uint32_t most = std::min(most_slab_slices ? most_slab_slices : layer,
+                                      std::max(1u, bricked_read_slices(shape, options, streaming.build.encoding)));
+  const auto slab_slices =
+      static_cast<std::uint32_t>(exchange.agree(distributed_layer_slab_slices(layer, depth, exchange.size(), most),
+                                                "the slab thickness in slices (a bricked grid's layers)"));
+  report.slab_slices = slab_slices;
+  const std::vector<LayerSlab> slabs = layer_slabs(depth, layer, slab_slices);
+  const std::size_t slice = std::size_t{shape.dims[0]} * shape.dims[1];
+  const bool injected_failure = rank_told_to_fail_building() == exchange.rank();
+
+  // One of this rank's slabs: reconstructed, then as stored values.
+  std::vector<float> values, scratch;
+  auto build_mine = [&](std::size_t k, std::uint16_t* stored, LossTally& loss) {
+    const LayerSlab& s = slabs[k];
+    values.resize(std::size_t{s.count} * slice);
+    const auto reconstructing = std::chrono::steady_clock::now();
+    const recon::FdkReport fdk = reconstructor.reconstruct(
+        grid,
+        [&](std::uint32_t k0, std::uint32_t k1, const float* data) {
+          std::memcpy(values.data() + (k0 - s.z0) * slice, data, (k1 - k0) * slice * sizeof(float));
+        },
+        s.z0, s.z0 + s.count);
+    if (result.slabs_built == 0)
+      result.fdk = fdk;
+    else
+      add_fdk_report(result.fdk, fdk);
+    result.reconstruction_seconds += seconds_since(reconstructing);
+    const auto building = std::chrono::steady_clock::now();
+    if (injected_failure)
+      throw std::runtime_error("storing the values of slab " + std::to_string(k) +
+                               ": failure injected (IVOL_TEST_FAIL_BUILD_RANK)");
+    samples_to_stored(shape, streaming.build, reinterpret_cast<const std::uint8_t*>(values.data()),
+                      std::uint64_t{s.count} * slice, scratch, stored, loss);
+    result.build_seconds += seconds_since(building);
+    ++result.slabs_built;
+    result.slices_built += s.count;
+  };
+
+  if (exchange.rank() != 0) {
+    try {
+      std::vector<std::uint16_t> stored;
+      for (std::size_t k = 0; k < slabs.size(); ++k) {
+        if (exchange.owner(k, slabs.size()) != exchange.rank()) continue;
+        stored.resize(std::size_t{slabs[k].count} * slice);
+        LossTally loss;
+        build_mine(k, stored.data(), loss);
+        exchange.send_bytes(k, pack(stored.data(), stored.size(), loss));
+      }
+    } catch (const std::exception& error) {
+      exchange.report_failure(error.what());  // rank 0 is waiting for this rank's slabs
+      throw;
+    }
+    return result;
+  }
+
+  BrickedImport writer(shape, path, options, streaming);
+  std::vector<std::uint16_t> layer_values(std::size_t{layer} * slice);
+  std::vector<std::uint8_t> received;
+  LossTally loss;
+  for (std::size_t k = 0; k < slabs.size(); ++k) {
+    const LayerSlab& s = slabs[k];
+    std::uint16_t* into = layer_values.data() + std::size_t{s.z0 - writer.next_layer_first()} * slice;
+    const std::size_t count = std::size_t{s.count} * slice;
+    const int from = exchange.owner(k, slabs.size());
+    if (from == 0) {
+      LossTally mine;
+      build_mine(k, into, mine);
+      loss.merge(mine);
+    } else {
+      const auto waiting = std::chrono::steady_clock::now();
+      exchange.receive_bytes(k, from, received);
+      result.waiting_seconds += seconds_since(waiting);
+      LossTally theirs;
+      if (received.size() != count * 2 + sizeof theirs)
+        throw std::runtime_error("rank " + std::to_string(from) + " sent " + std::to_string(received.size()) +
+                                 " bytes for slab " + std::to_string(k) + ", not " +
+                                 std::to_string(count * 2 + sizeof theirs));
+      std::memcpy(into, received.data(), count * 2);
+      std::memcpy(&theirs, received.data() + count * 2, sizeof theirs);
+      loss.merge(theirs);
+    }
+    if (s.last_of_layer) {
+      const auto adding = std::chrono::steady_clock::now();
+      writer.add_layer(layer_values.data());
+      result.writing_seconds += seconds_since(adding);
+    }
+    if (options.progress) options.progress(s.z0 + s.count, depth);
+  }
+  every_slab_received();
+  const auto finishing = std::chrono::steady_clock::now();
+  writer.finish(loss, report);
+  result.writing_seconds += seconds_since(finishing);
+  report.seconds = seconds_since(start);
+  return result;
+}
+
+}  // namespace ivol::convert
