@@ -10,6 +10,13 @@
 //
 // Prints one JSON line per setting; with SWEEP_DIAG=1 also the first missed
 // object voxels of each setting (position, dense value, the cell's pooled value).
+// With SWEEP_POST=1, for the detection rule at 0.3: the missed object voxels
+// by the edge of the coarse leaf holding them, and what a check after the
+// structure FDK would catch that refines every coarse leaf whose largest
+// octant sample exceeds s2 × the samples' Otsu's threshold (the octant
+// samples of 2³ leaves are voxel centres, taken from the dense volume; of
+// larger leaves, trilinear in the dense volume: an estimate).
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -107,6 +114,75 @@ int main(int argc, char** argv) {
           for (std::uint32_t y = 0; y < b.count[1]; ++y)
             for (std::uint32_t x = 0; x < b.count[0]; ++x)
               fine[(std::size_t{b.origin[2] + z} * size + b.origin[1] + y) * size + b.origin[0] + x] = 1;
+      }
+      if (std::getenv("SWEEP_POST") && c.scale > 0.29 && c.scale < 0.31) {
+        auto at = [&](double x, double y, double z) {
+          auto cl = [&](double v) { return std::min(std::max(v, 0.0), size - 1.0); };
+          x = cl(x);
+          y = cl(y);
+          z = cl(z);
+          const std::size_t x0 = static_cast<std::size_t>(x), y0 = static_cast<std::size_t>(y),
+                            z0 = static_cast<std::size_t>(z);
+          const std::size_t x1 = std::min<std::size_t>(x0 + 1, size - 1), y1 = std::min<std::size_t>(y0 + 1, size - 1),
+                            z1 = std::min<std::size_t>(z0 + 1, size - 1);
+          const double fx = x - x0, fy = y - y0, fz = z - z0;
+          auto d = [&](std::size_t i, std::size_t j, std::size_t k) {
+            return static_cast<double>(dense[(k * size + j) * size + i]);
+          };
+          const double a = d(x0, y0, z0) * (1 - fx) + d(x1, y0, z0) * fx,
+                       b = d(x0, y1, z0) * (1 - fx) + d(x1, y1, z0) * fx;
+          const double e = d(x0, y0, z1) * (1 - fx) + d(x1, y0, z1) * fx,
+                       g = d(x0, y1, z1) * (1 - fx) + d(x1, y1, z1) * fx;
+          return ((a * (1 - fy) + b * fy) * (1 - fz) + (e * (1 - fy) + g * fy) * fz);
+        };
+        std::vector<std::uint16_t> edge_of(dense.size(), 1);
+        std::vector<float> leaf_max(dense.size(), 0.0F);
+        for (const Brick& b : octree->bricks()) {
+          if (b.voxel[0] == 1 && b.voxel[1] == 1 && b.voxel[2] == 1) continue;
+          for (std::uint32_t cz = 0; cz < b.count[2]; ++cz)
+            for (std::uint32_t cy = 0; cy < b.count[1]; ++cy)
+              for (std::uint32_t cx = 0; cx < b.count[0]; ++cx) {
+                const double ox = b.origin[0] + cx * double(b.voxel[0]), oy = b.origin[1] + cy * double(b.voxel[1]),
+                             oz = b.origin[2] + cz * double(b.voxel[2]);
+                double m = -1e30;
+                for (int o = 0; o < 8; ++o)
+                  m = std::max(m, at(ox + ((o & 1) ? 0.75 : 0.25) * b.voxel[0] - 0.5,
+                                     oy + ((o & 2) ? 0.75 : 0.25) * b.voxel[1] - 0.5,
+                                     oz + ((o & 4) ? 0.75 : 0.25) * b.voxel[2] - 0.5));
+                for (std::uint32_t z = 0; z < b.voxel[2]; ++z)
+                  for (std::uint32_t y = 0; y < b.voxel[1]; ++y)
+                    for (std::uint32_t x = 0; x < b.voxel[0]; ++x) {
+                      const std::size_t i = (std::size_t{static_cast<std::uint32_t>(oz) + z} * size +
+                                             static_cast<std::uint32_t>(oy) + y) *
+                                                size +
+                                            static_cast<std::uint32_t>(ox) + x;
+                      if (i >= dense.size()) continue;
+                      edge_of[i] = static_cast<std::uint16_t>(b.voxel[0]);
+                      leaf_max[i] = static_cast<float>(m);
+                    }
+              }
+        }
+        std::uint64_t by_edge[64] = {};
+        for (std::size_t i = 0; i < dense.size(); ++i)
+          if (dense[i] > object_threshold && !fine[i]) ++by_edge[std::min<int>(edge_of[i], 63)];
+        std::printf("post %s missed-by-edge:", name.c_str());
+        for (int e = 2; e < 64; e *= 2) std::printf(" %d:%llu", e, (unsigned long long)by_edge[e]);
+        std::printf("  (samples otsu %.4g, dense otsu %.4g)\n", c.preview.otsu_threshold, object_threshold);
+        for (double s2 : {0.3, 0.5, 0.7, 0.9, 1.0}) {
+          const float t2 = static_cast<float>(s2 * c.preview.otsu_threshold);
+          std::uint64_t added = 0, left = 0, added_e2 = 0;
+          for (std::size_t i = 0; i < dense.size(); ++i) {
+            const bool flagged = !fine[i] && leaf_max[i] > t2;
+            if (flagged) {
+              ++added;
+              if (edge_of[i] == 2) ++added_e2;
+            }
+            if (dense[i] > object_threshold && !fine[i] && !flagged) ++left;
+          }
+          std::printf("post %s s2 %.1f: voxels flagged %llu (edge2 %llu), octree voxels %llu, missed left %llu\n",
+                      name.c_str(), s2, (unsigned long long)added, (unsigned long long)added_e2,
+                      (unsigned long long)octree->voxel_count(), (unsigned long long)left);
+        }
       }
       std::uint64_t kept = 0;
       int shown = 0;
