@@ -8,6 +8,7 @@
 #include <cstring>
 #include <filesystem>
 
+#include "bricked_import.hpp"
 #include "dense_volume.hpp"
 #include "ivol/error.hpp"
 #include "ivol/reader.hpp"
@@ -255,6 +256,32 @@ TEST(Converters, AutoStructureChoosesBrickedGridsWithinTheMemoryBudget) {
   Reader reader(small);
   EXPECT_EQ(reader.layout().kind, StructureKind::Octree);
   EXPECT_EQ(reader.read_box_bits(full_box({64, 64, 64})), v.data);
+}
+
+// However a bricked grid's samples are read (several whole layers at once,
+// one layer, or parts of one, as the budget allows: bricked_read_slices),
+// the writer sees the same layers, so the file is the same.
+TEST(Converters, BrickedFileDoesNotDependOnHowItsSamplesAreRead) {
+  DenseVolume v = make_dense({64, 48, 80}, SampleType::UInt16);  // layers of 32, 32 and 16 slices
+  for (std::size_t i = 0; i < v.data.size() / 2; ++i) {
+    const auto value = static_cast<std::uint16_t>(1000 + (i * 2654435761U >> 20) % 97 + (i / 3072) * 7);
+    std::memcpy(v.data.data() + 2 * i, &value, 2);
+  }
+  std::vector<std::uint8_t> first;
+  for (const std::uint32_t slices : {96U, 64U, 32U, 8U, 1U}) {
+    ImportOptions options;
+    options.memory_bytes = bricked_layer_bytes(v, options, ValueEncoding::UInt16, slices);
+    ASSERT_EQ(bricked_read_slices(v, options, ValueEncoding::UInt16), slices);
+    const std::string path = test::temp_path("read_" + std::to_string(slices) + ".ivol");
+    EXPECT_EQ(import_to_ivol(v, path, options).structure, "bricked") << slices;
+    const std::vector<std::uint8_t> bytes = test::read_bytes(path);
+    if (first.empty()) {
+      first = bytes;
+      EXPECT_EQ(Reader(path).read_box_bits(full_box({64, 48, 80})), v.data);
+    } else {
+      EXPECT_EQ(bytes, first) << "read " << slices << " slices at a time";
+    }
+  }
 }
 
 }  // namespace

@@ -1,6 +1,8 @@
 #include "bricked_import.hpp"
 
 #include <algorithm>
+#include <climits>
+#include <cstdint>
 #include <cstring>
 
 #include "ivol/binary16.hpp"
@@ -52,7 +54,9 @@ std::uint64_t bricked_layer_bytes(const DenseVolume& shape, const ImportOptions&
     levels += Wide{level[0]} * level[1] *
               (9 + 2 * std::min<std::uint64_t>(level[2], std::uint64_t{1} << std::min(options.brick_log2, 31u)));
   }
-  const Wide bytes = layer * (2 + 2) + slice * slices * read_bytes_per_voxel(shape, encoding) + levels;
+  // Whole layers read at once hold their 16-bit values until they are added.
+  const Wide stored = slice * std::max(slices, layer_slices_of(shape, options)) * 2;
+  const Wide bytes = stored + layer * 2 + slice * slices * read_bytes_per_voxel(shape, encoding) + levels;
   return bytes > ~std::uint64_t{0} ? ~std::uint64_t{0} : static_cast<std::uint64_t>(bytes);
 }
 
@@ -62,10 +66,22 @@ std::uint64_t bricked_layer_budget(const ImportOptions& options) {
 
 std::uint32_t bricked_read_slices(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding) {
   const std::uint64_t budget = bricked_layer_budget(options);
-  std::uint32_t slices = layer_slices_of(shape, options);
-  if (bricked_layer_bytes(shape, options, encoding, 1) > budget) return 0;
+  const auto fits = [&](std::uint32_t slices) {
+    return bricked_layer_bytes(shape, options, encoding, slices) <= budget;
+  };
+  const std::uint32_t layer = layer_slices_of(shape, options);
+  if (!fits(1)) return 0;
+  std::uint32_t slices = layer;
+  if (fits(layer)) {
+    // Whole layers, twice as many while they fit, up to the volume: a
+    // reconstruction's slabs cost less per voxel the thicker they are.
+    const std::uint32_t all = static_cast<std::uint32_t>(
+        std::min<std::uint64_t>((std::uint64_t{shape.dims[2]} + layer - 1) / layer * layer, UINT32_MAX / 2));
+    while (slices < all && fits(std::min(2 * slices, all))) slices = std::min(2 * slices, all);
+    return slices;
+  }
   // Halving keeps the reads whole divisions of a layer of 2^b slices.
-  while (slices > 1 && bricked_layer_bytes(shape, options, encoding, slices) > budget) slices = (slices + 1) / 2;
+  while (slices > 1 && !fits(slices)) slices = (slices + 1) / 2;
   return slices;
 }
 

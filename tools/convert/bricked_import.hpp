@@ -17,16 +17,18 @@
 namespace ivol::convert {
 
 // What a layer of bricks of `shape` holds when its samples are read `slices`
-// slices at a time: the layer's 16-bit values and its encoded bricks (counted
-// at their worst, as large as the values), the samples read (and their
-// float32 copy, for types other than float32 that binary16 rounds), and the
-// stored levels' sums and bricks. Saturates instead of overflowing.
+// slices at a time (a part of a layer, or whole layers): the layers' 16-bit
+// values, one layer's encoded bricks (counted at their worst, as large as
+// the values), the samples read (and their float32 copy, for types other
+// than float32 that binary16 rounds), and the stored levels' sums and
+// bricks. Saturates instead of overflowing.
 std::uint64_t bricked_layer_bytes(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding,
                                   std::uint32_t slices);
 // What a layer may hold: options.layer_budget_bytes, else all of --memory.
 std::uint64_t bricked_layer_budget(const ImportOptions& options);
-// The most slices (1 .. a layer's) read at once within the budget; 0 when
-// not even one fits.
+// The slices read at once within the budget: whole layers, as many as fit
+// (powers of two of them, up to the volume), else a layer's slices halved
+// until they fit; 0 when not even one slice fits.
 std::uint32_t bricked_read_slices(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding);
 
 // StructureChoice::Auto's rule (or the flag): whether `shape` becomes a

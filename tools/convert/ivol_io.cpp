@@ -214,7 +214,8 @@ std::uint64_t memory_that_would_do(const Dims& dims, const ImportOptions& option
 }
 
 // The bricked regular grid, a layer of bricks at a time, its samples read
-// as many slices at once as the layer's budget allows.
+// as many slices at once as the layer's budget allows (bricked_read_slices):
+// whole layers, or parts of one.
 void import_bricked(SlabReader& source, const std::string& path, const ImportOptions& options,
                     const StreamingOptions& streaming, ImportReport& report) {
   const DenseVolume& shape = source.shape();
@@ -233,11 +234,23 @@ void import_bricked(SlabReader& source, const std::string& path, const ImportOpt
                  what + " (samples)");
   std::vector<float> scratch;
   std::vector<std::uint16_t> stored;
-  checked_resize(stored, checked_mul(layer, slice, what), what + " (as 16-bit values)");
+  checked_resize(stored, checked_mul(std::max(layer, read), slice, what), what + " (as 16-bit values)");
   LossTally loss;
   ProgressTicker ticker(options.progress, shape.dims[2]);
   while (writer.next_layer_count() > 0) {
     const std::uint32_t z0 = writer.next_layer_first(), n = writer.next_layer_count();
+    if (read > layer) {  // whole layers at a time
+      const std::uint32_t count = std::min(read, shape.dims[2] - z0);
+      source.read(z0, count, samples.data());
+      samples_to_stored(shape, build, samples.data(), std::uint64_t{count} * slice, scratch, stored.data(), loss);
+      for (std::uint32_t done = 0; done < count;) {
+        const std::uint32_t next = writer.next_layer_count();
+        writer.add_layer(stored.data() + std::uint64_t{done} * slice);
+        done += next;
+        ticker.update(z0 + done);
+      }
+      continue;
+    }
     for (std::uint32_t z = 0; z < n; z += read) {
       const std::uint32_t count = std::min(read, n - z);
       source.read(z0 + z, count, samples.data());
