@@ -683,7 +683,8 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
   out->add_option("--memory", s->memory_mib,
                   "About how many MiB of host memory the run may use (default: half of the memory cgroup's limit "
                   "when one is set, else half of MemAvailable, at least 256 MiB; printed in the notes and --json): "
-                  "a quarter each for the writer's slab, the filtered detector rows (the rest go to a temporary "
+                  "a quarter each for the writer's slab (a bricked grid's layer, with what the rows leave if it "
+                  "must), the filtered detector rows (the rest go to a temporary "
                   "file, see --temp-dir), on CPU devices the device's slabs and, with --structure, the detection "
                   "preview (its cells and the samples for Otsu's threshold, the rest to a temporary file; the need "
                   "mask at 1 bit per cell) and then the structure's value window (slabs are cut thinner to fit)")
@@ -896,6 +897,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
                                {"writing", writing}}}};
     report["rows_filtered"] = fdk_totals.rows_filtered;
     report["memory"] = memory_json(*s, fdk_totals, reconstructor.device_names().size());
+    if (written.structure == "bricked") report["memory"]["writer_layer_budget_bytes"] = import.layer_budget_bytes;
     if (mpi) report["seconds"]["building"] = building;
     if (import.keep) report["threshold"] = import.keep->threshold;
     if (mpi) report["ranks"] = ranks_json(ranks);
