@@ -150,18 +150,8 @@ BrickedImport::BrickedImport(const DenseVolume& shape, const std::string& path, 
 
 void BrickedImport::finish(const LossTally& loss, ImportReport& report) {
   report.encoding_loss = loss;
-  if (!options_.allow_lossy)
-    refuse_loss(loss, shape_.voxel_count(),
-                (options_.what.empty() ? path_ : options_.what) + ": " + sample_type_name(shape_.type) +
-                    " samples as " + encoding_name(encoding_),
-                encoding_name(encoding_), "--encoding " + std::string(encoding_name(lossless_encoding(shape_.type))));
-  Metadata metadata = options_.metadata;
-  if (options_.complete_metadata) options_.complete_metadata(metadata);
-  if (shape_.has_geometry) {
-    metadata.voxel_size = shape_.voxel_size;
-    metadata.origin = shape_.origin;
-    metadata.unit = shape_.unit;
-  }
+  refuse_encoding_loss(loss, shape_, options_, path_, encoding_);
+  Metadata metadata = import_metadata(shape_, options_);
   report.lossless = loss.exact();
   report.max_abs_error = loss.max_error;
   metadata.structure["kind"] = "bricked";

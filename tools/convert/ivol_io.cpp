@@ -156,8 +156,16 @@ std::vector<std::uint8_t> slab_keep_mask(const float* values, const Dims& dims, 
   return keep;
 }
 
-void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, const ImportOptions& options,
-                   ImportReport& report) {
+void refuse_encoding_loss(const LossTally& loss, const DenseVolume& shape, const ImportOptions& options,
+                          const std::string& path, ValueEncoding encoding) {
+  if (options.allow_lossy) return;
+  refuse_loss(loss, shape.voxel_count(),
+              (options.what.empty() ? path : options.what) + ": " + sample_type_name(shape.type) + " samples as " +
+                  encoding_name(encoding),
+              encoding_name(encoding), "--encoding " + std::string(encoding_name(lossless_encoding(shape.type))));
+}
+
+Metadata import_metadata(const DenseVolume& shape, const ImportOptions& options) {
   Metadata metadata = options.metadata;
   if (options.complete_metadata) options.complete_metadata(metadata);
   if (shape.has_geometry) {
@@ -165,6 +173,12 @@ void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, cons
     metadata.origin = shape.origin;
     metadata.unit = shape.unit;
   }
+  return metadata;
+}
+
+void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, const ImportOptions& options,
+                   ImportReport& report) {
+  Metadata metadata = import_metadata(shape, options);
   // The outcome of the build is known only at the end; finish() writes the
   // metadata after the blocks, so say it here from what the slabs reported.
   metadata.structure["kind"] = "octree";
@@ -348,12 +362,7 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
     }
     ticker.update(z0 + n);
   }
-  if (!options.allow_lossy)
-    refuse_loss(report.encoding_loss, shape.voxel_count(),
-                (options.what.empty() ? path : options.what) + ": " + sample_type_name(shape.type) + " samples as " +
-                    encoding_name(build.encoding),
-                encoding_name(build.encoding),
-                "--encoding " + std::string(encoding_name(lossless_encoding(shape.type))));
+  refuse_encoding_loss(report.encoding_loss, shape, options, path, build.encoding);
   finish_import(writer, shape, options, report);
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return report;

@@ -100,6 +100,13 @@ StreamingOptions import_streaming_options(const DenseVolume& shape, const Import
 // which the mask's growth needs).
 std::vector<std::uint8_t> slab_keep_mask(const float* values, const Dims& dims, std::uint32_t lo, std::uint32_t hi,
                                          std::uint32_t z0, std::uint32_t count, float threshold, unsigned margin);
+// Unless options.allow_lossy: throws (refuse_loss) when `loss`, what storing
+// the samples as `encoding` changed, is not exact.
+void refuse_encoding_loss(const LossTally& loss, const DenseVolume& shape, const ImportOptions& options,
+                          const std::string& path, ValueEncoding encoding);
+// The file's metadata before the structure's entries: options.metadata,
+// completed (complete_metadata), with the volume's geometry.
+Metadata import_metadata(const DenseVolume& shape, const ImportOptions& options);
 // After the last slab: the metadata (geometry, keep rule, outcome) and the
 // file; fills report's outcome (lossless, error, kept voxels, bytes).
 void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, const ImportOptions& options,
