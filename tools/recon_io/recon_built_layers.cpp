@@ -80,19 +80,7 @@ DistributedBuild reconstruct_distributed_bricked(recon::FdkReconstructor& recons
   std::vector<float> values, scratch;
   auto build_mine = [&](std::size_t k, std::uint16_t* stored, LossTally& loss) {
     const LayerSlab& s = slabs[k];
-    values.resize(std::size_t{s.count} * slice);
-    const auto reconstructing = std::chrono::steady_clock::now();
-    const recon::FdkReport fdk = reconstructor.reconstruct(
-        grid,
-        [&](std::uint32_t k0, std::uint32_t k1, const float* data) {
-          std::memcpy(values.data() + (k0 - s.z0) * slice, data, (k1 - k0) * slice * sizeof(float));
-        },
-        s.z0, s.z0 + s.count);
-    if (result.slabs_built == 0)
-      result.fdk = fdk;
-    else
-      add_fdk_report(result.fdk, fdk);
-    result.reconstruction_seconds += seconds_since(reconstructing);
+    reconstruct_slices(reconstructor, grid, s.z0, s.z0 + s.count, values, result);
     const auto building = std::chrono::steady_clock::now();
     if (injected_failure)
       throw std::runtime_error("storing the values of slab " + std::to_string(k) +

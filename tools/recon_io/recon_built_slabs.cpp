@@ -20,8 +20,7 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-}  // namespace
-
+// A later slab's report into the first's (which says the devices and plan).
 void add_fdk_report(recon::FdkReport& into, const recon::FdkReport& report) {
   recon::FdkTimings& t = into.timings;
   t.setup += report.timings.setup;
@@ -36,6 +35,26 @@ void add_fdk_report(recon::FdkReport& into, const recon::FdkReport& report) {
   into.rows_filtered += report.rows_filtered;
   into.filtered_rows_host_bytes = std::max(into.filtered_rows_host_bytes, report.filtered_rows_host_bytes);
   into.filtered_rows_disk_bytes = std::max(into.filtered_rows_disk_bytes, report.filtered_rows_disk_bytes);
+}
+
+}  // namespace
+
+void reconstruct_slices(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid, std::uint32_t lo,
+                        std::uint32_t hi, std::vector<float>& values, DistributedBuild& result) {
+  const std::size_t slice = std::size_t{grid.size[0]} * grid.size[1];
+  values.resize((hi - lo) * slice);
+  const auto reconstructing = std::chrono::steady_clock::now();
+  const recon::FdkReport fdk = reconstructor.reconstruct(
+      grid,
+      [&](std::uint32_t k0, std::uint32_t k1, const float* data) {
+        std::memcpy(values.data() + (k0 - lo) * slice, data, (k1 - k0) * slice * sizeof(float));
+      },
+      lo, hi);
+  if (result.slabs_built == 0)
+    result.fdk = fdk;
+  else
+    add_fdk_report(result.fdk, fdk);
+  result.reconstruction_seconds += seconds_since(reconstructing);
 }
 
 int rank_told_to_fail_building() {
@@ -92,19 +111,7 @@ DistributedBuild reconstruct_distributed(recon::FdkReconstructor& reconstructor,
     const std::uint32_t n = builder.slab_size(k);
     const std::uint32_t lo = z0 >= margin ? z0 - margin : 0;
     const std::uint32_t hi = std::min(depth, z0 + n + margin);
-    values.resize((hi - lo) * slice);
-    const auto reconstructing = std::chrono::steady_clock::now();
-    const recon::FdkReport fdk = reconstructor.reconstruct(
-        grid,
-        [&](std::uint32_t k0, std::uint32_t k1, const float* data) {
-          std::memcpy(values.data() + (k0 - lo) * slice, data, (k1 - k0) * slice * sizeof(float));
-        },
-        lo, hi);
-    if (result.slabs_built == 0)
-      result.fdk = fdk;
-    else
-      add_fdk_report(result.fdk, fdk);
-    result.reconstruction_seconds += seconds_since(reconstructing);
+    reconstruct_slices(reconstructor, grid, lo, hi, values, result);
     const auto building = std::chrono::steady_clock::now();
     std::vector<std::uint8_t> keep;
     if (options.keep) keep = slab_keep_mask(values.data(), shape.dims, lo, hi, z0, n, report.threshold, margin);

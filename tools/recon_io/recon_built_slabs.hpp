@@ -21,6 +21,7 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <vector>
 
 #include "ivol/recon/fdk.hpp"
 #include "ivol/recon/slab_exchange.hpp"
@@ -39,8 +40,11 @@ struct DistributedBuild {
   double waiting_seconds = 0;         // rank 0: waiting for the other ranks' slabs
 };
 
-// A later slab's report into the first's (which says the devices and plan).
-void add_fdk_report(recon::FdkReport& into, const recon::FdkReport& report);
+// Reconstructs slices [lo, hi) into `values` (resized to them), adding the
+// FDK's report and seconds to `result` (the first slab's report is kept as
+// it is: it says the devices and plan).
+void reconstruct_slices(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid, std::uint32_t lo,
+                        std::uint32_t hi, std::vector<float>& values, DistributedBuild& result);
 
 // The writer's slab thickness for a distributed run: its own choice for the
 // volume and options, halved until every rank has `slabs_per_rank` slabs
