@@ -148,16 +148,19 @@ std::vector<StructureRankOutcome> run_structure_ranks(Scan& scan, int ranks, con
 
 TEST(ReconBuiltSlabs, SameFileAsOneProcess) {
   Scan scan;
-  enum Kind { kOctree, kKeep, kBricked };
-  for (const Kind kind : {kOctree, kKeep, kBricked}) {
+  enum Kind { kOctree, kKeep, kBricked, kBrickedLayers };
+  for (const Kind kind : {kOctree, kKeep, kBricked, kBrickedLayers}) {
     const bool keep = kind == kKeep;
     convert::ImportOptions options;
     options.encoding = ValueEncoding::Binary16;
     // Octree: the ranks build its subtrees; with a keep mask, ivol recon's
     // choice. Bricked: ivol recon's dense default, the ranks' slabs its
-    // stored values; layers of 16 (16, 16 and 1 slices) in slabs of 4.
+    // stored values; layers of 16 (16, 16 and 1 slices) in slabs of 4, or
+    // layers of 8 in slabs of two whole layers (16, 16 and 1 slices).
     options.structure = kind == kOctree ? convert::StructureChoice::Octree : convert::StructureChoice::Auto;
     if (kind == kBricked) options.brick_log2 = 4;
+    if (kind == kBrickedLayers) options.brick_log2 = 3;
+    const std::uint32_t slab = kind == kBrickedLayers ? 16 : 4;
     if (keep) options.keep = convert::KeepRule{false, 0.01F, 2};
     const std::string one_path = test::temp_path("recon-one.ivol");
     {
@@ -168,16 +171,16 @@ TEST(ReconBuiltSlabs, SameFileAsOneProcess) {
     // Writer slabs of 4 slices (9 of them, 3 per rank), each with its margin.
     Mailbox mailbox;
     const std::string path = test::temp_path("recon-ranks.ivol");
-    const std::vector<RankOutcome> ranks = run_ranks(scan, 3, path, options, 4, mailbox);
+    const std::vector<RankOutcome> ranks = run_ranks(scan, 3, path, options, slab, mailbox);
     std::uint64_t slices = 0;
     for (std::size_t r = 0; r < ranks.size(); ++r) {
       EXPECT_EQ(ranks[r].error, "") << "rank " << r;
-      EXPECT_EQ(ranks[r].built.slabs_built, 3U) << "rank " << r;
+      EXPECT_EQ(ranks[r].built.slabs_built, kind == kBrickedLayers ? 1U : 3U) << "rank " << r;
       slices += ranks[r].built.slices_built;
     }
     EXPECT_EQ(slices, scan.grid.size[2]);
-    EXPECT_EQ(ranks[0].built.written.slab_slices, 4U);
-    EXPECT_EQ(ranks[0].built.written.structure, kind == kBricked ? "bricked" : "octree");
+    EXPECT_EQ(ranks[0].built.written.slab_slices, slab);
+    EXPECT_EQ(ranks[0].built.written.structure, kind >= kBricked ? "bricked" : "octree");
     EXPECT_FALSE(ranks[0].built.written.lossless);  // float32 as binary16, counted on every rank
     EXPECT_GT(ranks[0].built.written.max_abs_error, 0.0);
     EXPECT_GT(mailbox.bytes_to_rank0, 0U);
@@ -224,6 +227,11 @@ TEST(ReconBuiltSlabs, LayerSlabsGiveEveryRankOne) {
   EXPECT_EQ(convert::distributed_layer_slab_slices(32, 33, 2, 3), 2U);   // at most 3: 2
   EXPECT_EQ(convert::distributed_layer_slab_slices(24, 24, 4, 0), 6U);   // a layer of 24 in 4
   EXPECT_EQ(convert::distributed_layer_slab_slices(2, 2, 8, 0), 1U);     // never below one slice
+  // Whole layers, as many as the bound holds, while every rank has a slab.
+  EXPECT_EQ(convert::distributed_layer_slab_slices(32, 256, 2, 128), 128U);
+  EXPECT_EQ(convert::distributed_layer_slab_slices(32, 256, 4, 128), 64U);
+  EXPECT_EQ(convert::distributed_layer_slab_slices(32, 256, 16, 1000), 16U);
+  EXPECT_EQ(convert::distributed_layer_slab_slices(32, 100, 1, 96), 64U);  // 64 and 36
 }
 
 TEST(ReconBuiltStructure, SameOctreeFileAsOneProcess) {

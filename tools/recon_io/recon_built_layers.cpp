@@ -18,16 +18,20 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 
 struct LayerSlab {
   std::uint32_t z0, count;
-  bool last_of_layer;
 };
 
-// The slabs in z order: each layer cut into slabs of `slices` (its last
-// slab thinner where the layer is).
+// The slabs in z order: slabs of `slices` whole layers (a multiple of
+// `layer`), or each layer cut into slabs of `slices` (its last slab thinner
+// where the layer is).
 std::vector<LayerSlab> layer_slabs(std::uint32_t depth, std::uint32_t layer, std::uint32_t slices) {
   std::vector<LayerSlab> slabs;
+  if (slices > layer) {
+    for (std::uint32_t z = 0; z < depth; z += slices) slabs.push_back({z, std::min(slices, depth - z)});
+    return slabs;
+  }
   for (std::uint32_t l0 = 0; l0 < depth; l0 += layer) {
     const std::uint32_t end = std::min(depth, l0 + layer);
-    for (std::uint32_t z = l0; z < end; z += slices) slabs.push_back({z, std::min(slices, end - z), z + slices >= end});
+    for (std::uint32_t z = l0; z < end; z += slices) slabs.push_back({z, std::min(slices, end - z)});
   }
   return slabs;
 }
@@ -45,9 +49,13 @@ std::vector<std::uint8_t> pack(const std::uint16_t* stored, std::uint64_t count,
 
 std::uint32_t distributed_layer_slab_slices(std::uint32_t layer_slices, std::uint32_t depth, int ranks,
                                             std::uint32_t most_slices) {
-  std::uint32_t slab = std::max(layer_slices, 1u);
-  const auto slabs = [&](std::uint32_t slices) { return layer_slabs(depth, layer_slices, slices).size(); };
-  while (slab > 1 && slabs(slab) < static_cast<std::size_t>(ranks)) slab = (slab + 1) / 2;
+  const std::uint32_t layer = std::max(layer_slices, 1u);
+  // Whole layers, as many as `most_slices` holds (a power of two of them):
+  // thick slabs cost the FDK less per voxel.
+  std::uint32_t slab = layer;
+  while (most_slices > 0 && std::uint64_t{slab} * 2 <= most_slices && slab < depth) slab *= 2;
+  const auto slabs = [&](std::uint32_t slices) { return layer_slabs(depth, layer, slices).size(); };
+  while (slab > 1 && slabs(slab) < static_cast<std::size_t>(ranks)) slab = slab > layer ? slab / 2 : (slab + 1) / 2;
   while (most_slices > 0 && slab > most_slices) slab = (slab + 1) / 2;
   return slab;
 }
@@ -66,8 +74,8 @@ DistributedBuild reconstruct_distributed_bricked(recon::FdkReconstructor& recons
   const std::uint32_t depth = shape.dims[2];
   const std::uint32_t layer = std::min<std::uint32_t>(depth, 1u << options.brick_log2);
   // Within the layer's budget, as one process reads it (bricked_read_slices).
-  const std::uint32_t most = std::min(most_slab_slices ? most_slab_slices : layer,
-                                      std::max(1u, bricked_read_slices(shape, options, streaming.build.encoding)));
+  const std::uint32_t read = std::max(1u, bricked_read_slices(shape, options, streaming.build.encoding));
+  const std::uint32_t most = most_slab_slices ? std::min(most_slab_slices, read) : read;
   const auto slab_slices =
       static_cast<std::uint32_t>(exchange.agree(distributed_layer_slab_slices(layer, depth, exchange.size(), most),
                                                 "the slab thickness in slices (a bricked grid's layers)"));
@@ -110,12 +118,16 @@ DistributedBuild reconstruct_distributed_bricked(recon::FdkReconstructor& recons
   }
 
   BrickedImport writer(shape, path, options, streaming);
-  std::vector<std::uint16_t> layer_values(std::size_t{layer} * slice);
+  // Slabs of whole layers, or a layer gathered from its slabs; `base` is the
+  // first slice the buffer holds.
+  std::vector<std::uint16_t> layer_values(std::size_t{std::max(layer, slab_slices)} * slice);
+  std::uint32_t base = 0;
   std::vector<std::uint8_t> received;
   LossTally loss;
   for (std::size_t k = 0; k < slabs.size(); ++k) {
     const LayerSlab& s = slabs[k];
-    std::uint16_t* into = layer_values.data() + std::size_t{s.z0 - writer.next_layer_first()} * slice;
+    if (s.z0 == writer.next_layer_first()) base = s.z0;
+    std::uint16_t* into = layer_values.data() + std::size_t{s.z0 - base} * slice;
     const std::size_t count = std::size_t{s.count} * slice;
     const int from = exchange.owner(k, slabs.size());
     if (from == 0) {
@@ -135,9 +147,10 @@ DistributedBuild reconstruct_distributed_bricked(recon::FdkReconstructor& recons
       std::memcpy(&theirs, received.data() + count * 2, sizeof theirs);
       loss.merge(theirs);
     }
-    if (s.last_of_layer) {
+    // Every layer the slabs have completed.
+    while (writer.next_layer_count() > 0 && writer.next_layer_first() + writer.next_layer_count() <= s.z0 + s.count) {
       const auto adding = std::chrono::steady_clock::now();
-      writer.add_layer(layer_values.data());
+      writer.add_layer(layer_values.data() + std::size_t{writer.next_layer_first() - base} * slice);
       result.writing_seconds += seconds_since(adding);
     }
     if (options.progress) options.progress(s.z0 + s.count, depth);

@@ -1,6 +1,7 @@
 // A distributed dense reconstruction into a bricked regular grid
-// (bricked_import.hpp; docs/distributed.md). The volume is cut into slabs
-// that divide the grid's layers of bricks, handed out round robin. Each rank
+// (bricked_import.hpp; docs/distributed.md). The volume is cut into slabs of
+// whole layers of bricks, as many as one process would read at once, or
+// into slabs that divide a layer, handed out round robin. Each rank
 // reconstructs its slabs and turns them into the stored 16-bit values there
 // (binary16, half the bytes of the float32 samples), counting what the
 // rounding changes; rank 0 gathers each layer from its slabs, its own and
@@ -21,9 +22,10 @@
 
 namespace ivol::convert {
 
-// The slab thickness: a layer's, halved until every rank has a slab (while
-// slabs are thicker than one slice) and until it is at most `most_slices`
-// (0: no bound).
+// The slab thickness: whole layers, as many as `most_slices` holds (a power
+// of two of them; 0: one layer), halved until every rank has a slab (a
+// layer's slices too, while slabs are thicker than one slice) and until it
+// is at most `most_slices`.
 std::uint32_t distributed_layer_slab_slices(std::uint32_t layer_slices, std::uint32_t depth, int ranks,
                                             std::uint32_t most_slices);
 
