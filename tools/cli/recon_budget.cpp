@@ -109,11 +109,12 @@ ReconDiskNeeds recon_disk_needs(const recon::ScanGeometry& geometry, const recon
                                                   octree_spill, output, writer_temp_directory);
   const std::string temp = fdk.temp_directory;
   if (const std::uint64_t rows = recon::filtered_rows_disk_bound(geometry, fdk); rows > 0)
-    needs.reconstruction.push_back({temp, rows, "the filtered detector rows beyond their share of --memory"});
+    needs.reconstruction.push_back({temp, rows, "the filtered detector rows beyond their share of --memory", true});
   if (detection) {
     if (const std::uint64_t preview = recon::detection_temp_bytes(geometry, fdk, grid, *detection); preview > 0)
       needs.preview.push_back(
-          {temp, preview, "the detection preview's cells, samples and filtered rows beyond their share of --memory"});
+          {temp, preview, "the detection preview's cells, samples and filtered rows beyond their share of --memory",
+           true});
   }
   return needs;
 }

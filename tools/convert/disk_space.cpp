@@ -56,7 +56,7 @@ std::vector<DiskNeed> ivol_disk_needs(const Dims& dims, ValueEncoding encoding, 
   __extension__ const unsigned __int128 exact = static_cast<unsigned __int128>(dims[0]) * dims[1] * dims[2] * width;
   const std::uint64_t file = exact > ~std::uint64_t{0} ? ~std::uint64_t{0} : static_cast<std::uint64_t>(exact);
   std::vector<DiskNeed> needs{{directory_of(output), file, "the output " + output}};
-  if (octree) needs.push_back({spill_directory_for(output, temp_directory), file, "the octree writer's spill file"});
+  if (octree) needs.push_back({spill_directory_for(output, temp_directory), file, "the octree writer's spill file", true});
   return needs;
 }
 
@@ -66,6 +66,7 @@ void require_disk_space(const std::vector<DiskNeed>& needs) {
     std::string directory;
     std::uint64_t bytes = 0;
     std::string parts;
+    bool temporary = false;
   };
   std::map<dev_t, Filesystem> filesystems;
   std::vector<dev_t> order;
@@ -78,6 +79,7 @@ void require_disk_space(const std::vector<DiskNeed>& needs) {
     Filesystem& fs = it->second;
     fs.bytes = saturating_add(fs.bytes, need.bytes);
     fs.parts += (fs.parts.empty() ? "" : " + ") + need.what + " " + readable(need.bytes);
+    fs.temporary = fs.temporary || need.temporary;
   }
   for (const dev_t dev : order) {
     const Filesystem& fs = filesystems[dev];
@@ -87,9 +89,9 @@ void require_disk_space(const std::vector<DiskNeed>& needs) {
                   fs.directory + ": not enough free disk for this run: it needs about " + readable(fs.bytes) + " (" +
                       std::to_string(fs.bytes) + " bytes: " + fs.parts +
                       ", estimated as the values uncompressed) and its filesystem has " + readable(available) + " (" +
-                      std::to_string(available) +
-                      " bytes) available (--temp-dir puts the spill file on another disk; --no-disk-check skips "
-                      "this estimate)");
+                      std::to_string(available) + " bytes) available (" +
+                      (fs.temporary ? "--temp-dir puts the temporary files on another disk; " : "") +
+                      "--no-disk-check skips this estimate)");
   }
 }
 

@@ -26,6 +26,7 @@ struct DiskNeed {
   std::string directory;  // where the file goes
   std::uint64_t bytes = 0;
   std::string what;  // "the output x.ivol", "the octree writer's spill file"
+  bool temporary = false;  // gone when the run ends; --temp-dir chooses its disk
 };
 
 // What writing a volume of `dims` into `output` needs, by the rule above;

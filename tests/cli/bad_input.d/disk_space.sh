@@ -11,7 +11,13 @@ bad disk-space-convert 2 "$out: not enough free disk for this run: it needs abou
   env IVOL_TEST_FREE_BYTES=1000 "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,16
 bad disk-space-convert-free 2 "its filesystem has 1000 bytes (1000 bytes) available" -- \
   env IVOL_TEST_FREE_BYTES=1000 "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,16
+bad disk-space-convert-temp-hint 2 "available (--temp-dir puts the temporary files on another disk; --no-disk-check" -- \
+  env IVOL_TEST_FREE_BYTES=1000 "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,16
 bad disk-space-recon 2 "$out: not enough free disk for this run" -- \
+  env IVOL_TEST_FREE_BYTES=1000 "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 16 --voxel 0.4 -o "$out/x.ivol"
+# A dense recon writes a bricked grid: no spill, no temporary files, so no
+# --temp-dir to suggest.
+bad disk-space-recon-no-temp-hint 2 "bytes) available (--no-disk-check skips this estimate)" -- \
   env IVOL_TEST_FREE_BYTES=1000 "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 16 --voxel 0.4 -o "$out/x.ivol"
 bad disk-space-recon-structure 2 "not enough free disk" -- \
   env IVOL_TEST_FREE_BYTES=1000 "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 16 --voxel 0.4 --structure octree -o "$out/x.ivol"
