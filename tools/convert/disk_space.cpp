@@ -56,7 +56,8 @@ std::vector<DiskNeed> ivol_disk_needs(const Dims& dims, ValueEncoding encoding, 
   __extension__ const unsigned __int128 exact = static_cast<unsigned __int128>(dims[0]) * dims[1] * dims[2] * width;
   const std::uint64_t file = exact > ~std::uint64_t{0} ? ~std::uint64_t{0} : static_cast<std::uint64_t>(exact);
   std::vector<DiskNeed> needs{{directory_of(output), file, "the output " + output}};
-  if (octree) needs.push_back({spill_directory_for(output, temp_directory), file, "the octree writer's spill file", true});
+  if (octree)
+    needs.push_back({spill_directory_for(output, temp_directory), file, "the octree writer's spill file", true});
   return needs;
 }
 
