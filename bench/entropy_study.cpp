@@ -159,8 +159,8 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
         model_brick(residuals(brick, d, encoding, s.codec3), d, s);
       }
   auto vs = [&](double v) { return 100.0 * (v / s.codec3 - 1.0); };
-  std::printf("| %s | %.0f | %.0f (%+.1f %%) | %.0f (%+.1f %%) | %.0f (%+.1f %%) | %.0f (%+.1f %%) |\n", label, s.codec3,
-              s.order0, vs(s.order0), s.static_ctx, vs(s.static_ctx), s.adaptive, vs(s.adaptive), s.split,
+  std::printf("| %s | %.0f | %.0f (%+.1f %%) | %.0f (%+.1f %%) | %.0f (%+.1f %%) | %.0f (%+.1f %%) |\n", label,
+              s.codec3, s.order0, vs(s.order0), s.static_ctx, vs(s.static_ctx), s.adaptive, vs(s.adaptive), s.split,
               vs(s.split));
 }
 
