@@ -1,12 +1,12 @@
 // Codec 3 (predicted 16-bit, spec §7.2) against codec 2 (zstd over byte
 // planes) on the bricks of a real volume (issue 22), one core:
 //
-//   codec_bench VOLUME.f32 N [BRICK_LOG2]
+//   codec_bench VOLUME.f32 N [BRICK_LOG2 [ZSTD_LEVEL]]
 //
 // VOLUME.f32: N^3 float32, x fastest (peers_bench caches its reconstructions
 // as such under WORK/cache). Each brick is encoded as binary16 and as uint16
 // (the volume's range scaled to 0 .. 65535), with codec 3 and with codec 2 at
-// zstd level 3; prints bytes, and encode and decode MB/s of 16-bit values
+// zstd level ZSTD_LEVEL (default 3) for both; prints bytes, and encode and decode MB/s of 16-bit values
 // per second of the thread's CPU time.
 #include <algorithm>
 #include <cmath>
@@ -58,14 +58,16 @@ std::vector<Brick> cut(const std::vector<std::uint16_t>& v, std::uint32_t n, uns
 }
 
 void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint32_t n, unsigned log2,
-         ivol::ValueEncoding encoding) {
+         ivol::ValueEncoding encoding, int zstd_level) {
   const std::vector<Brick> bricks = cut(volume, n, log2);
   const double mb = 2.0 * volume.size() / 1e6;
   std::uint64_t predicted_bytes = 0, planes_bytes = 0, best_bytes = 0;
   std::vector<std::vector<std::uint8_t>> payloads(bricks.size());
   auto t = Clock::now();
   for (std::size_t b = 0; b < bricks.size(); ++b) {
-    payloads[b] = ivol::encode_predicted(bricks[b].values.data(), bricks[b].dims, encoding);
+    ivol::PredictedOptions p;
+    p.zstd_level = zstd_level;
+    payloads[b] = ivol::encode_predicted(bricks[b].values.data(), bricks[b].dims, encoding, p);
     predicted_bytes += payloads[b].size();
   }
   const double encode3 = since(t);
@@ -78,6 +80,7 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
   }
   const double decode3 = since(t);
   ivol::WriteOptions w;
+  w.zstd_level = zstd_level;
   t = Clock::now();
   for (std::size_t b = 0; b < bricks.size(); ++b) {
     const auto block = ivol::encode_block(ivol::Stream::Values, 0, 0, static_cast<std::uint32_t>(out.size()), 2,
@@ -98,11 +101,12 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: codec_bench VOLUME.f32 N [BRICK_LOG2]\n");
+    std::fprintf(stderr, "usage: codec_bench VOLUME.f32 N [BRICK_LOG2 [ZSTD_LEVEL]]\n");
     return 2;
   }
   const std::uint32_t n = static_cast<std::uint32_t>(std::stoul(argv[2]));
   const unsigned log2 = argc > 3 ? static_cast<unsigned>(std::stoul(argv[3])) : 5;
+  const int zstd_level = argc > 4 ? std::stoi(argv[4]) : 3;
   std::vector<float> f(std::size_t{n} * n * n);
   std::ifstream in(argv[1], std::ios::binary);
   if (!in.read(reinterpret_cast<char*>(f.data()), static_cast<std::streamsize>(f.size() * 4))) {
@@ -115,7 +119,7 @@ int main(int argc, char** argv) {
     half[i] = ivol::float_to_binary16(f[i]);
     codes[i] = static_cast<std::uint16_t>(std::lround((f[i] - *lo) / (*hi - *lo) * 65535.0));
   }
-  run("binary16", half, n, log2, ivol::ValueEncoding::Binary16);
-  run("uint16", codes, n, log2, ivol::ValueEncoding::UInt16);
+  run("binary16", half, n, log2, ivol::ValueEncoding::Binary16, zstd_level);
+  run("uint16", codes, n, log2, ivol::ValueEncoding::UInt16, zstd_level);
   return 0;
 }

@@ -27,7 +27,7 @@ struct BrickedOptions {
   ValueEncoding encoding = ValueEncoding::UInt16;  // binary16 or uint16
   double value_scale = 1.0;
   double value_offset = 0.0;
-  int zstd_level = 3;
+  int zstd_level = 3;  // codecs 2 and 4; codec 3 at residual_zstd_level(zstd_level)
   bool predicted = true;  // false: zstd over byte planes (codec 2), for comparison
   unsigned threads = 0;   // 0: all hardware threads
   // Levels of detail stored (spec §8A.5): every level from this one to the
@@ -35,6 +35,14 @@ struct BrickedOptions {
   // them instead of the whole file (bench/RESULTS.md, issue 20).
   unsigned first_stored_level = 3;
 };
+
+// The zstd level of codec 3's residual planes for a writer asked for
+// `zstd_level`: 1 up to level 3, the level asked above it. The residuals are
+// nearly noise: zstd's fast strategy (level 1) leaves their literals to the
+// Huffman tables and is 0.9 % smaller to 0.1 % larger than level 3, at twice
+// its speed; levels 5 to 9 are larger than level 1 on binary16
+// (bench/RESULTS.md, issue 22, "zstd levels for codec 3's residuals").
+constexpr int residual_zstd_level(int zstd_level) { return zstd_level <= 3 ? 1 : zstd_level; }
 
 class BrickedGridWriter {
  public:
