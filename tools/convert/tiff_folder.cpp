@@ -186,4 +186,10 @@ TiffFolder scan_tiff_folder(const std::string& folder, const TiffFolderOptions& 
   return out;
 }
 
+Error several_pages_among_files(const std::string& file, const std::string& unit) {
+  return Error(ErrorClass::Malformed, file + ": holds more than one page, but among several TIFF files each must be one " +
+                                          unit + " (one number, one " + unit + "): its other pages would move every " +
+                                          unit + " after it; convert a multi-page file on its own");
+}
+
 }  // namespace ivol::convert

@@ -23,6 +23,8 @@
 #include <string>
 #include <vector>
 
+#include "ivol/error.hpp"
+
 namespace ivol::convert {
 
 struct TiffFolderOptions {
@@ -39,5 +41,10 @@ struct TiffFolder {
 // Throws ivol::Error(Malformed) naming the offending files; Io when the
 // folder cannot be listed; InvalidArgument when it holds no TIFF file.
 TiffFolder scan_tiff_folder(const std::string& folder, const TiffFolderOptions& options = {});
+
+// The refusal of a file with a second page among several files (`unit`:
+// "slice", "projection"): the numbering counts one per file, so its other
+// pages would move every later one along z (or in angle) unnoticed.
+Error several_pages_among_files(const std::string& file, const std::string& unit);
 
 }  // namespace ivol::convert

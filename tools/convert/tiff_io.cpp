@@ -238,6 +238,7 @@ class TiffSlabReader final : public SlabReader {
       if (f == 0) read_tiff_metadata(tif.get(), files_[0], shape_);
       tdir_t page_in_file = 0;
       do {
+        if (page_in_file == 1 && files_.size() > 1) throw several_pages_among_files(files_[f], "slice");
         const bool several = page_in_file > 0 || !TIFFLastDirectory(tif.get());
         const std::string where = files_[f] + (several ? " page " + std::to_string(page_in_file) : std::string());
         const PageFormat page = page_format(tif.get(), where);

@@ -172,17 +172,19 @@ struct Page {
 };
 
 // Every page of every file, checked to share one size (and, for the
-// projections, one sample type).
-std::vector<Page> list_pages(const std::vector<std::string>& files, PageFormat& format, bool same_type) {
+// projections, one sample type, and one page a file when there are several
+// files: a view each).
+std::vector<Page> list_pages(const std::vector<std::string>& files, PageFormat& format, bool projections) {
   std::vector<Page> pages;
   for (std::size_t i = 0; i < files.size(); ++i) {
     TiffFile file(files[i]);
     do {
       const tdir_t directory = TIFFCurrentDirectory(file.get());
+      if (projections && files.size() > 1 && directory > 0) throw several_pages_among_files(files[i], "projection");
       const std::string where = files[i] + " page " + std::to_string(directory);
       const PageFormat page = page_format(file.get(), where);
       if (pages.empty() && format.width == 0) format = page;
-      if (page.width != format.width || page.height != format.height || (same_type && page.is_float != format.is_float))
+      if (page.width != format.width || page.height != format.height || (projections && page.is_float != format.is_float))
         fail(where, std::to_string(page.width) + "x" + std::to_string(page.height) +
                         (page.is_float ? " float32" : " uint16") + " differs from the projections' " +
                         std::to_string(format.width) + "x" + std::to_string(format.height) +

@@ -1,6 +1,7 @@
 # TIFF folders checked before they are trusted (README "TIFF folders"): a
 # missing slice number, two files with one number, a page of another size or
-# sample type are refused (exit 2) naming the file; hidden files (macOS
+# sample type, a file of several pages among single slices are refused (exit
+# 2) naming the file; hidden files (macOS
 # AppleDouble ._*) are skipped with a note. Sourced by ../run_bad_input.sh.
 
 /usr/bin/python3 - "$work" <<'PY'
@@ -19,6 +20,10 @@ folder("type", [("s1.tif", u16(1)), ("s2.tif", u16(2)), ("s3.tif", np.full((8, 8
 folder("unnumbered", [("s1.tif", u16(1)), ("s2.tif", u16(2)), ("preview.tif", u16(0))])
 folder("every_other", [("s%d.tif" % i, u16(i)) for i in (0, 2, 4, 6)])
 folder("appledouble", [("s1.tif", u16(1)), ("s2.tif", u16(2))])
+# One file of four pages among files of one: s3's other pages would move
+# every later slice by three.
+folder("multipage", [("s%d.tif" % i, u16(i)) for i in (1, 2, 4, 5)])
+tifffile.imwrite(os.path.join(d, "multipage", "s3.tif"), np.stack([u16(3)] * 4), photometric="minisblack")
 # What macOS leaves on a non-Apple disk: a resource fork that is no TIFF.
 open(os.path.join(d, "appledouble", "._s1.tif"), "wb").write(b"\x00\x05\x16\x07" + bytes(60))
 PY
@@ -32,8 +37,10 @@ bad tiff-folder-unnumbered 2 "unnumbered/preview.tif: no slice number in the nam
 # $out, which must stay empty.
 bad tiff-folder-allow-gaps 0 "s57.tif is missing: converted without it (--allow-gaps)" -- "$IVOL" convert "$work/gap" "$work/gap.ivol" --allow-gaps
 bad tiff-folder-appledouble 0 "skipped hidden file ._s1.tif" -- "$IVOL" convert "$work/appledouble" "$work/appledouble.ivol"
+bad tiff-folder-multipage  2 "multipage/s3.tif: holds more than one page, but among several TIFF files each must be one slice" -- "$IVOL" convert "$work/multipage" "$out/x.ivol"
 # A folder of every other slice has a step of 2, not gaps.
 bad tiff-folder-step-two   0 "every_other (tiff u16 8x8x4" -- "$IVOL" convert "$work/every_other" "$work/every_other.ivol"
 # Projections in a folder are checked the same way: a missing view would
 # shift every later angle.
 bad recon-tiff-folder-gap  2 "gap/s58.tif follows s56.tif: s57.tif is missing; every view needs its projection" -- "$IVOL" recon "$work/gap" --sid 600 --sdd 1200 --pitch 1.5 --size 16 --voxel 1.5 -o "$out/x.ivol"
+bad recon-tiff-folder-multipage 2 "multipage/s3.tif: holds more than one page, but among several TIFF files each must be one projection" -- "$IVOL" recon "$work/multipage" --sid 600 --sdd 1200 --pitch 1.5 --size 16 --voxel 1.5 -o "$out/x.ivol"
