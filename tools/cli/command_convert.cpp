@@ -171,7 +171,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::Range(1, 19))
       ->capture_default_str();
   into->add_option("--memory", s->memory_mib, "About how many MiB the conversion may hold (default 2048)")
-      ->check(whole_number());
+      ->check(mebibytes());
   into->add_option("--temp-dir", s->temp_dir,
                    "Directory of the octree writer's temporary spill file (default: $TMPDIR, else OUT's directory)");
   into->add_flag("--no-disk-check", s->no_disk_check,

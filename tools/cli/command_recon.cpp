@@ -632,7 +632,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       ->check(whole_number());
   fdk->add_option("--device-memory", s->device_memory_mib,
                   "MiB of device memory to use (default: 80 % of it on GPUs, a quarter of --memory on CPU devices)")
-      ->check(whole_number());
+      ->check(mebibytes());
   fdk->add_option("--slab-slices", s->slab_slices,
                   "Most slices per slab (default: as many as fit the device; under mpirun, at most the volume's "
                   "depth over the ranks; under mpirun without --structure, also the writer's slabs that the ranks "
@@ -688,7 +688,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
                   "file, see --temp-dir), on CPU devices the device's slabs and, with --structure, the detection "
                   "preview (its cells and the samples for Otsu's threshold, the rest to a temporary file; the need "
                   "mask at 1 bit per cell) and then the structure's value window (slabs are cut thinner to fit)")
-      ->check(whole_number());
+      ->check(mebibytes());
   out->add_option(
       "--temp-dir", s->temp_dir,
       "Directory of the octree writer's temporary spill file and of the filtered detector rows and the "

@@ -149,6 +149,15 @@ CLI::Validator whole_number() {
   return checked([](const std::string& v) { parse_count(v, ""); });
 }
 
+CLI::Validator mebibytes() {
+  return checked([](const std::string& v) {
+    const std::uint64_t mib = parse_count(v, "");
+    if (mib == 0) throw UsageError("", "'" + v + "' MiB is no memory: give 1 or more, or leave the option out");
+    if (mib >= std::uint64_t{1} << 44)
+      throw UsageError("", "'" + v + "' MiB is more bytes than 64 bits hold (at most 17592186044415)");
+  });
+}
+
 CLI::Validator number_in(double low, double high, bool open_low) {
   return checked([=](const std::string& v) {
     const double x = parse_number(v, "");

@@ -51,6 +51,9 @@ CLI::Validator checked(const std::function<void(const std::string&)>& parse, con
 // Digits only, for CLI11's unsigned options: CLI11 itself turns "-4" into
 // 2^64 - 4 for a 64-bit one.
 CLI::Validator whole_number();
+// A size in MiB: a whole number from 1 whose bytes fit 64 bits (below 2^44),
+// for --memory and --device-memory, where 0 would quietly mean "default".
+CLI::Validator mebibytes();
 // A finite number within [low, high] (open at low when `open_low`): CLI11
 // itself takes "nan" and "inf" for a double, and NaN passes CLI::Range.
 CLI::Validator number_in(double low, double high, bool open_low = false);

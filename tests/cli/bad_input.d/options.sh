@@ -35,6 +35,13 @@ bad opt-recon-detector     1 "--detector"             -- "$IVOL" recon "$work/p.
 bad opt-recon-pitch-zero   1 "--pitch"                -- "$IVOL" recon "$work/p.raw" --geometry "$work/p.xml" --pitch 0 --detector 32,32 --views 20 "${grid[@]}" -o "$out/x.ivol"
 bad opt-recon-offset       1 "--offset"               -- "$IVOL" recon "$work/q.h5" --sid 600 --sdd 1200 --offset 1 --pitch 1.5 "${grid[@]}" -o "$out/x.ivol"
 bad opt-recon-memory-neg   1 "--memory"               -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --memory -64 -o "$out/x.ivol"
+# 0 once meant the default (the largest budget), and 2^44 MiB or more wrapped
+# round 2^64 bytes: a budget of 0 B, or 1 MiB and an octree, exit 0.
+bad opt-recon-memory-zero  1 "--memory: '0' MiB is no memory" -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --memory 0 -o "$out/x.ivol"
+bad opt-recon-memory-wraps 1 "--memory: '17592186044417' MiB is more bytes than 64 bits hold" -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --memory 17592186044417 -o "$out/x.ivol"
+bad opt-recon-device-zero  1 "--device-memory: '0' MiB is no memory" -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --device-memory 0 -o "$out/x.ivol"
+bad opt-memory-zero        1 "--memory: '0' MiB is no memory" -- "$IVOL" "${raw[@]}" --memory 0
+bad opt-memory-wraps       1 "--memory: '17592186044416' MiB is more bytes than 64 bits hold" -- "$IVOL" "${raw[@]}" --memory 17592186044416
 bad opt-recon-keep         1 "--keep"                 -- "$IVOL" recon "$work/p.raw" "${scan[@]}" "${grid[@]}" --keep threshold=otsu,margin=x -o "$out/x.ivol"
 bad opt-phantom-pitch      1 "--pitch"                -- "$IVOL" phantom thin-pipe --views 4 --detector 8 --pitch 1,2,3 -o "$out/x.h5"
 bad opt-phantom-geometry   1 "--geometry-out"         -- "$IVOL" phantom thin-pipe --views 4 --detector 8 --geometry-out "$out/g.txt" -o "$out/x.h5"
