@@ -6,6 +6,7 @@
 #include <thread>
 
 #include "fdk_native_backproject.hpp"
+#include "ivol/error.hpp"
 #include "fdk_session.hpp"
 
 namespace ivol::recon::detail {
@@ -138,9 +139,11 @@ SlabPlan plan_slabs(const FdkProblem& problem, const std::vector<detail::DeviceH
   if (fits(high, plan, true)) return plan;
   std::uint32_t low = 1;
   if (!fits(low, plan, true))
-    throw std::runtime_error("FDK: even one slice of " + std::to_string(problem.grid->size[0]) + "x" +
-                             std::to_string(problem.grid->size[1]) + " voxels needs " + std::to_string(plan.bytes) +
-                             " bytes of device memory, more than the " + std::to_string(budget) + " allowed");
+    throw Error(ErrorClass::LimitExceeded,
+                "FDK: even one slice of " + std::to_string(problem.grid->size[0]) + "x" +
+                    std::to_string(problem.grid->size[1]) + " voxels needs " + std::to_string(plan.bytes) +
+                    " bytes of device memory, more than the " + std::to_string(budget) +
+                    " allowed (--device-memory; a CPU device's share of --memory)");
   while (high - low > 1) {  // largest slab that fits
     const std::uint32_t mid = low + (high - low) / 2;
     SlabPlan candidate;
