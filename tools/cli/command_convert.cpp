@@ -14,6 +14,7 @@
 #include "report.hpp"
 #include "sizes.hpp"
 #include "volume_metadata.hpp"
+#include "signal_cleanup.hpp"
 
 namespace ivol::cli {
 namespace {
@@ -191,6 +192,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     const auto start = std::chrono::steady_clock::now();
     const Format from = detect_format(s->input, s->from, "--from");
     const Format to = output_format(s->output, s->to, "OUT");
+    remove_temporaries_on_signal(s->output);
     if (from == Format::Ivol && to == Format::Ivol) throw UsageError("OUT", "ivol to ivol: nothing to convert");
     if (is_stdio(s->input) && from != Format::Raw) throw UsageError("IN", "'-' (standard input) takes raw input only");
     check_output(s->output, "OUT", {s->input}, s->force, /*stdout_allowed=*/true);

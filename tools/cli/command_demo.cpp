@@ -22,6 +22,7 @@
 #include "recon_slabs.hpp"
 #include "report.hpp"
 #include "slice_image.hpp"
+#include "signal_cleanup.hpp"
 
 namespace ivol::cli {
 namespace {
@@ -105,6 +106,8 @@ Runner add_demo_command(CLI::App& app, const GlobalOptions& global) {
     std::filesystem::create_directories(s->output_dir);
     const std::string dense_path = s->output_dir + "/demo-dense.ivol";
     const std::string octree_path = s->output_dir + "/demo-octree.ivol";
+    for (const char* name : {"demo-dense.ivol", "demo-octree.ivol", "demo-dense-slice.png", "demo-octree-slice.png"})
+      remove_temporaries_on_signal(s->output_dir + "/" + name);
 
     auto start = Clock::now();
     recon::InMemoryProjections projections = recon::project_scan(phantom, geometry);

@@ -11,6 +11,7 @@
 #include "output_rules.hpp"
 #include "report.hpp"
 #include "salvage_report.hpp"
+#include "signal_cleanup.hpp"
 
 namespace ivol::cli {
 namespace {
@@ -59,6 +60,7 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
     const Format to = output_format(s->output, s->to, "-o");
     if (to == Format::Ivol) throw UsageError("-o", "extract writes dense formats, not .ivol");
     check_output(s->output, "-o", {s->file}, s->force, /*stdout_allowed=*/true);
+    remove_temporaries_on_signal(s->output);
     std::ostream& say = is_stdio(s->output) ? std::cerr : std::cout;  // not among the samples
     ReaderOptions reader_options;
     reader_options.salvage = s->salvage;

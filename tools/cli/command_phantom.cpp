@@ -31,6 +31,7 @@
 #include "projection_io.hpp"
 #include "report.hpp"
 #include "staged_file.hpp"
+#include "signal_cleanup.hpp"
 
 namespace ivol::cli {
 namespace {
@@ -345,6 +346,7 @@ Runner add_phantom_command(CLI::App& app, const GlobalOptions& global) {
     std::vector<OutputFile> outputs{{s->output, "-o", false}, {plan.geometry_path, "--geometry-out", false}};
     if (!s->truth.empty()) outputs.push_back({s->truth, "--truth", false});
     check_outputs(outputs, {}, s->force);
+    for (const OutputFile& output : outputs) remove_temporaries_on_signal(output.path);
 
     // Temporary files first: a missing or read-only folder fails before any work.
     convert::StagedFile projections_file(s->output);

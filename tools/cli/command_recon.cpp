@@ -33,6 +33,7 @@
 #include "recon_slabs.hpp"
 #include "report.hpp"
 #include "scan_input.hpp"
+#include "signal_cleanup.hpp"
 
 namespace ivol::cli {
 namespace {
@@ -719,6 +720,7 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     // Distributed, rank 0 writes the file.
     const bool writes = !mpi || mpi->rank() == 0;
     if (writes) check_output(s->output, "-o", input_paths, s->force);
+    if (writes) remove_temporaries_on_signal(s->output);
     // Hashed on a thread of its own while the reconstruction runs.
     std::shared_ptr<SourceDigests> digests;
     if (writes) digests = std::make_shared<SourceDigests>(inputs, roles);
@@ -832,7 +834,6 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
     import.progress = progress_bar("ivol recon", quiet || s->json);
 
     if (!s->structure.empty()) {
-      if (mpi && root) mpi->remove_temporaries_on_signal(s->output);
       return run_structure(*s, global, grid, options, scan, reconstructor, import.metadata, import.complete_metadata,
                            start, mpi);
     }
@@ -859,7 +860,6 @@ Runner add_recon_command(CLI::App& app, const GlobalOptions& global) {
       // Distributed: each rank reconstructs whole writer slabs, builds their
       // subtrees and sends them to rank 0, which writes them in z order.
       // The other ranks then compress blocks for rank 0's writer.
-      if (root) mpi->remove_temporaries_on_signal(s->output);
       import.encoder = mpi->block_encoder();
       const convert::DistributedBuild built =
           convert::reconstruct_distributed(reconstructor, grid, s->output, import, *mpi->exchange(), s->slab_slices,

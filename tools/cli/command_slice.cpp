@@ -13,6 +13,7 @@
 #include "png_image.hpp"
 #include "report.hpp"
 #include "slice_image.hpp"
+#include "signal_cleanup.hpp"
 
 namespace ivol::cli {
 
@@ -41,6 +42,7 @@ Runner add_slice_command(CLI::App& app, const GlobalOptions& global) {
     // slice writes PNG only: the name must say so (s.jpg would hold PNG bytes).
     if (lower_extension(s->output) != ".png") throw UsageError("-o", "'" + s->output + "' is not a .png name");
     check_output(s->output, "-o", {s->file}, s->force);
+    remove_temporaries_on_signal(s->output);
     Reader reader(s->file);
     warn_if_fetched_whole(reader, "ivol slice");
     const int axis = s->axis[0] - 'x';

@@ -10,6 +10,7 @@
 #include "ivol/error.hpp"
 #include "ivol/metadata.hpp"
 #include "option_parsing.hpp"
+#include "signal_cleanup.hpp"
 
 namespace {
 
@@ -96,6 +97,8 @@ int main(int argc, char** argv) {
   // Started again as the child that runs libhdf5 (isolated_worker.hpp):
   // serves its parent and exits here.
   ivol::convert::serve_if_worker_process();
+  // Before any thread exists, so that every thread inherits the blocked signals.
+  ivol::cli::start_signal_cleanup();
   try {
     return run(argc, argv);
   } catch (const std::exception& e) {

@@ -1,17 +1,10 @@
 #include "mpi_exchange.hpp"
 
-#include <dirent.h>
-#include <pthread.h>
-#include <signal.h>
-#include <sys/stat.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cstdlib>
-#include <ctime>
 #include <iostream>
-#include <mutex>
 #include <stdexcept>
 #include <thread>
 
@@ -31,52 +24,6 @@ namespace {
 int environment_size(const char* name) {
   const char* value = std::getenv(name);
   return value != nullptr ? std::atoi(value) : 0;
-}
-
-// The temporary files of one output, removed when a signal ends the run.
-// Written by the main thread, read by the signal thread.
-struct TemporaryOutput {
-  std::mutex mutex;
-  std::string directory;
-  std::string prefix;  // ".<name>.tmp-"
-  std::time_t since = 0;
-
-  void remove() {
-    std::lock_guard<std::mutex> lock(mutex);
-    if (prefix.empty()) return;
-    DIR* dir = ::opendir(directory.c_str());
-    if (dir == nullptr) return;
-    while (const dirent* entry = ::readdir(dir)) {
-      const std::string name = entry->d_name;
-      if (name.compare(0, prefix.size(), prefix) != 0) continue;
-      const std::string path = directory + "/" + name;
-      struct stat st {};
-      // Only ours: made since this run started (another run's may be older).
-      if (::stat(path.c_str(), &st) == 0 && st.st_mtime >= since) ::unlink(path.c_str());
-    }
-    ::closedir(dir);
-  }
-};
-
-TemporaryOutput& temporary_output() {
-  static TemporaryOutput output;
-  return output;
-}
-
-// SIGTERM and SIGINT, blocked in every thread, arrive here instead, where
-// removing files is safe (no async-signal restrictions).
-[[maybe_unused]] void start_signal_thread() {
-  sigset_t signals;
-  sigemptyset(&signals);
-  sigaddset(&signals, SIGTERM);
-  sigaddset(&signals, SIGINT);
-  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
-  std::thread([signals] {
-    int received = 0;
-    if (sigwait(&signals, &received) != 0) return;
-    temporary_output().remove();
-    ::_exit(128 + received);
-  }).detach();
 }
 
 // How many processes the launcher started, as it says in the environment:
@@ -194,8 +141,6 @@ struct MpiRun::Impl {
 };
 
 MpiRun::MpiRun() : impl_(std::make_unique<Impl>()) {
-  temporary_output().since = std::time(nullptr) - 1;  // whole seconds: never miss a file of this run
-  start_signal_thread();
   int provided = 0;
   MPI_Init_thread(nullptr, nullptr, MPI_THREAD_FUNNELED, &provided);
   if (provided < MPI_THREAD_FUNNELED) {
@@ -293,12 +238,5 @@ void MpiRun::fail(const std::exception& what) {
 
 #endif
 
-void MpiRun::remove_temporaries_on_signal(const std::string& output) {
-  TemporaryOutput& t = temporary_output();
-  std::lock_guard<std::mutex> lock(t.mutex);
-  const std::size_t slash = output.find_last_of('/');
-  t.directory = slash == std::string::npos ? "." : slash == 0 ? "/" : output.substr(0, slash);
-  t.prefix = "." + (slash == std::string::npos ? output : output.substr(slash + 1)) + ".tmp-";
-}
 
 }  // namespace ivol::cli

@@ -59,11 +59,9 @@ class MpiRun {
   // Whether this ivol was built with MPI (IVOL_WITH_MPI).
   static bool available();
 
-  // MPI_Init_thread (MPI_THREAD_FUNNELED). Blocks SIGTERM and SIGINT for
-  // every thread started afterwards and waits for them on a thread of its
-  // own, which removes this run's temporary output files (see
-  // remove_temporaries_on_signal) before exiting: mpirun sends SIGTERM to
-  // every rank when one of them dies. Throws when built without MPI.
+  // MPI_Init_thread (MPI_THREAD_FUNNELED). mpirun sends SIGTERM to every
+  // rank when one of them dies: signal_cleanup.hpp (started in main) removes
+  // each rank's temporary output files then. Throws when built without MPI.
   MpiRun();
   ~MpiRun();  // MPI_Finalize
   MpiRun(const MpiRun&) = delete;
@@ -86,11 +84,6 @@ class MpiRun {
   // Collective: every rank's stats on rank 0, rank by rank (empty elsewhere).
   // Bytes, slabs and compression come from the exchange and the farm.
   std::vector<RankStats> gather(RankStats mine);
-
-  // After a temporary file for `output` may exist on this rank: on SIGTERM
-  // or SIGINT, files ".<name>.tmp-*" next to it made since this run started
-  // are removed (libformat's and StagedFile's temporaries are named so).
-  void remove_temporaries_on_signal(const std::string& output);
 
   // Ends the whole run after `what` failed on this rank: prints
   // "ivol recon: error: …" (rank 0, which reports the other ranks' failures
