@@ -157,7 +157,11 @@ class File(Level):
         # (None when the file opened as it is).
         self.salvage = info["salvage"]
         m = self.metadata
-        self.voxel_size = tuple(float(v) for v in m["voxel_size"][::-1])
+        # None where the file says nobody knew it (ivol convert of a raw file
+        # without --voxel-size): the stored 1s are no measurement.
+        provenance = m.get("provenance")
+        known = not (isinstance(provenance, dict) and provenance.get("voxel_size_known") is False)
+        self.voxel_size = tuple(float(v) for v in m["voxel_size"][::-1]) if known else None
         self.origin = tuple(float(v) for v in m["origin"][::-1])
         self.unit = m["unit"]
         super().__init__(self, 0)

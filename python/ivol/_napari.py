@@ -57,7 +57,7 @@ def read_layers(path):
     pyramid = [f.level(k) for k in range(f.levels)]
     options = {
         "name": os.path.splitext(os.path.basename(f.path))[0],
-        "scale": f.voxel_size,
+        "scale": f.voxel_size or (1.0, 1.0, 1.0),  # unknown: voxels as units
         "translate": f.origin,
         "metadata": {"ivol": f.metadata, "unit": f.unit},
         "multiscale": len(pyramid) > 1,

@@ -20,10 +20,20 @@ _SAMPLE_NAMES = {
 }
 
 
+def _voxel_size_or_unknown(voxel_size, provenance):
+    """(vz, vy, vx, provenance): a voxel size not given is recorded as
+    unknown, as `ivol convert` records it (1 in the metadata, provenance
+    "voxel_size_known": false), never as a size nobody measured."""
+    if voxel_size is not None:
+        vz, vy, vx = (float(v) for v in voxel_size)
+        return vz, vy, vx, provenance
+    return 1.0, 1.0, 1.0, dict(provenance or {}, voxel_size_known=False)
+
+
 def write(
     path,
     array,
-    voxel_size=(1.0, 1.0, 1.0),
+    voxel_size=None,
     origin=(0.0, 0.0, 0.0),
     unit="mm",
     encoding=None,
@@ -34,9 +44,10 @@ def write(
     byte_planes=True,
 ):
     """Writes a 3-D array (z, y, x) as a lossless octree .ivol file, as
-    `ivol convert` writes the same samples from a raw file: the same file,
-    byte for byte, given the same provenance. voxel_size and origin are in
-    (z, y, x) order. encoding: None (lossless: uint16 for integer arrays,
+    `ivol convert --structure octree` writes the same samples from a raw
+    file: the same file, byte for byte, given the same provenance. voxel_size
+    and origin are in (z, y, x) order; without voxel_size the file says the
+    voxel size is unknown (File.voxel_size is then None). encoding: None (lossless: uint16 for integer arrays,
     binary16 for float16, float32 for float32), "uint16", "binary16" or
     "float32". provenance: a dict merged into the default provenance.
     The file appears at `path` only when complete."""
@@ -53,7 +64,7 @@ def write(
     a = np.ascontiguousarray(a, dtype=a.dtype.newbyteorder("<"))
     if 0 in a.shape:
         raise InvalidArgumentError(f"{path}: the volume is empty {a.shape}", "invalid-argument")
-    vz, vy, vx = (float(v) for v in voxel_size)
+    vz, vy, vx, provenance = _voxel_size_or_unknown(voxel_size, provenance)
     oz, oy, ox = (float(v) for v in origin)
     return _ivol.write(
         os.fspath(path),
@@ -78,7 +89,7 @@ def write_structure(
     need,
     factor=1,
     structure="regular",
-    voxel_size=(1.0, 1.0, 1.0),
+    voxel_size=None,
     origin=(0.0, 0.0, 0.0),
     unit="mm",
     encoding="float32",
@@ -121,7 +132,7 @@ def write_structure(
     nested_cell = int(nested_cell)
     if nested_cell < 1 or nested_cell & (nested_cell - 1):
         raise InvalidArgumentError(f"{path}: nested_cell {nested_cell} is not a power of two", "invalid-argument")
-    vz, vy, vx = (float(v) for v in voxel_size)
+    vz, vy, vx, provenance = _voxel_size_or_unknown(voxel_size, provenance)
     oz, oy, ox = (float(v) for v in origin)
     return _ivol.write_grid(
         os.fspath(path),

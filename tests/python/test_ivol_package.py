@@ -394,6 +394,31 @@ class Writing(unittest.TestCase):
             with self.assertRaises(ivol.IvolIOError):
                 ivol.write(os.path.join(tmp, "no", "such", "dir.ivol"), np.zeros((2, 2, 2), np.float32))
 
+    def test_a_voxel_size_nobody_gave_stays_unknown(self):
+        # ivol.write used to record 1 mm when no voxel size was given, and
+        # File.voxel_size gave the stored 1s of a file `ivol convert` had
+        # marked as unknown: a size nobody measured, read as one.
+        a = np.arange(4 * 5 * 6, dtype=np.uint16).reshape(4, 5, 6)
+        with tempfile.TemporaryDirectory() as tmp:
+            py_file = os.path.join(tmp, "py.ivol")
+            ivol.write(py_file, a)
+            f = ivol.open(py_file)
+            self.assertIsNone(f.voxel_size)
+            self.assertIs(f.metadata["provenance"]["voxel_size_known"], False)
+            self.assertTrue(np.array_equal(f[...], a))
+            raw = os.path.join(tmp, "a.raw")
+            a.astype("<u2").tofile(raw)
+            for name, extra, want in [("unknown.ivol", [], None),
+                                      ("known.ivol", ["--voxel-size", "0.5,0.25,2"], (2.0, 0.25, 0.5))]:
+                with self.subTest(name=name):
+                    out = os.path.join(tmp, name)
+                    run_ivol("convert", raw, out, "--dims", "6,5,4", "--type", "u16", *extra)
+                    self.assertEqual(ivol.open(out).voxel_size, want)
+            ivol.write(py_file, a, voxel_size=(2, 0.25, 0.5))
+            f = ivol.open(py_file)
+            self.assertEqual(f.voxel_size, (2.0, 0.25, 0.5))
+            self.assertNotIn("voxel_size_known", f.metadata["provenance"])
+
     def test_reads_only_the_blocks_touched(self):
         rng = np.random.default_rng(5)
         a = rng.normal(size=(64, 64, 64)).astype(np.float32)
