@@ -12,13 +12,12 @@
 #include <cmath>
 #include <cstdio>
 #include <ctime>
-#include <fstream>
 #include <string>
 #include <vector>
 
-#include "ivol/binary16.hpp"
 #include "ivol/predicted_codec.hpp"
 #include "ivol/writer.hpp"
+#include "sixteen_bit_volume.hpp"
 
 namespace {
 
@@ -107,19 +106,14 @@ int main(int argc, char** argv) {
   const std::uint32_t n = static_cast<std::uint32_t>(std::stoul(argv[2]));
   const unsigned log2 = argc > 3 ? static_cast<unsigned>(std::stoul(argv[3])) : 5;
   const int zstd_level = argc > 4 ? std::stoi(argv[4]) : 3;
-  std::vector<float> f(std::size_t{n} * n * n);
-  std::ifstream in(argv[1], std::ios::binary);
-  if (!in.read(reinterpret_cast<char*>(f.data()), static_cast<std::streamsize>(f.size() * 4))) {
-    std::fprintf(stderr, "codec_bench: cannot read %zu float32 from %s\n", f.size(), argv[1]);
+  bench::SixteenBitVolume volume;
+  try {
+    volume = bench::read_sixteen_bit(argv[1], n);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
     return 2;
   }
-  std::vector<std::uint16_t> half(f.size()), codes(f.size());
-  const auto [lo, hi] = std::minmax_element(f.begin(), f.end());
-  for (std::size_t i = 0; i < f.size(); ++i) {
-    half[i] = ivol::float_to_binary16(f[i]);
-    codes[i] = static_cast<std::uint16_t>(std::lround((f[i] - *lo) / (*hi - *lo) * 65535.0));
-  }
-  run("binary16", half, n, log2, ivol::ValueEncoding::Binary16, zstd_level);
-  run("uint16", codes, n, log2, ivol::ValueEncoding::UInt16, zstd_level);
+  run("binary16", volume.binary16, n, log2, ivol::ValueEncoding::Binary16, zstd_level);
+  run("uint16", volume.codes, n, log2, ivol::ValueEncoding::UInt16, zstd_level);
   return 0;
 }

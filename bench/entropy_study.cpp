@@ -34,14 +34,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
-#include "ivol/binary16.hpp"
 #include "ivol/predicted_codec.hpp"
+#include "sixteen_bit_volume.hpp"
 
 namespace {
 
@@ -173,21 +172,16 @@ int main(int argc, char** argv) {
   }
   const auto n = static_cast<std::uint32_t>(std::stoul(argv[2]));
   const unsigned log2 = argc > 3 ? static_cast<unsigned>(std::stoul(argv[3])) : 5;
-  std::vector<float> f(std::size_t{n} * n * n);
-  std::ifstream in(argv[1], std::ios::binary);
-  if (!in.read(reinterpret_cast<char*>(f.data()), static_cast<std::streamsize>(f.size() * 4))) {
-    std::fprintf(stderr, "entropy_study: cannot read %zu float32 from %s\n", f.size(), argv[1]);
+  bench::SixteenBitVolume volume;
+  try {
+    volume = bench::read_sixteen_bit(argv[1], n);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
     return 2;
-  }
-  std::vector<std::uint16_t> half(f.size()), codes(f.size());
-  const auto [lo, hi] = std::minmax_element(f.begin(), f.end());
-  for (std::size_t i = 0; i < f.size(); ++i) {
-    half[i] = ivol::float_to_binary16(f[i]);
-    codes[i] = static_cast<std::uint16_t>(std::lround((f[i] - *lo) / (*hi - *lo) * 65535.0));
   }
   std::printf("| %s | codec 3 | order-0 | contexts, static | adaptive | split |\n|---|---:|---:|---:|---:|---:|\n",
               argv[1]);
-  run("binary16", half, n, log2, ivol::ValueEncoding::Binary16);
-  run("uint16", codes, n, log2, ivol::ValueEncoding::UInt16);
+  run("binary16", volume.binary16, n, log2, ivol::ValueEncoding::Binary16);
+  run("uint16", volume.codes, n, log2, ivol::ValueEncoding::UInt16);
   return 0;
 }
