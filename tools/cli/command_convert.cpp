@@ -299,6 +299,8 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
                      std::to_string(r.threshold) + ")";
           std::cerr << "ivol convert: lossy: " << steps << "; largest error " << r.max_abs_error << "\n";
         }
+        // A bricked grid is far smaller for such input: say why it is not one.
+        if (r.octree_for_memory) std::cerr << "ivol convert: note: an octree, because " << r.structure_reason << "\n";
         say << s->input << " (" << format_name(from) << " " << describe(shape) << ", " << human_bytes(bytes) << ") -> "
             << s->output << " (ivol " << r.structure << " " << encoding_name(r.encoding) << ", "
             << human_bytes(r.file_bytes) << ", " << static_cast<double>(bytes) / r.file_bytes << "x smaller"

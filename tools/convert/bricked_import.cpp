@@ -104,9 +104,15 @@ bool choose_bricked(const DenseVolume& shape, const ImportOptions& options, Valu
     report.structure = "octree";
     return false;
   }
-  if (against.empty() && bricked_read_slices(shape, options, encoding) == 0)
-    against = "a layer of bricks (" + mib_text(bricked_layer_bytes(shape, options, encoding, 1)) +
+  if (against.empty() && bricked_read_slices(shape, options, encoding) == 0) {
+    const std::uint64_t layer = bricked_layer_bytes(shape, options, encoding, 1);
+    against = "a layer of bricks (" + mib_text(layer) +
               ") exceeds the memory budget (--memory), a slab of the octree writer does not";
+    // Where the layer's budget is the whole of --memory (convert), say what
+    // would write the smaller bricked grid.
+    if (options.layer_budget_bytes == 0) against += "; " + memory_option_for(layer) + " writes a bricked grid";
+    report.octree_for_memory = true;
+  }
   if (!against.empty()) {
     report.structure = "octree";
     report.structure_reason = against;

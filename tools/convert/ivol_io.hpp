@@ -70,6 +70,7 @@ struct ImportOptions {
 struct ImportReport {
   std::string structure = "octree";  // "octree" or "bricked"
   std::string structure_reason;      // why (the choice of StructureChoice::Auto, or the flag)
+  bool octree_for_memory = false;    // Auto chose an octree only because a layer of bricks did not fit
   ValueEncoding encoding = ValueEncoding::Binary16;
   double value_scale = 1.0;
   double value_offset = 0.0;

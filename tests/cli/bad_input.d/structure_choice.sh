@@ -4,7 +4,13 @@
 /usr/bin/python3 - "$work" <<'PY'
 import sys, numpy as np
 (np.arange(8 * 8 * 8, dtype=np.uint16) * 7).tofile(sys.argv[1] + "/u16.raw")
+(np.arange(256 * 256 * 32, dtype=np.uint32) % 4093).astype(np.uint16).tofile(sys.argv[1] + "/wide.raw")
 PY
+# auto under a --memory that holds the octree's slabs but not a layer of
+# bricks: an octree, said on stderr with the --memory that
+# writes the bricked grid (only `info` said it). Its output goes outside $out.
+bad structure-octree-for-memory 0 "note: an octree, because a layer of bricks (10 MiB) exceeds the memory budget (--memory), a slab of the octree writer does not; --memory 10 writes a bricked grid" \
+    -- "$IVOL" convert "$work/wide.raw" "$work/wide.ivol" --dims 256,256,32 --type u16 --memory 8 -f
 bad bricked-with-keep 2 "--structure bricked: a keep rule coarsens regions, which only an octree holds" \
     -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --keep threshold=10,margin=1
 bad bricked-float32 2 "--structure bricked: float32 values (codecs 3 and 4 hold 16-bit values)" \
