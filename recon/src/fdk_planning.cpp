@@ -6,8 +6,8 @@
 #include <thread>
 
 #include "fdk_native_backproject.hpp"
-#include "ivol/error.hpp"
 #include "fdk_session.hpp"
+#include "ivol/error.hpp"
 
 namespace ivol::recon::detail {
 

@@ -12,9 +12,9 @@
 #include "option_parsing.hpp"
 #include "output_rules.hpp"
 #include "report.hpp"
+#include "signal_cleanup.hpp"
 #include "sizes.hpp"
 #include "volume_metadata.hpp"
-#include "signal_cleanup.hpp"
 
 namespace ivol::cli {
 namespace {

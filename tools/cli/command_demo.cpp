@@ -21,8 +21,8 @@
 #include "ivol_io.hpp"
 #include "recon_slabs.hpp"
 #include "report.hpp"
-#include "slice_image.hpp"
 #include "signal_cleanup.hpp"
+#include "slice_image.hpp"
 
 namespace ivol::cli {
 namespace {

@@ -30,8 +30,8 @@
 #include "output_rules.hpp"
 #include "projection_io.hpp"
 #include "report.hpp"
-#include "staged_file.hpp"
 #include "signal_cleanup.hpp"
+#include "staged_file.hpp"
 
 namespace ivol::cli {
 namespace {

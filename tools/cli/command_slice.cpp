@@ -12,8 +12,8 @@
 #include "output_rules.hpp"
 #include "png_image.hpp"
 #include "report.hpp"
-#include "slice_image.hpp"
 #include "signal_cleanup.hpp"
+#include "slice_image.hpp"
 
 namespace ivol::cli {
 
