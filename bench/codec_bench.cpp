@@ -1,12 +1,14 @@
 // Codec 3 (predicted 16-bit, spec §7.2) against codec 2 (zstd over byte
 // planes) on the bricks of a real volume (issue 22), one core:
 //
-//   codec_bench VOLUME.f32 N [BRICK_LOG2 [ZSTD_LEVEL]]
+//   codec_bench VOLUME.f32 N [BRICK_LOG2 [ZSTD_LEVEL [ENTROPY]]]
 //
 // VOLUME.f32: N^3 float32, x fastest (peers_bench caches its reconstructions
 // as such under WORK/cache). Each brick is encoded as binary16 and as uint16
 // (the volume's range scaled to 0 .. 65535), with codec 3 and with codec 2 at
-// zstd level ZSTD_LEVEL (default 3) for both; prints bytes, and encode and decode MB/s of 16-bit values
+// zstd level ZSTD_LEVEL (default 3) for both, codec 3 with the entropy coder
+// ENTROPY (smaller: the smaller of the two per brick, the default; zstd:
+// coder 1 only; tokens: coder 2 only, where the spec allows it); prints bytes, and encode and decode MB/s of 16-bit values
 // per second of the thread's CPU time.
 #include <algorithm>
 #include <cmath>
@@ -57,7 +59,7 @@ std::vector<Brick> cut(const std::vector<std::uint16_t>& v, std::uint32_t n, uns
 }
 
 void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint32_t n, unsigned log2,
-         ivol::ValueEncoding encoding, int zstd_level) {
+         ivol::ValueEncoding encoding, int zstd_level, ivol::PredictedOptions::Entropy entropy) {
   const std::vector<Brick> bricks = cut(volume, n, log2);
   const double mb = 2.0 * volume.size() / 1e6;
   std::uint64_t predicted_bytes = 0, planes_bytes = 0, best_bytes = 0;
@@ -66,6 +68,7 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
   for (std::size_t b = 0; b < bricks.size(); ++b) {
     ivol::PredictedOptions p;
     p.zstd_level = zstd_level;
+    p.entropy = entropy;
     payloads[b] = ivol::encode_predicted(bricks[b].values.data(), bricks[b].dims, encoding, p);
     predicted_bytes += payloads[b].size();
   }
@@ -100,12 +103,15 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: codec_bench VOLUME.f32 N [BRICK_LOG2 [ZSTD_LEVEL]]\n");
+    std::fprintf(stderr, "usage: codec_bench VOLUME.f32 N [BRICK_LOG2 [ZSTD_LEVEL [smaller|zstd|tokens]]]\n");
     return 2;
   }
   const std::uint32_t n = static_cast<std::uint32_t>(std::stoul(argv[2]));
   const unsigned log2 = argc > 3 ? static_cast<unsigned>(std::stoul(argv[3])) : 5;
   const int zstd_level = argc > 4 ? std::stoi(argv[4]) : 3;
+  const std::string coder = argc > 5 ? argv[5] : "smaller";
+  using Entropy = ivol::PredictedOptions::Entropy;
+  const Entropy entropy = coder == "zstd" ? Entropy::ZstdPlanes : coder == "tokens" ? Entropy::Tokens : Entropy::Smaller;
   bench::SixteenBitVolume volume;
   try {
     volume = bench::read_sixteen_bit(argv[1], n);
@@ -113,7 +119,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
     return 2;
   }
-  run("binary16", volume.binary16, n, log2, ivol::ValueEncoding::Binary16, zstd_level);
-  run("uint16", volume.codes, n, log2, ivol::ValueEncoding::UInt16, zstd_level);
+  run("binary16", volume.binary16, n, log2, ivol::ValueEncoding::Binary16, zstd_level, entropy);
+  run("uint16", volume.codes, n, log2, ivol::ValueEncoding::UInt16, zstd_level, entropy);
   return 0;
 }

@@ -7,6 +7,7 @@
 #include <zstd.h>
 #include <zstd_errors.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <memory>
@@ -15,6 +16,7 @@
 #include "ivol/error.hpp"
 #include "predicted_fit.hpp"
 #include "predicted_rows.hpp"
+#include "residual_tokens.hpp"
 #include "zstd_parts.hpp"
 
 namespace ivol {
@@ -28,6 +30,7 @@ constexpr std::uint8_t kPredictorLinear = 1;   // seven integer taps and a shift
 constexpr std::uint8_t kMapIdentity = 0;       // the u16 as it is
 constexpr std::uint8_t kMapBinary16Order = 1;  // binary16 bit patterns in numeric order
 constexpr std::uint8_t kEntropyZstdPlanes = 1;
+constexpr std::uint8_t kEntropyTokens = 2;  // rANS over tokens with contexts (§7.2.1)
 constexpr unsigned kMaxShift = 15;
 
 // Negative numbers reversed below the positive ones: -0 (0x8000) becomes
@@ -127,6 +130,22 @@ void check_frame(const std::uint8_t* frame, std::size_t size, std::size_t conten
     bad("the bytes after the codec header are not exactly one complete zstd frame");
 }
 
+// Entropy coder 1: the residuals' byte planes from one zstd frame.
+void decode_zstd_planes(const std::uint8_t* frame, std::size_t frame_size, std::vector<std::uint8_t>& planes) {
+  auto bad = [](ErrorClass c, const std::string& what) { throw Error(c, "codec 3: " + what); };
+  check_frame(frame, frame_size, planes.size());
+  thread_local std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> context(ZSTD_createDCtx(), ZSTD_freeDCtx);
+  const std::size_t got = ZSTD_decompressDCtx(context.get(), planes.data(), planes.size(), frame, frame_size);
+  if (ZSTD_isError(got)) {
+    if (ZSTD_getErrorCode(got) == ZSTD_error_checksum_wrong)
+      bad(ErrorClass::Checksum, "the zstd content checksum does not match");
+    bad(ErrorClass::Malformed, std::string("zstd cannot decode the residuals: ") + ZSTD_getErrorName(got));
+  }
+  if (got != planes.size())
+    bad(ErrorClass::Malformed,
+        "the residuals decoded to " + std::to_string(got) + " bytes, the brick needs " + std::to_string(planes.size()));
+}
+
 }  // namespace
 
 std::uint64_t predicted_payload_bound(std::uint64_t voxels) {
@@ -164,13 +183,8 @@ std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const Br
   if (!have) interior_residuals(dims, taps, u.data(), best_z.data());
   face_residuals(dims, u.data(), best_z.data());
 
-  std::vector<std::uint8_t> planes(2 * n);
-  for (std::size_t i = 0; i < n; ++i) {
-    planes[i] = static_cast<std::uint8_t>(best_z[i]);
-    planes[n + i] = static_cast<std::uint8_t>(best_z[i] >> 8);
-  }
-
-  std::vector<std::uint8_t> out(predicted_payload_bound(n));
+  std::vector<std::uint8_t> out(kPredictedHeaderSize);
+  out.reserve(predicted_payload_bound(n));
   out[0] = kPredictorLinear;
   out[1] = map;
   out[2] = static_cast<std::uint8_t>(taps.shift);
@@ -182,13 +196,33 @@ std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const Br
   }
   for (int k = 0; k < 4; ++k) out[18 + k] = static_cast<std::uint8_t>(static_cast<std::uint32_t>(taps.bias) >> (8 * k));
   out[22] = out[23] = 0;  // reserved
-  thread_local std::unique_ptr<ZSTD_CCtx, decltype(&ZSTD_freeCCtx)> context(ZSTD_createCCtx(), ZSTD_freeCCtx);
-  if (!context) throw Error(ErrorClass::Io, "zstd: cannot create a compression context");
-  ZSTD_CCtx_reset(context.get(), ZSTD_reset_session_and_parameters);
-  ZSTD_CCtx_setParameter(context.get(), ZSTD_c_compressionLevel, options.zstd_level);
-  ZSTD_CCtx_setParameter(context.get(), ZSTD_c_contentSizeFlag, 1);
-  // Each plane ends a zstd block: entropy tables of its own (zstd_parts.hpp).
-  detail::compress_parts(context.get(), {{planes.data(), n}, {planes.data() + n, n}}, out, kPredictedHeaderSize);
+
+  auto zstd_planes = [&] {
+    std::vector<std::uint8_t> planes(2 * n);
+    for (std::size_t i = 0; i < n; ++i) {
+      planes[i] = static_cast<std::uint8_t>(best_z[i]);
+      planes[n + i] = static_cast<std::uint8_t>(best_z[i] >> 8);
+    }
+    thread_local std::unique_ptr<ZSTD_CCtx, decltype(&ZSTD_freeCCtx)> context(ZSTD_createCCtx(), ZSTD_freeCCtx);
+    if (!context) throw Error(ErrorClass::Io, "zstd: cannot create a compression context");
+    ZSTD_CCtx_reset(context.get(), ZSTD_reset_session_and_parameters);
+    ZSTD_CCtx_setParameter(context.get(), ZSTD_c_compressionLevel, options.zstd_level);
+    ZSTD_CCtx_setParameter(context.get(), ZSTD_c_contentSizeFlag, 1);
+    // Each plane ends a zstd block: entropy tables of its own (zstd_parts.hpp).
+    detail::compress_parts(context.get(), {{planes.data(), n}, {planes.data() + n, n}}, out, kPredictedHeaderSize);
+  };
+  // Either coder's payload obeys codec 3's one limit on stored bytes (spec §7).
+  std::size_t limit = ZSTD_compressBound(2 * n);
+  if (options.entropy != PredictedOptions::Entropy::Tokens) {
+    zstd_planes();
+    if (options.entropy == PredictedOptions::Entropy::ZstdPlanes) return out;
+    limit = out.size() - kPredictedHeaderSize - 1;  // coder 2 only where it is smaller
+  }
+  std::vector<std::uint8_t> tokens(out.begin(), out.begin() + kPredictedHeaderSize);
+  tokens[3] = kEntropyTokens;
+  if (detail::encode_residual_tokens(best_z.data(), dims, limit, tokens)) return tokens;
+  // Coder 2 is larger, or (asked for alone) past its limit in the spec.
+  if (options.entropy == PredictedOptions::Entropy::Tokens) zstd_planes();
   return out;
 }
 
@@ -202,7 +236,7 @@ void decode_predicted(const std::uint8_t* payload, std::size_t size, const Brick
   if (payload[1] != kMapIdentity && payload[1] != kMapBinary16Order)
     bad(ErrorClass::Malformed, "value map " + std::to_string(payload[1]) + " is not 0 or 1");
   if (payload[2] > kMaxShift) bad(ErrorClass::Malformed, "shift " + std::to_string(payload[2]) + " exceeds 15");
-  if (payload[3] != kEntropyZstdPlanes)
+  if (payload[3] != kEntropyZstdPlanes && payload[3] != kEntropyTokens)
     bad(ErrorClass::UnsupportedFeature, "entropy coder " + std::to_string(payload[3]) + " is not known");
   if (payload[22] != 0 || payload[23] != 0) bad(ErrorClass::Malformed, "the reserved bytes 22 .. 24 are not 0");
   PredictorTaps taps;
@@ -212,20 +246,11 @@ void decode_predicted(const std::uint8_t* payload, std::size_t size, const Brick
   taps.bias = static_cast<std::int32_t>(std::uint32_t{payload[18]} | std::uint32_t{payload[19]} << 8 |
                                         std::uint32_t{payload[20]} << 16 | std::uint32_t{payload[21]} << 24);
 
-  const std::uint8_t* frame = payload + kPredictedHeaderSize;
-  const std::size_t frame_size = size - kPredictedHeaderSize;
-  check_frame(frame, frame_size, 2 * n);
-  thread_local std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> context(ZSTD_createDCtx(), ZSTD_freeDCtx);
   std::vector<std::uint8_t> planes(2 * n);
-  const std::size_t got = ZSTD_decompressDCtx(context.get(), planes.data(), planes.size(), frame, frame_size);
-  if (ZSTD_isError(got)) {
-    if (ZSTD_getErrorCode(got) == ZSTD_error_checksum_wrong)
-      bad(ErrorClass::Checksum, "the zstd content checksum does not match");
-    bad(ErrorClass::Malformed, std::string("zstd cannot decode the residuals: ") + ZSTD_getErrorName(got));
-  }
-  if (got != planes.size())
-    bad(ErrorClass::Malformed,
-        "the residuals decoded to " + std::to_string(got) + " bytes, the brick needs " + std::to_string(planes.size()));
+  if (payload[3] == kEntropyTokens)
+    detail::decode_residual_tokens(payload + kPredictedHeaderSize, size - kPredictedHeaderSize, dims, planes.data());
+  else
+    decode_zstd_planes(payload + kPredictedHeaderSize, size - kPredictedHeaderSize, planes);
   const RowPredictor p(taps);
   const std::uint8_t *lo = planes.data(), *hi = planes.data() + n;
   const std::ptrdiff_t sy = dims[0], sz = std::ptrdiff_t{dims[0]} * dims[1];

@@ -1,7 +1,8 @@
 // Codec 3, "predicted 16-bit" (spec §7.2, format 1.3): the payload of a
 // values block that is a brick of 16-bit values. A causal 3-D predictor on
 // the u16 bit patterns (so -0 and NaN payloads come back exactly), zigzag
-// residuals, and zstd over the residuals' two byte planes. Each brick carries
+// residuals, entropy-coded by zstd over their two byte planes or by rANS over
+// tokens with contexts (§7.2.1), whichever is smaller. Each brick carries
 // its own integer predictor taps and level: least squares fitted to the brick
 // (with or without a level), or the Lorenzo predictor, whichever leaves the
 // smallest residuals.
@@ -25,6 +26,9 @@ struct PredictedOptions {
   // Best: the smallest residuals of Lorenzo and both fits; LeastSquares: of
   // the fits only.
   enum class Taps { Best, Lorenzo, LeastSquares } taps = Taps::Best;
+  // Which entropy coder (§7.2, header byte 3) the encoder may use: the one
+  // that gives the smaller payload, or only one of them.
+  enum class Entropy { Smaller, ZstdPlanes, Tokens } entropy = Entropy::Smaller;
 };
 
 // Size of the codec header in front of the zstd frame (spec §7.2).
@@ -43,8 +47,8 @@ std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const Br
 // Allocates nothing beyond the brick's own decoded size.
 void decode_predicted(const std::uint8_t* payload, std::size_t size, const BrickDims& dims, std::uint16_t* out);
 
-// The largest payload encode_predicted can produce for `voxels` values: the
-// codec header and the largest zstd frame of 2 * voxels bytes (spec §7).
+// The largest payload spec §7 allows for `voxels` values, whichever entropy
+// coder: the codec header and the largest zstd frame of 2 * voxels bytes.
 std::uint64_t predicted_payload_bound(std::uint64_t voxels);
 
 }  // namespace ivol
