@@ -22,6 +22,7 @@ them; not an error of the file); 4 internal error of this reader (a bug).
 """
 
 import argparse
+import bisect
 import collections
 import json
 import math
@@ -888,8 +889,9 @@ def decode_payload(ix, e, stored, limit=MAX_BLOCK_DECODED):
 
 
 def decode_predicted(payload, ext, where):
-    """§7.2 codec 3: the codec header, the residuals' frame, then every voxel in
-    raster order from its prediction.  Returns the values as little-endian u16."""
+    """§7.2 codec 3: the codec header, the residuals (entropy coder 1: a zstd
+    frame of two byte planes; 2: §7.2.1), then every voxel in raster order
+    from its prediction.  Returns the values as little-endian u16."""
     ex, ey, ez = ext
     n = ex * ey * ez
     if len(payload) < PREDICTED_HEADER:
@@ -902,15 +904,20 @@ def decode_predicted(payload, ext, where):
         fail("malformed", "%s: codec 3 value_map %d, expected 0 or 1" % (where, value_map))
     if s > 15:
         fail("malformed", "%s: codec 3 shift %d, expected 0..15" % (where, s))
-    if entropy != 1:
-        fail("unsupported-feature", "%s: codec 3 entropy coder %d, this reader knows 1" % (where, entropy))
+    if entropy not in (1, 2):
+        fail("unsupported-feature", "%s: codec 3 entropy coder %d, this reader knows 1 and 2"
+             % (where, entropy))
     t = struct.unpack_from("<7h", payload, 4)
     (level,) = struct.unpack_from("<i", payload, 18)
     if payload[22] or payload[23]:
         fail("malformed", "%s: codec 3 reserved bytes 22..24 are not 0" % where)
-    content = decode_zstd_frame(bytes(payload[PREDICTED_HEADER:]), 2 * n, where)
-    planes = np.frombuffer(content, np.uint8).astype(np.int64)
-    zz = planes[:n] + 256 * planes[n:]
+    if entropy == 1:
+        content = decode_zstd_frame(bytes(payload[PREDICTED_HEADER:]), 2 * n, where)
+        planes = np.frombuffer(content, np.uint8).astype(np.int64)
+        zz = planes[:n] + 256 * planes[n:]
+    else:
+        # every check of §7.2.1 is made before any value is predicted (SPEC-NOTES 71)
+        zz = np.array(decode_rans_residuals(bytes(payload), ext, where), np.int64)
     diff = np.where(zz % 2 == 0, zz // 2, -(zz + 1) // 2).tolist()
     r = (1 << (s - 1)) if s > 0 else 0
     sy, sz = ex, ex * ey          # index steps along y and z
@@ -942,6 +949,128 @@ def decode_predicted(payload, ext, where):
     if value_map == 1:   # the inverse of the binary16 order map
         v = np.where(v & 0x8000, v ^ 0x8000, v ^ 0xFFFF)
     return v.astype("<u2").tobytes()
+
+
+RANS_PROB_BITS = 12                 # §7.2.1: tables sum to 4096
+RANS_LOW = 1 << 23                  # §7.2.1: the states' lower bound and final value
+RANS_CONTEXTS = 12
+RANS_TOKENS = 32
+
+
+def rans_table(c, T):
+    """§7.2.1: the frequencies f_0 .. f_31 (summing to 4096) and the cumulative
+    frequencies s_0 .. s_31 made from the counts c (sum T) of one context."""
+    R4 = (1 << 44) // T
+    f = [max(1, (ct * R4) >> 32) for ct in c]
+    j = f.index(max(f))              # the lowest t among equal largest
+    f[j] += (1 << RANS_PROB_BITS) - sum(f)   # D, which may be negative (SPEC-NOTES 73)
+    s, acc = [], 0
+    for ft in f:
+        s.append(acc)
+        acc += ft
+    return f, s
+
+
+def decode_rans_residuals(payload, ext, where):
+    """§7.2.1 codec 3 entropy coder 2: the residuals z_0 .. z_{n-1} of a brick
+    of extent ext from the bytes after the 24-byte codec header of payload:
+    the stream length R, the rANS stream of two interleaved states coding one
+    token a voxel in one of 12 adaptive contexts, then the bits below the
+    tokens.  Returns the residuals as a list of ints."""
+    ex, ey, ez = ext
+    n = ex * ey * ez
+    what = "%s: codec 3 entropy coder 2" % where
+    base = PREDICTED_HEADER
+    if len(payload) < base + 4:      # (SPEC-NOTES 72)
+        fail("malformed", "%s: payload of %d bytes has no room for the stream length R "
+             "(at least 28 bytes)" % (what, len(payload)))
+    (R,) = struct.unpack_from("<I", payload, base)
+    if R < 8 or R > len(payload) - 28:
+        fail("malformed", "%s: rANS stream length R = %d, expected 8 .. %d (payload size "
+             "%d - 28)" % (what, R, len(payload) - 28, len(payload)))
+    start = base + 4                  # stream byte 0
+    end = start + R                   # one past the last stream byte
+    X = list(struct.unpack_from("<2I", payload, start))
+    for j in (0, 1):   # §7.2.1: 2^23 .. 2^31 - 1 (SPEC-NOTES 74 asked for the upper bound)
+        if not RANS_LOW <= X[j] < 1 << 31:
+            fail("malformed", "%s: initial rANS state X_%d = %d is not in 2^23 .. 2^31 - 1" % (what, j, X[j]))
+    pos = start + 8                   # next stream byte to read
+    # every context: counts, their sum, tokens coded in it, frequencies, cumulative frequencies
+    counts = [[1] * RANS_TOKENS for _ in range(RANS_CONTEXTS)]
+    totals = [RANS_TOKENS] * RANS_CONTEXTS
+    coded = [0] * RANS_CONTEXTS
+    f0, s0 = rans_table(counts[0], totals[0])
+    freqs = [list(f0) for _ in range(RANS_CONTEXTS)]
+    cums = [list(s0) for _ in range(RANS_CONTEXTS)]
+    tokens = [0] * n
+    blen = [0] * n                    # B(t) of every voxel's token
+    sy, sz = ex, ex * ey
+    mask = (1 << RANS_PROB_BITS) - 1
+    find = bisect.bisect_right
+    i = 0
+    for z in range(ez):
+        for y in range(ey):
+            for x in range(ex):
+                # the context from the bit lengths of earlier rows, 0 outside the brick
+                ctx = 2
+                if y:
+                    ctx += 2 * blen[i - sy]
+                    if x:
+                        ctx += blen[i - sy - 1]
+                    if x + 1 < ex:
+                        ctx += blen[i - sy + 1]
+                if z:
+                    ctx += blen[i - sz]
+                k = ctx // 5
+                if k > 11:
+                    k = 11
+                f, s = freqs[k], cums[k]
+                j = i & 1
+                st = X[j]
+                slot = st & mask
+                tok = find(s, slot) - 1
+                st = f[tok] * (st >> RANS_PROB_BITS) + slot - s[tok]
+                while st < RANS_LOW:
+                    if pos >= end:
+                        fail("malformed", "%s: the rANS stream of %d bytes ends at voxel %d of %d"
+                             % (what, R, i, n))
+                    st = (st << 8) | payload[pos]
+                    pos += 1
+                X[j] = st
+                tokens[i] = tok
+                blen[i] = tok if tok < 2 else (tok >> 1) + 1
+                c = counts[k]
+                c[tok] += 16
+                totals[k] += 16
+                m = coded[k] + 1
+                coded[k] = m
+                if (m & (m - 1) == 0 and m >= 4) or m % 128 == 0:
+                    freqs[k], cums[k] = rans_table(c, totals[k])
+                i += 1
+    if X[0] != RANS_LOW or X[1] != RANS_LOW:
+        fail("malformed", "%s: final rANS states are %d and %d, expected 2^23 = %d for both"
+             % (what, X[0], X[1], RANS_LOW))
+    if pos != end:
+        fail("malformed", "%s: %d of the %d bytes of the rANS stream are left over after the "
+             "last voxel" % (what, end - pos, R))
+    # the bits below the tokens, in voxel order, least significant first
+    tok = np.array(tokens, np.int64)
+    e = np.where(tok < 2, 0, (tok >> 1) - 1)       # e = B(t) - 2 for t >= 2
+    E = int(e.sum())
+    bits = payload[end:]
+    if len(bits) != (E + 7) // 8:
+        fail("malformed", "%s: the bits below the tokens take %d bytes, the tokens need %d "
+             "bits (%d bytes)" % (what, len(bits), E, (E + 7) // 8))
+    if E % 8 and bits[-1] >> (E % 8):   # (SPEC-NOTES 75)
+        fail("malformed", "%s: padding bits %d..7 of the last byte of the bits below the "
+             "tokens are not 0 (byte 0x%02X)" % (what, E % 8, bits[-1]))
+    b = np.frombuffer(bits + b"\0\0\0", np.uint8).astype(np.int64)
+    at = np.cumsum(e) - e                          # the first bit of every token's bits
+    q = at >> 3
+    window = b[q] | (b[q + 1] << 8) | (b[q + 2] << 16)   # e + (at mod 8) <= 21 bits
+    w = (window >> (at & 7)) & ((np.int64(1) << e) - 1)
+    zz = np.where(tok < 2, tok, ((2 + (tok & 1)) << e) + w)
+    return zz.tolist()
 
 
 def decode_masked(payload, n, where):

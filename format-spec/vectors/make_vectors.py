@@ -27,6 +27,10 @@ The script contains
   * (1.3 draft) bricked grids (§8A.4) with codecs 3 and 4 (§7.2, §7.3), and
     stored levels of detail in stream 7 (§8A.5), each level computed from
     the dense source by the same flat sum and bricked with its own sizes,
+  * (1.3 draft) codec 3's entropy coder 2 (§7.2.1): tokens, contexts, the
+    adaptive model, an rANS encoder with two interleaved states (model run
+    forward, voxels coded last to first) and the self-test's decoder with
+    every check of §7.2.1,
   * a small reader that follows the check order of §13; it is used only as a
     self-test: every valid vector must read back to its expected dense export
     and levels of detail, and every invalid vector must fail with its
@@ -115,13 +119,11 @@ def predict(U, ext, x, y, z, shift, taps, level):
     return clamp(at(*c1) + at(*c2) - at(*c12))
 
 
-def predicted_payload(vals, ext, value_map=1, shift=0, taps=LORENZO, level=0, predictor=1,
-                      entropy=1, reserved=b"\0\0", zcheck=False):
-    """§7.2: the codec header and the zstd frame of the zigzag residuals' byte planes."""
+def predicted_residuals(vals, ext, value_map=1, shift=0, taps=LORENZO, level=0):
+    """§7.2 steps 1-3 backwards: the zigzag residuals z_0 .. z_{n-1} of a brick's values."""
     ex, ey, ez = ext
-    n = ex * ey * ez
     U = [b16_order(v) if value_map == 1 else v for v in vals]
-    low, high = bytearray(n), bytearray(n)
+    zs = []
     i = 0
     for z in range(ez):
         for y in range(ey):
@@ -129,11 +131,40 @@ def predicted_payload(vals, ext, value_map=1, shift=0, taps=LORENZO, level=0, pr
                 d = (U[i] - predict(U, ext, x, y, z, shift, taps, level)) % 65536
                 if d >= 32768:
                     d -= 65536
-                zz = 2 * d if d >= 0 else -2 * d - 1
-                low[i], high[i] = zz & 0xFF, zz >> 8
+                zs.append(2 * d if d >= 0 else -2 * d - 1)
                 i += 1
+    return zs
+
+
+def values_from_residuals(zs, ext, value_map=1, shift=0, taps=LORENZO, level=0):
+    """§7.2 steps 1-4 forwards: the values whose residuals are zs (any list of
+    0 .. 65535 is the residuals of exactly one brick of values)."""
+    ex, ey, ez = ext
+    U = [0] * len(zs)
+    i = 0
+    for z in range(ez):
+        for y in range(ey):
+            for x in range(ex):
+                zz = zs[i]
+                d = zz // 2 if zz % 2 == 0 else -(zz + 1) // 2
+                U[i] = (predict(U, ext, x, y, z, shift, taps, level) + d) % 65536
+                i += 1
+    return [b16_order_inverse(u) if value_map == 1 else u for u in U]
+
+
+def predicted_payload(vals, ext, value_map=1, shift=0, taps=LORENZO, level=0, predictor=1,
+                      entropy=1, reserved=b"\0\0", zcheck=False, e2=None):
+    """§7.2: the codec header, then (entropy 1) the zstd frame of the zigzag
+    residuals' byte planes, or (entropy 2) the rANS coding of §7.2.1, e2 the
+    options of e2_encode (for invalid vectors and statistics)."""
+    n = ext[0] * ext[1] * ext[2]
+    zs = predicted_residuals(vals, ext, value_map, shift, taps, level)
     head = struct.pack("<BBBB7hi", predictor, value_map, shift, entropy, *taps, level) + reserved
-    return head + zframe(bytes(low) + bytes(high), zcheck)
+    if entropy == 2:
+        return head + e2_encode(zs, ext, **(e2 or {}))
+    low, high = bytes(zz & 0xFF for zz in zs), bytes(zz >> 8 for zz in zs)
+    assert len(low) == n
+    return head + zframe(low + high, zcheck)
 
 
 def predicted_decode(st, ext):
@@ -149,24 +180,237 @@ def predicted_decode(st, ext):
         _fail("malformed", "codec3.map")
     if shift > 15:
         _fail("malformed", "codec3.shift")
-    if entropy != 1:
+    if entropy not in (1, 2):
         _fail("unsupported-feature", "codec3.entropy")
     if st[22:24] != b"\0\0":
         _fail("malformed", "codec3.reserved")
     taps = struct.unpack_from("<7h", st, 4)
     (level,) = struct.unpack_from("<i", st, 18)
-    planes = zstd_content(st[24:], 2 * n)
+    if entropy == 1:
+        planes = zstd_content(st[24:], 2 * n)
+        zs = [planes[i] | planes[n + i] << 8 for i in range(n)]
+    else:
+        zs = e2_decode(st[24:], ext)
     U = [0] * n
     i = 0
     for z in range(ez):
         for y in range(ey):
             for x in range(ex):
-                zz = planes[i] | planes[n + i] << 8
+                zz = zs[i]
                 d = zz // 2 if zz % 2 == 0 else -(zz + 1) // 2
                 U[i] = (predict(U, ext, x, y, z, shift, taps, level) + d) % 65536
                 i += 1
     vals = [b16_order_inverse(u) if value_map == 1 else u for u in U]
     return struct.pack("<%dH" % n, *vals)
+
+
+# ------------------------------------------- codec 3, entropy coder 2 (§7.2.1)
+
+E2_LOW = 1 << 23        # the states' lower bound, and what both start (encoder) and end (decoder) at
+
+
+def e2_token(zz):
+    """§7.2.1 Tokens: (token t, number e of bits below, their value w) of residual zz."""
+    if zz < 2:
+        return zz, 0, 0
+    b = zz.bit_length()
+    e = b - 2
+    return 2 * b - 2 + ((zz >> e) & 1), e, zz & ((1 << e) - 1)
+
+
+def e2_bitlen(t):
+    """§7.2.1: B(t), the bit length of the residuals of token t."""
+    return t if t < 2 else (t >> 1) + 1
+
+
+def e2_residual(t, w):
+    """§7.2.1: the residual of token t and its bits below w."""
+    if t < 2:
+        return t
+    return ((2 + (t & 1)) << (e2_bitlen(t) - 2)) + w
+
+
+def _check_e2_tokens():
+    for zz in range(65536):
+        t, e, w = e2_token(zz)
+        assert 0 <= t < 32 and e == max(0, e2_bitlen(t) - 2) and e2_residual(t, w) == zz
+    assert [e2_token(zz)[0] for zz in (0, 1, 2, 3, 4, 6, 32767, 32768, 49151, 49152, 65535)] == \
+        [0, 1, 2, 3, 4, 5, 29, 30, 30, 31, 31]
+
+
+class E2Model:
+    """§7.2.1 Model: 12 contexts of 32 counts (each 1 at the start of the
+    brick), their sum T, the number m of tokens coded in the context, and a
+    frequency table made from the counts.  `stats` (a dict or None) collects
+    what the vectors claim to cover: the number of tables made (the 12
+    starting ones included), the largest m, and the most negative D."""
+
+    def __init__(self, stats=None):
+        self.c = [[1] * 32 for _ in range(12)]
+        self.T = [32] * 12
+        self.m = [0] * 12
+        self.f = [None] * 12
+        self.s = [None] * 12
+        self.stats = stats
+        for k in range(12):
+            self._table(k)
+
+    def _table(self, k):
+        T = self.T[k]
+        R4 = (1 << 44) // T
+        f = [max(1, (c * R4) >> 32) for c in self.c[k]]
+        D = 4096 - sum(f)                       # may be negative (max(1, ..) above), see SPEC-NOTES
+        j = f.index(max(f))                     # the lowest t among equal largest
+        f[j] += D
+        assert f[j] >= 1 and sum(f) == 4096
+        s, acc = [], 0
+        for ft in f:
+            s.append(acc)
+            acc += ft
+        self.f[k], self.s[k] = f, s
+        if self.stats is not None:
+            st = self.stats
+            st["tables"] = st.get("tables", 0) + 1
+            st["min_D"] = min(st.get("min_D", 0), D)
+
+    def update(self, k, t):
+        self.c[k][t] += 16
+        self.T[k] += 16
+        self.m[k] += 1
+        m = self.m[k]
+        if (m >= 4 and m & (m - 1) == 0) or m % 128 == 0:
+            self._table(k)
+        if self.stats is not None:
+            ms = self.stats.setdefault("m", [0] * 12)
+            ms[k] = max(ms[k], m)
+
+
+def e2_context(B, ext, x, y, z):
+    """§7.2.1 Contexts: k of voxel (x, y, z) from the bit lengths B (raster
+    order) of the tokens at (x, y-1, z), (x, y, z-1), (x-1, y-1, z),
+    (x+1, y-1, z), 0 outside the brick."""
+    ex, ey, ez = ext
+
+    def at(a, b, c):
+        if 0 <= a < ex and 0 <= b < ey and 0 <= c < ez:
+            return B[(c * ey + b) * ex + a]
+        return 0
+    u, k, l, p = at(x, y - 1, z), at(x, y, z - 1), at(x - 1, y - 1, z), at(x + 1, y - 1, z)
+    return min(11, (2 * u + k + l + p + 2) // 5)
+
+
+def _raster(ext):
+    ex, ey, ez = ext
+    return [(x, y, z) for z in range(ez) for y in range(ey) for x in range(ex)]
+
+
+def e2_encode(zs, ext, start=(E2_LOW, E2_LOW), extra=None, stats=None):
+    """§7.2.1, the encoder paragraph: R, the rANS stream and the bits below of
+    the residuals zs (raster order) of a brick of extent ext.  The model is run
+    forward (raster order) to give each voxel's frequency f and cumulative s;
+    the voxels are then coded from the last to the first, voxel i with state
+    X_{i mod 2}, both states starting at `start` (2^23 in a valid payload).
+    extra = j (invalid vectors only): before the last coding step of state j
+    emit one byte more than the encoder rule asks, so that X_j ends below 2^23
+    while the stream otherwise decodes exactly."""
+    n = len(zs)
+    toks = [e2_token(zz) for zz in zs]
+    B = [e2_bitlen(t) for t, _, _ in toks]
+    model = E2Model(stats)
+    fs = []
+    for i, (x, y, z) in enumerate(_raster(ext)):
+        k = e2_context(B, ext, x, y, z)
+        t = toks[i][0]
+        fs.append((model.f[k][t], model.s[k][t]))
+        model.update(k, t)
+    X = list(start)
+    out = bytearray()
+    for i in range(n - 1, -1, -1):
+        j = i % 2
+        x = X[j]
+        f, s = fs[i]
+        while x >= f << 19:
+            out.append(x & 0xFF)
+            x >>= 8
+        if extra == j and i == j:
+            out.append(x & 0xFF)
+            x >>= 8
+        X[j] = 4096 * (x // f) + x % f + s
+    if extra is not None:
+        assert X[extra] < E2_LOW
+    stream = struct.pack("<II", X[0], X[1]) + bytes(reversed(out))
+    acc = nbits = 0
+    for _, e, w in toks:                         # least significant bit first
+        acc |= w << nbits
+        nbits += e
+    bits = acc.to_bytes((nbits + 7) // 8, "little")
+    return struct.pack("<I", len(stream)) + stream + bits
+
+
+def e2_split(body):
+    """(R, rANS stream, bits below) of the bytes after a codec 3 header, for
+    building invalid vectors."""
+    (R,) = struct.unpack_from("<I", body, 0)
+    return R, body[4:4 + R], body[4 + R:]
+
+
+def e2_decode(body, ext, skip=()):
+    """§7.2.1, for the self-test: the residuals of the bytes after a codec 3
+    header of entropy 2, with every check of §7.2.1 in the order a decoder
+    meets them.  skip: names of checks left out (only to show that an
+    invalid vector breaks nothing else)."""
+    n = ext[0] * ext[1] * ext[2]
+    if len(body) < 4:                               # payload shorter than 28 bytes: no R
+        _fail("malformed", "codec3.entropy2.short")
+    (R,) = struct.unpack_from("<I", body, 0)
+    if R < 8:
+        _fail("malformed", "codec3.entropy2.stream_size_below_8", str(R))
+    if R > len(body) - 4:                           # R <= payload size - 28
+        _fail("malformed", "codec3.entropy2.stream_size_over_payload", str(R))
+    stream = body[4:4 + R]
+    X = list(struct.unpack_from("<II", stream, 0))
+    if any(not E2_LOW <= x < 1 << 31 for x in X) and "initial_state" not in skip:
+        _fail("malformed", "codec3.entropy2.initial_state", "%d %d" % tuple(X))
+    pos = 8
+    model = E2Model()
+    toks, B = [0] * n, [0] * n
+    for i, (x, y, z) in enumerate(_raster(ext)):
+        k = e2_context(B, ext, x, y, z)
+        j = i % 2
+        st = X[j]
+        slot = st % 4096
+        f, s = model.f[k], model.s[k]
+        t = 0
+        while not s[t] <= slot < s[t] + f[t]:
+            t += 1
+        st = f[t] * (st // 4096) + slot - s[t]
+        while st < E2_LOW:
+            if pos >= R:
+                _fail("malformed", "codec3.entropy2.stream_end", "voxel %d" % i)
+            st = 256 * st + stream[pos]
+            pos += 1
+        X[j] = st
+        model.update(k, t)
+        toks[i], B[i] = t, e2_bitlen(t)
+    if X != [E2_LOW, E2_LOW] and "states_end" not in skip:
+        _fail("malformed", "codec3.entropy2.states_end", "%d %d" % tuple(X))
+    if pos != R and "stream_left" not in skip:
+        _fail("malformed", "codec3.entropy2.stream_left", "%d of %d bytes read" % (pos, R))
+    bits = body[4 + R:]
+    E = sum(max(0, b - 2) for b in B)
+    if len(bits) != (E + 7) // 8:
+        _fail("malformed", "codec3.entropy2.bits_size", "%d bytes for %d bits" % (len(bits), E))
+    acc = int.from_bytes(bits, "little")
+    if acc >> E:
+        _fail("malformed", "codec3.entropy2.padding")
+    bitstr = bin(acc)[2:].zfill(E)[::-1] if E else ""     # bit j of the part is bitstr[j]
+    zs, j = [], 0
+    for t, b in zip(toks, B):
+        e = max(0, b - 2)
+        w = int(bitstr[j:j + e][::-1], 2) if e else 0
+        j += e
+        zs.append(e2_residual(t, w))
+    return zs
 
 
 def masked_payload(vals, background, form=None, reserved=0, zcheck=False):
@@ -2665,6 +2909,7 @@ def gen():
     gen_bricked()
     gen_masked()
     gen_stored_lods()
+    gen_entropy2()
     return SAMPLE
 
 
@@ -3481,6 +3726,248 @@ def gen_stored_lods():
                 "structure_kind 5 stream 7 is an unknown stream, and a non-ignorable block of an unknown "
                 "stream makes the reader refuse the file (§6.4).")
 
+    # codec 3 with entropy coder 2 (§7.2.1) in stream 7; own generator, so the vectors above keep their bytes
+    rng2 = np.random.default_rng(2402)
+    src = (2000 + 37 * np.arange(13)[None, None, :] - 21 * np.arange(10)[None, :, None]
+           + 15 * np.arange(9)[:, None, None] + rng2.integers(0, 60, (9, 10, 13))).astype(np.uint16)
+    levels = {1: dict(codec=CODEC_PREDICTED, entropy=2, value_map=0),
+              2: dict(codec=CODEC_PREDICTED, entropy=2, value_map=0, shift=2, taps=(3, 3, 2, -2, -2, -1, 1),
+                      level=5),
+              3: dict(codec=CODEC_PREDICTED, entropy=1, value_map=0),
+              4: dict(codec=CODEC_PREDICTED, entropy=2, value_map=0)}
+    valid("bricked_lods_13x10x9_uint16_entropy2", src, UINT16, 2, levels,
+          "Bricked grid 13x10x9 uint16, bricks of 4, values codec 3 with entropy coder 2 (§7.2.1), storing "
+          "every level of detail in stream 7 as codec 3 bricks: levels 1 (7x5x5: bricks 4x4x4 .. 3x1x1), "
+          "2 (4x3x3, one brick; shift 2, taps 3, 3, 2, -2, -2, -1, 1, level 5) and 4 (1x1x1) with entropy "
+          "coder 2, level 3 (2x2x2) with entropy coder 1. The contexts of a level's brick use the "
+          "level's brick extents, which differ from the volume's bricks at the same brick coordinates.",
+          values=dict(value_map=0, entropy=2))
+
+
+# --------------------------------- codec 3 with entropy coder 2 (§7.2.1, 1.3 draft)
+
+def gen_entropy2():
+    """§7.2.1 (1.3 draft): bricked grids whose codec 3 blocks code their
+    residuals with entropy coder 2 (rANS over tokens with contexts), then
+    files whose first codec 3 block breaks one rule of §7.2.1 each.  Own
+    random generator, so that the vectors before it keep their bytes."""
+    framed = dict(framed=True, minor=3)
+    rng = np.random.default_rng(2401)
+
+    def bricked_file(src, enc, b, codec=CODEC_PREDICTED, mutate=None, **pred):
+        g = write_bricked(src, enc, b)
+        blocks = bricked_blocks(g, codec, **pred)
+        if mutate:
+            mutate(blocks)
+        blocks.insert(0, meta_block(DEFAULT_META))
+        data, _ = assemble(g, blocks, structure_kind=KIND_BRICKED, ireserved=b, **framed)
+        return data
+
+    def valid(name, src, enc, b, desc, lods=True, **kw):
+        add_valid(name, bricked_file(src, enc, b, **kw), src, enc, desc, lods=lods, kind=KIND_BRICKED,
+                  extra={"brick_log2": b})
+
+    smooth = lambda X, Y, Z, lo, step: (lo + step * (np.arange(X)[None, None, :] + 2 * np.arange(Y)[None, :, None]
+                                                     + 3 * np.arange(Z)[:, None, None]))
+    # ---- valid
+    src = (smooth(9, 5, 5, 2000, 9) + rng.integers(0, 6, (5, 5, 9))).astype(np.uint16)
+    shapes = sorted({e for _, e, _ in bricked_order((9, 5, 5), 2)})
+    assert (1, 1, 1) in shapes and (4, 1, 1) in shapes and (1, 4, 4) in shapes and len(shapes) == 8
+    valid("bricked_entropy2_9x5x5_uint16_edge_bricks", src, UINT16, 2,
+          "Bricked grid 9x5x5 uint16, bricks of 4, codec 3 (Lorenzo taps, identity map) with entropy "
+          "coder 2 (§7.2.1: rANS over tokens with contexts) in every brick. The 12 bricks have the 8 "
+          "extents %s: edge bricks of 1 voxel along one, two and all three axes (a 1x1x1 corner brick), "
+          "where the context neighbours (x, y-1, z), (x, y, z-1), (x-1, y-1, z) and (x+1, y-1, z) fall "
+          "outside the brick (bit length 0)." % ", ".join("%dx%dx%d" % e for e in shapes),
+          value_map=0, entropy=2)
+
+    vals = np.round(rng.normal(0.5, 0.3, 9 * 7 * 6), 3)
+    src = arr_f16(vals, (6, 7, 9))
+    flat = src.reshape(-1)
+    flat[[0, 5, 17, 40, 77, 111, 200, 301, 302]] = [0x8000, 0x7E01, 0xFE77, 0x7C00, 0xFC00, 0x0001, 0x8001,
+                                                    0x8000, 0x03FF]
+    valid("bricked_entropy2_9x7x6_binary16_specials", src, BINARY16, 2,
+          "Bricked grid 9x7x6 binary16, bricks of 4, codec 3 with the binary16 order map and entropy "
+          "coder 2: -0, NaNs with payloads (0x7E01, 0xFE77), both infinities and subnormals (0x0001, "
+          "0x8001, 0x03FF) come back bit for bit; their residuals are large tokens among small ones.",
+          entropy=2)
+
+    src = np.array([[[0x8000]]], np.uint16)
+    one = predicted_payload([0x8000], (1, 1, 1), entropy=2)
+    assert one[24 + 8:24 + 12] == b"\x00\x00\x80\x00" and e2_token(65534) == (31, 14, 16382)
+    valid("bricked_entropy2_1x1x1_binary16", src, BINARY16, 1,
+          "Bricked grid of one voxel (-0, mapped to 0x7FFF, predicted 0: residual 65534, token 31 with 14 "
+          "bits below), codec 3 with entropy coder 2. With n = 1 only state X_0 codes a voxel: X_1 is "
+          "never used and is 2^23 from the start (stream bytes 4 .. 7 = 00 00 80 00).", lods=False,
+          entropy=2)
+
+    # every token 0 .. 31 at both ends of its range, among random tokens
+    ext = (8, 8, 4)
+    n = 8 * 8 * 4
+    ends = []
+    for t in range(32):
+        e = max(0, e2_bitlen(t) - 2)
+        ends += [e2_residual(t, 0), e2_residual(t, (1 << e) - 1)]
+    rest = []
+    for t in rng.integers(0, 32, n - len(ends)):
+        e = max(0, e2_bitlen(int(t)) - 2)
+        rest.append(e2_residual(int(t), int(rng.integers(0, 1 << e)) if e else 0))
+    zs = [int(z) for z in rng.permutation(np.array(ends + rest))]
+    assert {e2_token(z)[0] for z in zs} == set(range(32)) and max(zs) == 65535
+    src = np.array(values_from_residuals(zs, ext, value_map=0), np.uint16).reshape(4, 8, 8)
+    assert predicted_residuals([int(v) for v in src.reshape(-1)], ext, value_map=0) == zs
+    valid("bricked_entropy2_8x8x4_uint16_all_tokens", src, UINT16, 3,
+          "Bricked grid 8x8x4 uint16, one brick of bricks of 8, codec 3 (Lorenzo, identity map) with "
+          "entropy coder 2, whose values are made from chosen residuals: every token 0 .. 31 occurs, each "
+          "at the lowest and the highest residual of its range (0, 1, 2, 3, 4 .. 5, 6 .. 7, ..., 32768 "
+          "(token 30) .. 49151, 49152 .. 65535 (token 31), e = 0 .. 14 bits below), among random tokens "
+          "with random bits: every bit length of the contexts and every width of the bits below.",
+          value_map=0, entropy=2)
+
+    # one brick of 32x16x16: contexts past m = 128, 256, 384 (tables made again)
+    X, Y, Z = 32, 16, 16
+    z, y, x = np.mgrid[0:Z, 0:Y, 0:X]
+    inside = (x - 13.0) ** 2 + (y - 8.0) ** 2 + (z - 7.5) ** 2 <= 10.5 ** 2
+    noise = rng.normal(0, 1, (Z, Y, X)) * (1 + 6 * x)          # noise grows along x: every context used
+    part = 30000 + 40 * x + 25 * y - 30 * z + noise
+    src = np.where(inside, np.clip(np.round(part), 0, 65535), 1000).astype(np.uint16)
+    stats = {}
+    predicted_payload([int(v) for v in src.reshape(-1)], (X, Y, Z), value_map=0, entropy=2, e2=dict(stats=stats))
+    ms = stats["m"]
+    assert min(ms) > 0 and max(ms) > 384 and sum(1 for m in ms if m > 128) >= 6 and stats["min_D"] < 0, stats
+    valid("bricked_entropy2_32x16x16_uint16_one_brick", src, UINT16, 5,
+          "Bricked grid 32x16x16 uint16, one brick (bricks of 32), codec 3 (Lorenzo, identity map) with "
+          "entropy coder 2: a ball of a ramp with noise growing along x in a background of 1000. Its "
+          "8192 voxels use all 12 contexts; %d of them code more than 128 tokens, the largest %d (so its "
+          "table is made again at m = 4 .. 64, 128, 256, 384, ...; %d tables made in all, the 12 starting "
+          "ones included), and the tables of "
+          "the most used contexts have D < 0 (down to %d: counts of 1 give f = max(1, 0) = 1, so the "
+          "largest frequency is lowered)."
+          % (sum(1 for m in ms if m > 128), max(ms), stats["tables"], stats["min_D"]),
+          value_map=0, entropy=2)
+
+    vals = np.round(rng.normal(1.0, 0.5, 12 * 8 * 6), 2)
+    src = arr_f16(vals, (6, 8, 12))
+    src.reshape(-1)[[3, 50, 100, 333]] = [0x8000, 0x7C00, 0x7E00, 0x0000]
+    per = lambda q: dict(entropy=1 + q % 2, value_map=q // 2 % 2, shift=q % 16,
+                         taps=tuple(int(t) for t in rng.integers(-999, 999, 7)) if q % 3 else LORENZO,
+                         level=int(rng.integers(-5000, 5000)) if q % 3 else 0)
+    valid("bricked_entropy2_12x8x6_binary16_mixed_entropy", src, BINARY16, 2,
+          "Bricked grid 12x8x6 binary16, 12 bricks of 4 (4x4x2 at the top), codec 3 in every brick, "
+          "alternating entropy coder 1 (zstd over byte planes) and 2 (rANS) from brick to brick, each brick "
+          "with its own value map, shift, taps and level (a writer keeps per brick the coder that is "
+          "smaller, §7.2).", per_brick=per)
+
+    # adversarial residuals: a correct entropy 2 coding larger than codec 3's limit (§7)
+    ext = (8, 8, 8)
+    n = 512
+    model, B, zs = E2Model(), [0] * n, []
+    for i, (x, y, z) in enumerate(_raster(ext)):
+        k = e2_context(B, ext, x, y, z)
+        f = model.f[k]
+        t = max(range(32), key=lambda t: (max(0, e2_bitlen(t) - 2) * 4096 + 4096 * math.log2(4096 / f[t]), -t))
+        e = max(0, e2_bitlen(t) - 2)
+        zs.append(e2_residual(t, int(rng.integers(0, 1 << e)) if e else 0))
+        B[i] = e2_bitlen(t)
+        model.update(k, t)
+    adv = np.array(values_from_residuals(zs, ext, value_map=0), np.uint16).reshape(8, 8, 8)
+    over = predicted_payload([int(v) for v in adv.reshape(-1)], ext, value_map=0, entropy=2)
+    limit = 24 + zstd_bound(2 * n)
+    assert len(over) > limit
+    assert len(predicted_payload([int(v) for v in adv.reshape(-1)], ext, value_map=0)) <= limit
+
+    # ---- invalid: the first brick of a bricked grid breaks one rule of §7.2.1 each
+    src = (smooth(6, 5, 4, 1000, 5) + rng.integers(0, 25, (4, 5, 6))).astype(np.uint16)
+    good = dict(value_map=0, entropy=2)
+    ext0 = bricked_order((6, 5, 4), 2)[0][1]
+    base = predicted_payload([int(v) for v in write_bricked(src, UINT16, 2).values[:64]], ext0, **good)
+    R0, stream0, bits0 = e2_split(base[24:])
+    vals0 = [int(v) for v in write_bricked(src, UINT16, 2).values[:64]]
+    zs0 = predicted_residuals(vals0, ext0, value_map=0)
+    E0 = sum(e2_token(z)[1] for z in zs0)
+    assert ext0 == (4, 4, 4) and R0 > 12 and 1 <= E0 % 8 <= 6, (R0, E0)
+    # the three codings that break one check only: each decodes to the brick without that check
+    for check, e2 in (("initial_state", dict(extra=1)), ("states_end", dict(start=(E2_LOW, E2_LOW + 1)))):
+        bad = predicted_payload(vals0, ext0, e2=e2, **good)[24:]
+        assert e2_decode(bad, ext0, skip=(check,)) == zs0
+    R, s, b = e2_split(base[24:])
+    assert e2_decode(struct.pack("<I", R + 1) + s + b"\x5a" + b, ext0, skip=("stream_left",)) == zs0
+
+    def body(fn):                       # mutate the bytes after the codec header of the first brick
+        def mutate(blocks):
+            st = blocks[0].stored
+            blocks[0].stored = st[:24] + fn(*e2_split(st[24:]))
+        return mutate
+
+    def join(R, stream, bits):
+        return struct.pack("<I", R) + stream + bits
+
+    def inv(name, expect, tag, desc, first=None, **kw):
+        args = dict(good)
+        if first is not None:           # settings of the first brick only
+            args = dict(per_brick=lambda q: dict(good, **(first if q == 0 else {})))
+        args.update(kw)
+        add_invalid(name, bricked_file(src, UINT16, 2, **args), expect, tag, desc)
+
+    head = ("Bricked grid 6x5x4 uint16, bricks of 4, codec 3 with entropy coder 2 in every brick, whose "
+            "first brick (4x4x4, R = %d, %d bytes of bits below for E = %d bits) " % (R0, len(bits0), E0))
+    inv("bricked_codec3_entropy2_stream_size_7", "malformed", "codec3.entropy2.stream_size_below_8",
+        head + "says R = 7: the rANS stream holds at least the two 4-byte states (§7.2.1: 8 <= R).",
+        mutate=body(lambda R, s, b: join(7, s, b)))
+    inv("bricked_codec3_entropy2_stream_size_over_payload", "malformed",
+        "codec3.entropy2.stream_size_over_payload",
+        head + "says R = payload size - 27, one more than the payload holds (§7.2.1: R <= payload size - 28).",
+        mutate=body(lambda R, s, b: join(R + len(b) + 1, s, b)))
+    inv("bricked_codec3_entropy2_initial_state_below_2_23", "malformed", "codec3.entropy2.initial_state",
+        head + "was coded with one byte more emitted before the last coding step of state X_1, so that "
+               "X_1 (stream bytes 4 .. 7) starts below 2^23 (§7.2.1: each MUST be >= 2^23); a decoder "
+               "that did not check it would read that byte back in its first renormalisation and decode "
+               "the brick exactly, with both states ending at 2^23 and every byte read.",
+        first=dict(e2=dict(extra=1)))
+    inv("bricked_codec3_entropy2_initial_state_2_31", "malformed", "codec3.entropy2.initial_state",
+        head + "has bit 31 of state X_1 (stream bytes 4 .. 7) set: X_1 starts at 2^31 or more (§7.2.1: each "
+               "MUST lie in 2^23 .. 2^31 - 1, the range an encoder's states end in, so that each list of "
+               "residuals has one coding). The first check that fails; what the brick would decode to "
+               "without it is not meant to be anything.",
+        mutate=body(lambda R, s, b: join(R, s[:7] + bytes([s[7] | 0x80]) + s[8:], b)))
+    inv("bricked_codec3_entropy2_states_end", "malformed", "codec3.entropy2.states_end",
+        head + "was coded with state X_1 starting at 2^23 + 1 instead of 2^23: the decoder reads every "
+               "byte of the stream and ends with X_0 = 2^23 but X_1 = 2^23 + 1 (§7.2.1: both MUST equal "
+               "2^23).", first=dict(e2=dict(start=(E2_LOW, E2_LOW + 1))))
+    inv("bricked_codec3_entropy2_stream_byte_left", "malformed", "codec3.entropy2.stream_left",
+        head + "has one byte more at the end of its rANS stream (R + 1, bits below unchanged): the "
+               "states end at 2^23 with that byte unread (§7.2.1: all R bytes MUST have been read).",
+        mutate=body(lambda R, s, b: join(R + 1, s + b"\x5a", b)))
+    inv("bricked_codec3_entropy2_stream_ends_early", "malformed", "codec3.entropy2.stream_end",
+        head + "lacks the last byte of its rANS stream (R - 1, bits below unchanged): the decoder's "
+               "last renormalisation finds the stream ended (§7.2.1 step 3).",
+        mutate=body(lambda R, s, b: join(R - 1, s[:-1], b)))
+    inv("bricked_codec3_entropy2_bits_short", "malformed", "codec3.entropy2.bits_size",
+        head + "lacks the last byte of its bits below: ceil(E / 8) - 1 bytes (§7.2.1: exactly the bytes "
+               "the tokens need).", mutate=body(lambda R, s, b: join(R, s, b[:-1])))
+    inv("bricked_codec3_entropy2_bits_long", "malformed", "codec3.entropy2.bits_size",
+        head + "has a zero byte after its bits below: ceil(E / 8) + 1 bytes (§7.2.1: exactly the bytes "
+               "the tokens need).", mutate=body(lambda R, s, b: join(R, s, b + b"\0")))
+    inv("bricked_codec3_entropy2_padding_bit", "malformed", "codec3.entropy2.padding",
+        head + "has bit 7 of the last byte of its bits below set, a padding bit (E mod 8 = %d, so bits "
+               "%d .. 7 of that byte are padding; §7.2.1: they are 0)." % (E0 % 8, E0 % 8),
+        mutate=body(lambda R, s, b: join(R, s, b[:-1] + bytes([b[-1] | 0x80]))))
+    inv("bricked_codec3_entropy2_short", "malformed", "codec3.entropy2.short",
+        head + "is cut to 27 bytes, the codec header and 3 bytes: too short for R (§7.2.1: 28 + R <= "
+               "payload size).", mutate=lambda blocks: setattr(blocks[0], "stored", blocks[0].stored[:27]))
+    inv("bricked_codec3_entropy_3", "unsupported-feature", "codec3.entropy",
+        head + "has entropy (payload byte 3) 3, not defined (§7.2: unsupported-feature); the bytes after "
+               "the header are its valid entropy 2 coding.",
+        mutate=lambda blocks: setattr(blocks[0], "stored",
+                                      blocks[0].stored[:3] + b"\x03" + blocks[0].stored[4:]))
+    add_invalid("bricked_codec3_entropy2_over_bound",
+                bricked_file(adv, UINT16, 3, value_map=0, entropy=2), "malformed", "block.stored_bound",
+                "Bricked grid 8x8x8 uint16, one brick, codec 3 with entropy coder 2, whose residuals were "
+                "chosen against the adaptive model (each voxel's token the one that costs most, "
+                "bits below included, under its context's current table): a correct §7.2.1 coding of %d "
+                "bytes, more than codec 3's limit 24 + bound(2n) = %d (§7; its entropy 1 payload fits). The stored_size rule is checked from "
+                "the block table, whatever the coder." % (len(over), limit))
+
 
 def gen_grids_valid():
     # ---- regular grid (§8A.1)
@@ -4208,6 +4695,16 @@ holds), `octree_not_ignorable_stream_7` is `unsupported-feature`.
   rule (block header fields, header_crc, signature, payload_crc,
   payload_size, the descriptor against the index, its reserved bytes).
 * The manifest's `format` is `ivol 1.3 (draft)`.
+* New (codec 3's entropy coder 2, §7.2.1): 6 valid `bricked_entropy2_*`
+  files and `bricked_lods_13x10x9_uint16_entropy2` (edge bricks down to
+  1x1x1, binary16 specials, every token 0 .. 31, one 32x16x16 brick whose
+  context tables are made again past m = 128, 256, 384, entropy coders 1
+  and 2 mixed per brick, stored levels of detail), and 12 invalid
+  `bricked_codec3_entropy2_*` / `bricked_codec3_entropy_3` files, each
+  breaking one rule of §7.2.1 (R, the initial and final states, the rANS
+  stream's length, the bits below and their padding, the entropy byte, the
+  limit of §7 on an over-long but correct coding). The older vectors are
+  unchanged byte for byte.
 
 ### Changes to the 1.1 vectors for 1.2
 
@@ -4278,6 +4775,7 @@ def main():
     _check_crc()
     _check_encoders()
     _check_byte_planes()
+    _check_e2_tokens()
     for sub in ("valid", "invalid"):
         p = os.path.join(HERE, sub)
         if os.path.isdir(p):
