@@ -12,7 +12,8 @@ way stored bit for bit by every method:
   object    binary16 within 3 voxels (Chebyshev) of the part (above half of
             Otsu's threshold), one background value (the mean of the rest)
             elsewhere.
-Methods: ivol convert (--structure auto: a bricked grid, codec 3) and, for
+Methods: ivol convert (--structure auto: a bricked grid, codec 3; and with
+--entropy-coder zstd, codec 3's residuals without rANS) and, for
 "object", ivol's octree that keeps full resolution only there (--keep);
 blosc2 (zstd 9 + byte shuffle, 64^3 chunks); HDF5 64^3 chunks with shuffle +
 deflate 9 and with blosc zstd 9 + shuffle (hdf5plugin); the zstd CLI (-3 and
@@ -85,7 +86,7 @@ def bits(v):
     return v.view(np.uint16)
 
 
-def method_ivol(v, kind, tmp, ivol, keep=None):
+def method_ivol(v, kind, tmp, ivol, keep=None, extra=()):
     raw = os.path.join(tmp, "v.raw")
     v.tofile(raw)
     out = os.path.join(tmp, "v.ivol")
@@ -93,6 +94,7 @@ def method_ivol(v, kind, tmp, ivol, keep=None):
     cmd = [ivol, "-q", "convert", raw, out, "--dims", "%d,%d,%d" % (n, n, n), "--type", kind, "-f"]
     if keep is not None:
         cmd += ["--keep", "threshold=%r,margin=3" % keep]
+    cmd += list(extra)
     with Timer() as t:
         subprocess.run(cmd, check=True)
     back = os.path.join(tmp, "back.raw")
@@ -185,6 +187,8 @@ def main():
     skip = set(filter(None, args.skip.split(",")))
     methods = [
         ("ivol (convert, --structure auto)", lambda v, k, tmp: method_ivol(v, k, tmp, args.ivol)),
+        ("ivol, --entropy-coder zstd (codec 3 without rANS)",
+         lambda v, k, tmp: method_ivol(v, k, tmp, args.ivol, extra=["--entropy-coder", "zstd"])),
         ("blosc2 64^3, zstd 9 + shuffle", method_blosc2),
         ("HDF5 64^3, blosc zstd 9 + shuffle", lambda v, k, tmp: method_hdf5(v, k, tmp, True)),
         ("HDF5 64^3, shuffle + deflate 9", lambda v, k, tmp: method_hdf5(v, k, tmp, False)),

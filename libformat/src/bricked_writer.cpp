@@ -70,6 +70,7 @@ struct BrickedGridWriter::Impl {
     block.element_count = static_cast<std::uint32_t>(n);
     PredictedOptions p;
     p.zstd_level = residual_zstd_level(options.zstd_level);
+    p.entropy = options.entropy;
     block.bytes = encode_predicted(brick.data(), e, options.encoding, p);
     block.codec = Codec::Predicted;
     // Where noise dominates, no predictor beats the values' own byte planes:

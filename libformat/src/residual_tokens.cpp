@@ -23,7 +23,9 @@ constexpr std::uint32_t kCountStep = 16;       // added to a token's count each 
 constexpr std::uint32_t kRefreshEvery = 128;   // tables made again every 128 tokens of a context,
                                                // and sooner at its start (next_refresh)
 
-[[noreturn]] void bad(const std::string& what) { throw Error(ErrorClass::Malformed, "codec 3, entropy coder 2: " + what); }
+[[noreturn]] void bad(const std::string& what) {
+  throw Error(ErrorClass::Malformed, "codec 3, entropy coder 2: " + what);
+}
 
 unsigned bit_length(unsigned v) { return v == 0 ? 0 : 32 - static_cast<unsigned>(__builtin_clz(v)); }
 
@@ -200,8 +202,7 @@ bool encode_residual_tokens(const std::uint16_t* residuals, const BrickDims& dim
   return true;
 }
 
-void decode_residual_tokens(const std::uint8_t* data, std::size_t size, const BrickDims& dims,
-                            std::uint8_t* planes) {
+void decode_residual_tokens(const std::uint8_t* data, std::size_t size, const BrickDims& dims, std::uint8_t* planes) {
   const std::size_t n = std::size_t{dims[0]} * dims[1] * dims[2];
   if (size < 4) bad("the " + std::to_string(size) + " bytes after the codec header hold no stream length");
   const std::uint32_t rans_size = read_u32(data);
@@ -211,7 +212,11 @@ void decode_residual_tokens(const std::uint8_t* data, std::size_t size, const Br
   const std::uint8_t* const end = p + rans_size;
   std::array<std::uint32_t, 2> state{read_u32(p), read_u32(p + 4)};
   p += 8;
-  if (state[0] < kStateLow || state[1] < kStateLow) bad("an initial rANS state is below 2^23");
+  // An encoder's states stay below 2^31 (its renormalisation keeps them
+  // under 2^19·f before a step of at most ·2^12 / f): one coding per brick.
+  for (std::uint32_t x : state)
+    if (x < kStateLow || x >= (1u << 31))
+      bad("an initial rANS state " + std::to_string(x) + " is not in 2^23 .. 2^31 - 1");
 
   // The bits below the tokens follow the rANS stream, LSB first. The two
   // states take the voxels in turn: `current` decodes, then the two swap.
@@ -254,8 +259,7 @@ void decode_residual_tokens(const std::uint8_t* data, std::size_t size, const Br
   });
   if (p != end) bad(std::to_string(end - p) + " bytes of the rANS stream are left after the brick's last voxel");
   if (current != kStateLow || other != kStateLow) bad("the rANS states do not end at 2^23");
-  if (q != q_end)
-    bad(std::to_string(q_end - q) + " bytes are left after the bits below the brick's last token");
+  if (q != q_end) bad(std::to_string(q_end - q) + " bytes are left after the bits below the brick's last token");
   if (pending != 0) bad("the padding bits after the last residual's bits are not 0");
 }
 

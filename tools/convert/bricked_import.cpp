@@ -18,6 +18,8 @@ BrickedOptions bricked_options(const ImportOptions& options, const StreamingOpti
   BrickedOptions bricked;
   bricked.brick_log2 = options.brick_log2;
   bricked.zstd_level = options.zstd_level;
+  bricked.entropy =
+      options.rans_residuals ? PredictedOptions::Entropy::Smaller : PredictedOptions::Entropy::ZstdPlanes;
   bricked.encoding = streaming.build.encoding;
   bricked.value_scale = streaming.build.value_scale;
   bricked.value_offset = streaming.build.value_offset;

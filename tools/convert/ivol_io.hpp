@@ -47,6 +47,7 @@ struct ImportOptions {
   std::optional<KeepRule> keep;           // default: lossless (equal leaves merge)
   std::uint32_t block_bytes = 0;          // 0: the library's default
   bool byte_planes = true;                // values over byte planes (codec 2, format 1.2)
+  bool rans_residuals = true;             // codec 3 may code residuals by rANS (§7.2.1); false: zstd only
   bool framed_blocks = true;              // format 1.3 framing (salvageable); false: format 1.2
   std::uint64_t slab_budget_bytes = 0;    // 0: the library's default
   std::uint64_t memory_bytes = 0;         // all the conversion may hold (--memory); 0: kDefaultMemoryBytes

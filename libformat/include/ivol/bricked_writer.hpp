@@ -18,6 +18,7 @@
 
 #include "ivol/geometry.hpp"
 #include "ivol/metadata.hpp"
+#include "ivol/predicted_codec.hpp"
 #include "ivol/writer.hpp"
 
 namespace ivol {
@@ -29,6 +30,10 @@ struct BrickedOptions {
   double value_offset = 0.0;
   int zstd_level = 3;  // codecs 2 and 4; codec 3 at residual_zstd_level(zstd_level)
   bool predicted = true;  // false: zstd over byte planes (codec 2), for comparison
+  // Codec 3's entropy coder (spec §7.2): Smaller keeps the smaller of zstd
+  // over byte planes and rANS over tokens (§7.2.1) per brick; ZstdPlanes
+  // only the first, which decodes about 2.5 times as fast (bench/RESULTS.md).
+  PredictedOptions::Entropy entropy = PredictedOptions::Entropy::Smaller;
   unsigned threads = 0;   // 0: all hardware threads
   // Levels of detail stored (spec §8A.5): every level from this one to the
   // coarsest (0: none). From 3, 1/448 more values, and a 1/8 preview reads

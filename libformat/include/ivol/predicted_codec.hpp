@@ -44,7 +44,8 @@ std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const Br
 // its values). Throws Error(Malformed) for a payload that breaks spec §7.2
 // and Error(UnsupportedFeature) for a predictor or entropy coder it does not
 // know; the message says what is wrong (the caller names the file and block).
-// Allocates nothing beyond the brick's own decoded size.
+// Allocates the residuals' planes (the brick's decoded size) and, for
+// entropy coder 2, a byte a voxel and 52 KiB of context tables.
 void decode_predicted(const std::uint8_t* payload, std::size_t size, const BrickDims& dims, std::uint16_t* out);
 
 // The largest payload spec §7 allows for `voxels` values, whichever entropy
