@@ -193,10 +193,13 @@ bool fit_least_squares_with_level(const ivol::BrickDims& d, const std::uint16_t*
   return true;
 }
 
-// Sum of the residuals' magnitudes: what the candidate taps are judged by.
+// Sum of the residuals' bit lengths (about what they cost coded): what the
+// candidate taps are judged by.
 std::uint64_t residual_cost(const ivol::BrickDims& d, const Taps& taps, const std::uint16_t* u) {
   std::uint64_t cost = 0;
-  walk_brick(d, taps, const_cast<std::uint16_t*>(u), [&](std::size_t i, std::uint16_t p) { cost += zigzag(u[i], p); });
+  walk_brick(d, taps, const_cast<std::uint16_t*>(u), [&](std::size_t i, std::uint16_t p) {
+    for (unsigned z = zigzag(u[i], p); z != 0; z >>= 1) ++cost;
+  });
   return cost;
 }
 
@@ -234,7 +237,9 @@ Reference reference_encode(const std::vector<std::uint16_t>& values, const Brick
 void expect_same_as_reference(const std::vector<std::uint16_t>& v, const BrickDims& d, ValueEncoding e,
                               const std::string& what) {
   const Reference r = reference_encode(v, d, e);
-  const auto payload = ivol::encode_predicted(v.data(), d, e);
+  ivol::PredictedOptions zstd_planes;  // the residuals as byte planes, to compare them
+  zstd_planes.entropy = ivol::PredictedOptions::Entropy::ZstdPlanes;
+  const auto payload = ivol::encode_predicted(v.data(), d, e, zstd_planes);
   ASSERT_GE(payload.size(), 24u) << what;
   EXPECT_EQ(payload[1], r.map) << what;
   EXPECT_EQ(payload[2], r.taps.shift) << what;
