@@ -191,16 +191,7 @@ def predicted_decode(st, ext):
         zs = [planes[i] | planes[n + i] << 8 for i in range(n)]
     else:
         zs = e2_decode(st[24:], ext)
-    U = [0] * n
-    i = 0
-    for z in range(ez):
-        for y in range(ey):
-            for x in range(ex):
-                zz = zs[i]
-                d = zz // 2 if zz % 2 == 0 else -(zz + 1) // 2
-                U[i] = (predict(U, ext, x, y, z, shift, taps, level) + d) % 65536
-                i += 1
-    vals = [b16_order_inverse(u) if value_map == 1 else u for u in U]
+    vals = values_from_residuals(zs, ext, value_map, shift, taps, level)
     return struct.pack("<%dH" % n, *vals)
 
 
@@ -3251,6 +3242,23 @@ def gen_bricked():
                 "A bricked grid of float32 values whose brick has codec 3, which holds 16-bit values only.")
 
 
+def framed_bricked_file(src, enc, b, codec, mutate=None, **kw):
+    """A framed 1.3 bricked grid of `src` in bricks of 2^b whose values blocks
+    bricked_blocks() makes with `codec` and **kw; mutate(blocks) may change
+    them before they are assembled (invalid vectors)."""
+    g = write_bricked(src, enc, b)
+    blocks = bricked_blocks(g, codec, **kw)
+    if mutate:
+        mutate(blocks)
+    blocks.insert(0, meta_block(DEFAULT_META))
+    data, _ = assemble(g, blocks, structure_kind=KIND_BRICKED, ireserved=b, framed=True, minor=3)
+    return data
+
+
+def add_valid_bricked(name, data, src, enc, b, desc, lods=True):
+    add_valid(name, data, src, enc, desc, lods=lods, kind=KIND_BRICKED, extra={"brick_log2": b})
+
+
 def gen_masked():
     """§7.3 (1.3 draft): bricked grids with codec 4 blocks (constant and
     masked forms, any background pattern), then files that break one rule
@@ -3259,17 +3267,10 @@ def gen_masked():
     rng = np.random.default_rng(2202)
 
     def masked_file(src, enc, b, codec=CODEC_MASKED, mutate=None, **kw):
-        g = write_bricked(src, enc, b)
-        blocks = bricked_blocks(g, codec, **kw)
-        if mutate:
-            mutate(blocks)
-        blocks.insert(0, meta_block(DEFAULT_META))
-        data, _ = assemble(g, blocks, structure_kind=KIND_BRICKED, ireserved=b, **framed)
-        return data
+        return framed_bricked_file(src, enc, b, codec, mutate, **kw)
 
     def valid(name, src, enc, b, desc, lods=True, **kw):
-        add_valid(name, masked_file(src, enc, b, **kw), src, enc, desc, lods=lods, kind=KIND_BRICKED,
-                  extra={"brick_log2": b})
+        add_valid_bricked(name, masked_file(src, enc, b, **kw), src, enc, b, desc, lods)
 
     def object_volume(X, Y, Z, background, inside):
         """A ball of `inside` values in a volume of `background`."""
@@ -3751,21 +3752,13 @@ def gen_entropy2():
     residuals with entropy coder 2 (rANS over tokens with contexts), then
     files whose first codec 3 block breaks one rule of §7.2.1 each.  Own
     random generator, so that the vectors before it keep their bytes."""
-    framed = dict(framed=True, minor=3)
     rng = np.random.default_rng(2401)
 
     def bricked_file(src, enc, b, codec=CODEC_PREDICTED, mutate=None, **pred):
-        g = write_bricked(src, enc, b)
-        blocks = bricked_blocks(g, codec, **pred)
-        if mutate:
-            mutate(blocks)
-        blocks.insert(0, meta_block(DEFAULT_META))
-        data, _ = assemble(g, blocks, structure_kind=KIND_BRICKED, ireserved=b, **framed)
-        return data
+        return framed_bricked_file(src, enc, b, codec, mutate, **pred)
 
     def valid(name, src, enc, b, desc, lods=True, **kw):
-        add_valid(name, bricked_file(src, enc, b, **kw), src, enc, desc, lods=lods, kind=KIND_BRICKED,
-                  extra={"brick_log2": b})
+        add_valid_bricked(name, bricked_file(src, enc, b, **kw), src, enc, b, desc, lods)
 
     smooth = lambda X, Y, Z, lo, step: (lo + step * (np.arange(X)[None, None, :] + 2 * np.arange(Y)[None, :, None]
                                                      + 3 * np.arange(Z)[:, None, None]))
