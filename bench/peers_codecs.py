@@ -5,16 +5,19 @@ instead, on the same voxels, side by side in one run.
     python bench/peers_codecs.py --work DIR [--ivol BINARY] [--phantoms A,B] [--only TEXT,...] [--skip TEXT,...]
 
 DIR holds PHANTOM.f32 (N^3 float32, x fastest: an ivol reconstruction, as
-bench/run_peers_codecs.sh makes it). Each volume is kept three ways, every
+bench/run_peers_codecs.sh makes it). Each volume is kept four ways, every
 way stored bit for bit by every method:
   binary16  every voxel as binary16;
   uint16    every voxel as uint16, the volume's range on 0 .. 65535;
   object    binary16 within 3 voxels (Chebyshev) of the part (above half of
             Otsu's threshold), one background value (the mean of the rest)
-            elsewhere.
-Methods: ivol convert (--structure auto: a bricked grid, codec 3; and with
---entropy-coder zstd, codec 3's residuals without rANS) and, for
-"object", ivol's octree that keeps full resolution only there (--keep);
+            elsewhere;
+  float32   every voxel as the reconstruction's float32.
+Methods: ivol convert (--structure auto: a bricked grid, codec 3 for 16-bit
+values, codec 2 for float32; with --entropy-coder zstd, codec 3's residuals
+without rANS; with --zstd-level 19, and with --brick 64 --zstd-level 19, its
+smallest) and, for "object", ivol's octree that keeps full resolution only
+there (--keep);
 blosc2 (zstd 9 + byte shuffle, 64^3 chunks); HDF5 64^3 chunks with shuffle +
 deflate 9 and with blosc zstd 9 + shuffle (hdf5plugin); the zstd CLI (-3 and
 -19, whole file); JPEG-XL, JPEG-LS and JPEG 2000 lossless per z slice
@@ -70,7 +73,8 @@ def volumes(f):
     keep = dilate(rounded > 0.5 * otsu(rounded), 3)
     background = np.float16(rounded[~keep].mean()) if (~keep).any() else np.float16(0)
     obj = np.where(keep, half, background).astype(np.float16)
-    return [("binary16", half, "f16"), ("uint16", codes, "u16"), ("object", obj, "f16")], keep.mean()
+    return [("binary16", half, "f16"), ("uint16", codes, "u16"), ("object", obj, "f16"),
+            ("float32", np.ascontiguousarray(f, dtype=np.float32), "f32")], keep.mean()
 
 
 class Timer:
@@ -180,6 +184,8 @@ def main():
     parser.add_argument("--work", required=True)
     parser.add_argument("--ivol", default="build/tools/ivol")
     parser.add_argument("--phantoms", default="pencil-holder,connector-board,lattice-part")
+    parser.add_argument("--ways", default="binary16,uint16,object,float32",
+                        help="which ways of keeping each volume (comma-separated)")
     parser.add_argument("--only", default="", help="methods whose label contains one of these (comma-separated)")
     parser.add_argument("--skip", default="", help="methods whose label contains one of these (comma-separated)")
     args = parser.parse_args()
@@ -189,6 +195,10 @@ def main():
         ("ivol (convert, --structure auto)", lambda v, k, tmp: method_ivol(v, k, tmp, args.ivol)),
         ("ivol, --entropy-coder zstd (codec 3 without rANS)",
          lambda v, k, tmp: method_ivol(v, k, tmp, args.ivol, extra=["--entropy-coder", "zstd"])),
+        ("ivol, --zstd-level 19",
+         lambda v, k, tmp: method_ivol(v, k, tmp, args.ivol, extra=["--zstd-level", "19"])),
+        ("ivol, --brick 64 --zstd-level 19",
+         lambda v, k, tmp: method_ivol(v, k, tmp, args.ivol, extra=["--brick", "64", "--zstd-level", "19"])),
         ("blosc2 64^3, zstd 9 + shuffle", method_blosc2),
         ("HDF5 64^3, blosc zstd 9 + shuffle", lambda v, k, tmp: method_hdf5(v, k, tmp, True)),
         ("HDF5 64^3, shuffle + deflate 9", lambda v, k, tmp: method_hdf5(v, k, tmp, False)),
@@ -216,6 +226,8 @@ def main():
             f = f.reshape(n, n, n)
             kept, keep_share = volumes(f)
             for name, v, kind in kept:
+                if name not in args.ways.split(","):
+                    continue
                 print("\n## %s %d^3, %s (raw %d bytes%s)\n" % (
                     phantom, n, name, v.nbytes, ", %.1f %% of the voxels kept" % (100 * keep_share)
                     if name == "object" else ""))

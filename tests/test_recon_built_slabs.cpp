@@ -148,17 +148,18 @@ std::vector<StructureRankOutcome> run_structure_ranks(Scan& scan, int ranks, con
 
 TEST(ReconBuiltSlabs, SameFileAsOneProcess) {
   Scan scan;
-  enum Kind { kOctree, kKeep, kBricked, kBrickedLayers };
-  for (const Kind kind : {kOctree, kKeep, kBricked, kBrickedLayers}) {
+  enum Kind { kOctree, kKeep, kBricked, kBrickedLayers, kBrickedFloat32 };
+  for (const Kind kind : {kOctree, kKeep, kBricked, kBrickedLayers, kBrickedFloat32}) {
     const bool keep = kind == kKeep;
     convert::ImportOptions options;
-    options.encoding = ValueEncoding::Binary16;
+    // float32: every bit of the FDK's values, in bricks of byte planes.
+    options.encoding = kind == kBrickedFloat32 ? ValueEncoding::Float32 : ValueEncoding::Binary16;
     // Octree: the ranks build its subtrees; with a keep mask, ivol recon's
     // choice. Bricked: ivol recon's dense default, the ranks' slabs its
     // stored values; layers of 16 (16, 16 and 1 slices) in slabs of 4, or
     // layers of 8 in slabs of two whole layers (16, 16 and 1 slices).
     options.structure = kind == kOctree ? convert::StructureChoice::Octree : convert::StructureChoice::Auto;
-    if (kind == kBricked) options.brick_log2 = 4;
+    if (kind == kBricked || kind == kBrickedFloat32) options.brick_log2 = 4;
     if (kind == kBrickedLayers) options.brick_log2 = 3;
     const std::uint32_t slab = kind == kBrickedLayers ? 16 : 4;
     if (keep) options.keep = convert::KeepRule{false, 0.01F, 2};
@@ -181,8 +182,9 @@ TEST(ReconBuiltSlabs, SameFileAsOneProcess) {
     EXPECT_EQ(slices, scan.grid.size[2]);
     EXPECT_EQ(ranks[0].built.written.slab_slices, slab);
     EXPECT_EQ(ranks[0].built.written.structure, kind >= kBricked ? "bricked" : "octree");
-    EXPECT_FALSE(ranks[0].built.written.lossless);  // float32 as binary16, counted on every rank
-    EXPECT_GT(ranks[0].built.written.max_abs_error, 0.0);
+    // float32 as binary16, counted on every rank; float32 as it is
+    EXPECT_EQ(ranks[0].built.written.lossless, kind == kBrickedFloat32);
+    EXPECT_EQ(ranks[0].built.written.max_abs_error > 0.0, kind != kBrickedFloat32);
     EXPECT_GT(mailbox.bytes_to_rank0, 0U);
     EXPECT_EQ(test::read_bytes(path), test::read_bytes(one_path)) << "kind " << kind;
   }
@@ -200,8 +202,8 @@ TEST(ReconBuiltSlabs, WriterSlabsGiveEveryRankOne) {
 TEST(ReconBuiltSlabs, RankFailingWhileBuildingEndsTheRun) {
   Scan scan;
   for (const bool bricked : {false, true}) {
-    convert::ImportOptions options;  // float32: an octree
-    if (bricked) options.encoding = ValueEncoding::Binary16;
+    convert::ImportOptions options;
+    options.structure = bricked ? convert::StructureChoice::Auto : convert::StructureChoice::Octree;
     const std::string path = test::temp_path("recon-fails.ivol");
     std::filesystem::remove(path);
     ::setenv("IVOL_TEST_FAIL_BUILD_RANK", "2", 1);

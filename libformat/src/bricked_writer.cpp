@@ -28,8 +28,6 @@ struct BrickedGridWriter::Impl {
     if (o.brick_log2 < 1 || o.brick_log2 > layout::kMaxBrickLog2)
       throw Error(ErrorClass::InvalidArgument, "bricked grid: brick_log2 " + std::to_string(o.brick_log2) +
                                                    " is outside 1 .. " + std::to_string(layout::kMaxBrickLog2));
-    if (o.encoding == ValueEncoding::Float32)
-      throw Error(ErrorClass::InvalidArgument, "bricked grid: the writer takes 16-bit values (binary16 or uint16)");
     VolumeLayout v;
     v.kind = StructureKind::Bricked;
     v.cell_log2 = static_cast<std::uint8_t>(o.brick_log2);
@@ -42,55 +40,59 @@ struct BrickedGridWriter::Impl {
     return v;
   }
 
-  // One brick, cut from the layer and encoded: the smallest of codec 3,
-  // codec 2 and codec 4, or stored when none is smaller (random bits).
-  // `layer` holds the brick layer's slices of a volume of `d` voxels in
-  // bricks `g`: the full-resolution grid, or a stored level of detail's.
-  EncodedBlock encode(const std::uint16_t* layer, const Dims& d, const detail::BrickGrid& g, std::uint32_t i,
-                      std::uint32_t j, std::uint32_t k) const {
+  // One brick, cut from the layer and encoded: 16-bit values as the
+  // smallest of codec 3, codec 2 and codec 4, float32 values as their byte
+  // planes (codec 2; codecs 3 and 4 hold 16-bit values), either stored when
+  // nothing is smaller (random bits). `layer` holds the brick layer's
+  // slices of a volume of `d` voxels in bricks `g`: the full-resolution
+  // grid, or a stored level of detail's.
+  template <class T>
+  EncodedBlock encode(const T* layer, const Dims& d, const detail::BrickGrid& g, std::uint32_t i, std::uint32_t j,
+                      std::uint32_t k) const {
     const Dims e = g.extent(i, j, k);
     const std::uint64_t edge = g.edge();
-    std::vector<std::uint16_t> brick(std::size_t{e[0]} * e[1] * e[2]);
+    std::vector<T> brick(std::size_t{e[0]} * e[1] * e[2]);
     std::size_t n = 0;
     for (std::uint32_t z = 0; z < e[2]; ++z)
       for (std::uint32_t y = 0; y < e[1]; ++y) {
-        const std::uint16_t* row = layer + (std::uint64_t{z} * d[1] + j * edge + y) * d[0] + i * edge;
+        const T* row = layer + (std::uint64_t{z} * d[1] + j * edge + y) * d[0] + i * edge;
         std::copy(row, row + e[0], brick.data() + n);
         n += e[0];
       }
     const std::uint64_t first = g.first_value(i, j, k);
-    if (!options.predicted) {
-      WriteOptions w;
-      w.zstd_level = options.zstd_level;
-      return encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), w);
-    }
-    EncodedBlock block;
-    block.stream = Stream::Values;
-    block.first_element = first;
-    block.element_count = static_cast<std::uint32_t>(n);
-    PredictedOptions p;
-    p.zstd_level = residual_zstd_level(options.zstd_level);
-    p.entropy = options.entropy;
-    block.bytes = encode_predicted(brick.data(), e, options.encoding, p);
-    block.codec = Codec::Predicted;
-    // Where noise dominates, no predictor beats the values' own byte planes:
-    // the smaller of codec 3 and codec 2 is kept (and stored below either).
     WriteOptions w;
     w.zstd_level = options.zstd_level;
-    EncodedBlock planes = encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), w);
-    if (planes.bytes.size() < block.bytes.size()) block = std::move(planes);
-    // Where one value (an object-fidelity file's background) fills an eighth
-    // of the brick or more, codec 4 stores only the others, behind a mask;
-    // a brick of that value alone is 4 bytes (bench/RESULTS.md, issue 22).
-    const CommonValue common = most_common_value(brick.data(), n);
-    if (common.count >= n / 8) {
-      std::vector<std::uint8_t> masked = encode_masked(brick.data(), n, common.value, options.zstd_level);
-      if (masked.size() < block.bytes.size()) block.bytes = std::move(masked), block.codec = Codec::Masked;
+    EncodedBlock block;
+    if constexpr (sizeof(T) == 4) {
+      block = encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 4, brick.data(), w);
+    } else {
+      if (!options.predicted)
+        return encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), w);
+      block.stream = Stream::Values;
+      block.first_element = first;
+      block.element_count = static_cast<std::uint32_t>(n);
+      PredictedOptions p;
+      p.zstd_level = residual_zstd_level(options.zstd_level);
+      p.entropy = options.entropy;
+      block.bytes = encode_predicted(brick.data(), e, options.encoding, p);
+      block.codec = Codec::Predicted;
+      // Where noise dominates, no predictor beats the values' own byte planes:
+      // the smaller of codec 3 and codec 2 is kept (and stored below either).
+      EncodedBlock planes = encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), w);
+      if (planes.bytes.size() < block.bytes.size()) block = std::move(planes);
+      // Where one value (an object-fidelity file's background) fills an eighth
+      // of the brick or more, codec 4 stores only the others, behind a mask;
+      // a brick of that value alone is 4 bytes (bench/RESULTS.md, issue 22).
+      const CommonValue common = most_common_value(brick.data(), n);
+      if (common.count >= n / 8) {
+        std::vector<std::uint8_t> masked = encode_masked(brick.data(), n, common.value, options.zstd_level);
+        if (masked.size() < block.bytes.size()) block.bytes = std::move(masked), block.codec = Codec::Masked;
+      }
     }
-    if (block.bytes.size() >= 2 * n) {
+    if (block.bytes.size() >= sizeof(T) * n) {
       block.codec = Codec::Stored;
-      block.bytes.resize(2 * n);
-      for (std::size_t v = 0; v < n; ++v) layout::store<std::uint16_t>(block.bytes.data() + 2 * v, brick[v]);
+      block.bytes.resize(sizeof(T) * n);
+      for (std::size_t v = 0; v < n; ++v) layout::store<T>(block.bytes.data() + sizeof(T) * v, brick[v]);
     }
     block.crc = crc32c(block.bytes.data(), block.bytes.size());
     return block;
@@ -99,8 +101,12 @@ struct BrickedGridWriter::Impl {
   const Dims& dims() const { return dims_; }
 
   // Encodes a layer of bricks on the writer's threads, in brick order.
-  std::vector<EncodedBlock> encode_layer(const std::uint16_t* values, const Dims& d, const detail::BrickGrid& g,
+  template <class T>
+  std::vector<EncodedBlock> encode_layer(const T* values, const Dims& d, const detail::BrickGrid& g,
                                          std::uint32_t k) const;
+  // add_layer's work for either width of stored values.
+  template <class T>
+  void add_layer(const T* values);
 
   BrickedOptions options;
   detail::BrickGrid grid;
@@ -154,7 +160,8 @@ std::uint32_t BrickedGridWriter::next_layer_count() const {
   return impl_->grid.extent(0, 0, impl_->next_layer)[2];
 }
 
-std::vector<EncodedBlock> BrickedGridWriter::Impl::encode_layer(const std::uint16_t* values, const Dims& d,
+template <class T>
+std::vector<EncodedBlock> BrickedGridWriter::Impl::encode_layer(const T* values, const Dims& d,
                                                                 const detail::BrickGrid& g, std::uint32_t k) const {
   const std::uint32_t nx = g.bricks()[0], ny = g.bricks()[1];
   const std::size_t count = std::size_t{nx} * ny;
@@ -192,8 +199,21 @@ std::vector<EncodedBlock> BrickedGridWriter::Impl::encode_layer(const std::uint1
 }
 
 void BrickedGridWriter::add_layer(const std::uint16_t* values) {
-  Impl& m = *impl_;
-  if (next_layer_count() == 0) throw Error(ErrorClass::InvalidArgument, "bricked grid: a layer after the last");
+  if (impl_->options.encoding == ValueEncoding::Float32)
+    throw Error(ErrorClass::InvalidArgument, "bricked grid: 16-bit values given for a float32 grid");
+  impl_->add_layer(values);
+}
+
+void BrickedGridWriter::add_layer(const std::uint32_t* values) {
+  if (impl_->options.encoding != ValueEncoding::Float32)
+    throw Error(ErrorClass::InvalidArgument, "bricked grid: float32 values given for a 16-bit grid");
+  impl_->add_layer(values);
+}
+
+template <class T>
+void BrickedGridWriter::Impl::add_layer(const T* values) {
+  Impl& m = *this;
+  if (m.next_layer >= m.grid.bricks()[2]) throw Error(ErrorClass::InvalidArgument, "bricked grid: a layer after the last");
   // The stored levels of detail take the layer's voxels on a thread of
   // their own while its bricks are encoded; a layer of a level's bricks is
   // written once its last slice is summed (spec §15), after the layer.
@@ -201,16 +221,17 @@ void BrickedGridWriter::add_layer(const std::uint16_t* values) {
     unsigned level;
     Dims dims;
     std::uint32_t layer;
-    std::vector<std::uint16_t> values;
+    std::vector<T> values;
   };
   std::vector<LevelLayer> level_layers;
   std::exception_ptr level_failure;
   std::thread summing;
   if (!m.levels.empty())
-    summing = std::thread([&, z0 = next_layer_first(), count = next_layer_count()] {
+    summing = std::thread([&, z0 = static_cast<std::uint32_t>(std::uint64_t{m.next_layer} * m.grid.edge()),
+                           count = m.grid.extent(0, 0, m.next_layer)[2]] {
       try {
         m.levels.add(values, z0, count,
-                     [&](unsigned level, const Dims& d, std::uint32_t layer, const std::uint16_t* level_values) {
+                     [&](unsigned level, const Dims& d, std::uint32_t layer, const std::uint32_t* level_values) {
                        const std::size_t n =
                            std::size_t{d[0]} * d[1] *
                            std::min<std::uint64_t>(std::uint64_t{1} << m.options.brick_log2,
@@ -232,7 +253,7 @@ void BrickedGridWriter::add_layer(const std::uint16_t* values) {
   if (level_failure) std::rethrow_exception(level_failure);
   for (const EncodedBlock& b : blocks) {
     m.file.append(b);
-    m.decoded_bytes += 2ull * b.element_count;
+    m.decoded_bytes += sizeof(T) * std::uint64_t{b.element_count};
   }
   for (const LevelLayer& l : level_layers) {
     const detail::BrickGrid level_grid(l.dims, m.options.brick_log2);
@@ -240,7 +261,7 @@ void BrickedGridWriter::add_layer(const std::uint16_t* values) {
       b.stream = Stream::StoredLevel;
       b.level = static_cast<std::uint8_t>(l.level);
       m.file.append(b);
-      m.decoded_bytes += 2ull * b.element_count;
+      m.decoded_bytes += sizeof(T) * std::uint64_t{b.element_count};
     }
   }
   ++m.next_layer;

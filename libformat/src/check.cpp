@@ -19,8 +19,8 @@ namespace {
 // computed from its full-resolution values (§12.3), brick layer by brick
 // layer. 16-bit grids: one pass over the volume sums every level as the
 // writer does (a different path from the Reader's, which the tests compare
-// them with). float32 grids (no ivol writer stores their levels): each
-// stored level against the Reader's own sum, a pass per level.
+// them with). float32 grids: each stored level against the Reader's own
+// sum, a pass per level (a path other than the writer's, too).
 void check_stored_levels(const std::string& path, Reader& stored) {
   const VolumeLayout& v = stored.layout();
   std::set<unsigned> levels;
@@ -65,10 +65,12 @@ void check_stored_levels(const std::string& path, Reader& stored) {
     std::vector<std::uint16_t> values(bytes.size() / 2);
     std::memcpy(values.data(), bytes.data(), bytes.size());
     sums.add(values.data(), z, count,
-             [&](unsigned k, const Dims& d, std::uint32_t layer, const std::uint16_t* computed) {
+             [&](unsigned k, const Dims& d, std::uint32_t layer, const std::uint32_t* computed) {
                if (!levels.count(k)) return;
                const Box box = layer_box(d, layer);
-               differ(k, box, reinterpret_cast<const std::uint8_t*>(computed), stored.read_box_bits(box, k));
+               const std::size_t n = std::size_t{d[0]} * d[1] * (box.hi[2] - box.lo[2]);
+               std::vector<std::uint16_t> codes(computed, computed + n);
+               differ(k, box, reinterpret_cast<const std::uint8_t*>(codes.data()), stored.read_box_bits(box, k));
              });
   }
 }

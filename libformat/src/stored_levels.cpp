@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include "ivol/encoding.hpp"
 #include "ivol/error.hpp"
@@ -17,14 +18,16 @@ constexpr double kBinary16Unit = 1.0 / 16777216.0;  // 2^-24: every finite binar
 
 StoredLevels::StoredLevels(const Dims& dims, unsigned brick_log2, ValueEncoding encoding, unsigned first_level)
     : dims_(dims), brick_log2_(brick_log2), encoding_(encoding) {
-  if (encoding == ValueEncoding::Float32) throw Error(ErrorClass::InvalidArgument, "stored levels: 16-bit values only");
   const unsigned depth = depth_for(dims);
   if (first_level == 0 || first_level > depth) return;
   const bool half = encoding == ValueEncoding::Binary16;
-  decoded_.resize(65536);
-  units_.resize(65536);
-  special_.resize(65536);
-  for (std::uint32_t code = 0; code < 65536; ++code) {
+  const bool wide = encoding == ValueEncoding::Float32;  // decoded as they come; every level inexact
+  if (!wide) {
+    decoded_.resize(65536);
+    units_.resize(65536);
+    special_.resize(65536);
+  }
+  for (std::uint32_t code = 0; code < decoded_.size(); ++code) {
     const double v = decode_value(encoding, code);
     decoded_[code] = v;
     if (std::isnan(v))
@@ -44,7 +47,7 @@ StoredLevels::StoredLevels(const Dims& dims, unsigned brick_log2, ValueEncoding 
     double cell_voxels = 1.0;
     for (int a = 0; a < 3; ++a)
       cell_voxels *= static_cast<double>(std::min<std::uint64_t>(std::uint64_t{1} << k, dims[a]));
-    level.exact = cell_voxels * largest_units < 9007199254740992.0;  // 2^53
+    level.exact = !wide && cell_voxels * largest_units < 9007199254740992.0;  // 2^53
     const std::uint64_t plane = std::uint64_t{level.dims[0]} * level.dims[1];
     if (level.exact) {
       level.exact_sums.assign(plane, 0);
@@ -61,7 +64,7 @@ StoredLevels::StoredLevels(const Dims& dims, unsigned brick_log2, ValueEncoding 
 std::uint64_t StoredLevels::memory_bytes() const {
   std::uint64_t bytes = decoded_.size() * (sizeof(double) + sizeof(std::int64_t) + 1);
   for (const Level& l : levels_)
-    bytes += l.sums.size() * sizeof(double) + l.exact_sums.size() * 8 + l.specials.size() + l.layer.size() * 2;
+    bytes += l.sums.size() * sizeof(double) + l.exact_sums.size() * 8 + l.specials.size() + l.layer.size() * 4;
   return bytes;
 }
 
@@ -98,14 +101,14 @@ void StoredLevels::finish_slice(std::size_t index, std::uint64_t z, std::vector<
       break;
     }
   const std::uint64_t cz = z + 1 - (std::uint64_t{level.slice} << k);
-  std::uint16_t* out = level.layer.data() + (level.slice & (edge - 1)) * mx * my;
+  std::uint32_t* out = level.layer.data() + (level.slice & (edge - 1)) * mx * my;
   for (std::uint64_t j = 0; j < my; ++j) {
     const std::uint64_t cy = std::min<std::uint64_t>((j + 1) << k, dims_[1]) - (j << k);
     for (std::uint64_t i = 0; i < mx; ++i) {
       const std::uint64_t cx = std::min<std::uint64_t>((i + 1) << k, dims_[0]) - (i << k);
       // The exact number of voxels, rounded once (spec §12.3).
       const auto voxels = static_cast<double>(static_cast<u128>(cz) * cy * cx);
-      out[j * mx + i] = static_cast<std::uint16_t>(encode_value(encoding_, cell_sum(level, j * mx + i) / voxels));
+      out[j * mx + i] = encode_value(encoding_, cell_sum(level, j * mx + i) / voxels);
     }
   }
   std::fill(level.sums.begin(), level.sums.end(), 0.0);
@@ -123,21 +126,34 @@ void StoredLevels::finish_slice(std::size_t index, std::uint64_t z, std::vector<
 
 namespace {
 
+// Stored bits as the number they hold: 16-bit codes through the table of
+// every code's value, float32 bits as they are (spec §9).
+struct DecodeCode {
+  const double* table;
+  double operator()(std::uint16_t code) const { return table[code]; }
+};
+struct DecodeFloat32 {
+  double operator()(std::uint32_t bits) const {
+    float f;
+    std::memcpy(&f, &bits, 4);
+    return f;
+  }
+};
+
 // One row into the cells of `L` levels that are not exact, in runs of 2^k0
 // voxels (k0 the finest of them), within which every level's cell is one:
 // each level's sum stays in a register through the run, and the levels'
 // additions, independent of one another, overlap. Each cell still takes
 // its voxels one by one in order.
-template <int L>
-void sum_runs(const std::uint16_t* row, std::uint64_t width, const double* decoded, double* const* cells,
-              const unsigned* shift) {
+template <int L, class T, class Decode>
+void sum_runs(const T* row, std::uint64_t width, const Decode& decoded, double* const* cells, const unsigned* shift) {
   const std::uint64_t run = std::uint64_t{1} << shift[0];
   for (std::uint64_t x0 = 0; x0 < width; x0 += run) {
     double acc[L];
     for (int l = 0; l < L; ++l) acc[l] = cells[l][x0 >> shift[l]];
     const std::uint64_t end = std::min(width, x0 + run);
     for (std::uint64_t x = x0; x < end; ++x) {
-      const double v = decoded[row[x]];
+      const double v = decoded(row[x]);
       for (int l = 0; l < L; ++l) acc[l] = acc[l] + v;
     }
     for (int l = 0; l < L; ++l) cells[l][x0 >> shift[l]] = acc[l];
@@ -146,11 +162,16 @@ void sum_runs(const std::uint16_t* row, std::uint64_t width, const double* decod
 
 }  // namespace
 
-void StoredLevels::sum_row_inexact(const std::uint16_t* row, double* const* cells,
-                                   const std::vector<std::size_t>& inexact) const {
+template <class T>
+void StoredLevels::sum_row_inexact(const T* row, double* const* cells, const std::vector<std::size_t>& inexact) const {
   unsigned shift[32];
   for (std::size_t n = 0; n < inexact.size(); ++n) shift[n] = levels_[inexact[n]].k;
-  const double* decoded = decoded_.data();
+  const auto decoded = [&] {
+    if constexpr (sizeof(T) == 2)
+      return DecodeCode{decoded_.data()};
+    else
+      return DecodeFloat32{};
+  }();
   // Levels come finest first: shift[0] is the finest.
   switch (inexact.size()) {
     case 1:
@@ -171,7 +192,7 @@ void StoredLevels::sum_row_inexact(const std::uint16_t* row, double* const* cell
       return sum_runs<8>(row, dims_[0], decoded, cells, shift);
     default:
       for (std::uint64_t x = 0; x < dims_[0]; ++x) {
-        const double v = decoded[row[x]];
+        const double v = decoded(row[x]);
         for (std::size_t n = 0; n < inexact.size(); ++n) {
           double& sum = cells[n][x >> shift[n]];
           sum = sum + v;
@@ -181,6 +202,19 @@ void StoredLevels::sum_row_inexact(const std::uint16_t* row, double* const* cell
 }
 
 void StoredLevels::add(const std::uint16_t* values, std::uint32_t z0, std::uint32_t count, const LayerReady& ready) {
+  if (encoding_ == ValueEncoding::Float32)
+    throw Error(ErrorClass::InvalidArgument, "stored levels: 16-bit values given for a float32 grid");
+  add_slices(values, z0, count, ready);
+}
+
+void StoredLevels::add(const std::uint32_t* values, std::uint32_t z0, std::uint32_t count, const LayerReady& ready) {
+  if (encoding_ != ValueEncoding::Float32)
+    throw Error(ErrorClass::InvalidArgument, "stored levels: float32 values given for a 16-bit grid");
+  add_slices(values, z0, count, ready);
+}
+
+template <class T>
+void StoredLevels::add_slices(const T* values, std::uint32_t z0, std::uint32_t count, const LayerReady& ready) {
   std::vector<std::vector<Completed>> completed(levels_.size());
   // The levels summed voxel by voxel: the finest exact one and every one
   // that is not exact, each voxel decoded once for all of them (their sums
@@ -191,10 +225,10 @@ void StoredLevels::add(const std::uint16_t* values, std::uint32_t z0, std::uint3
   std::vector<double*> cells(inexact.size());
   for (std::uint32_t n = 0; n < count; ++n) {
     const std::uint64_t z = std::uint64_t{z0} + n;
-    const std::uint16_t* slice = values + std::uint64_t{n} * dims_[1] * dims_[0];
+    const T* slice = values + std::uint64_t{n} * dims_[1] * dims_[0];
     for (std::uint64_t y = 0; y < dims_[1]; ++y) {
-      const std::uint16_t* row = slice + y * dims_[0];
-      if (finest_exact_ != SIZE_MAX) {
+      const T* row = slice + y * dims_[0];
+      if (sizeof(T) == 2 && finest_exact_ != SIZE_MAX) {  // float32 levels are never exact
         Level& level = levels_[finest_exact_];
         const unsigned k = level.k;
         std::int64_t* sums = level.exact_sums.data() + (y >> k) * level.dims[0];

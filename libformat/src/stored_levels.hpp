@@ -25,20 +25,21 @@ namespace ivol::detail {
 class StoredLevels {
  public:
   // Levels first_level .. depth of a grid of `dims` in bricks of
-  // 2^brick_log2 (none when first_level is 0 or beyond the depth); 16-bit
-  // encodings only.
+  // 2^brick_log2 (none when first_level is 0 or beyond the depth).
   StoredLevels(const Dims& dims, unsigned brick_log2, ValueEncoding encoding, unsigned first_level);
 
   // A layer of bricks of level `level` is complete: `values` holds its
   // slices (the level's extent along z of brick layer `layer`, [z][y][x]
-  // over the level's dims), stored bits.
+  // over the level's dims), stored bits zero-extended to 32 bits.
   using LayerReady =
-      std::function<void(unsigned level, const Dims& level_dims, std::uint32_t layer, const std::uint16_t* values)>;
+      std::function<void(unsigned level, const Dims& level_dims, std::uint32_t layer, const std::uint32_t* values)>;
 
   // Adds full-resolution slices z0 .. z0 + count (the next ones), [z][y][x]
-  // stored bits; calls `ready` for every brick layer of a level they
-  // complete, finest level first.
+  // stored bits: 16-bit encodings as std::uint16_t, float32 as
+  // std::uint32_t (InvalidArgument otherwise); calls `ready` for every brick
+  // layer of a level they complete, finest level first.
   void add(const std::uint16_t* values, std::uint32_t z0, std::uint32_t count, const LayerReady& ready);
+  void add(const std::uint32_t* values, std::uint32_t z0, std::uint32_t count, const LayerReady& ready);
 
   std::uint64_t memory_bytes() const;
   bool empty() const { return levels_.empty(); }
@@ -51,25 +52,28 @@ class StoredLevels {
     std::vector<double> sums;              // not exact: the cells of the level slice being summed
     std::vector<std::int64_t> exact_sums;  // exact: the same, in units (1, or 2^-24 for binary16)
     std::vector<std::uint8_t> specials;    // exact binary16: +inf 1, -inf 2, NaN 4 met in the cell
-    std::vector<std::uint16_t> layer;      // its finished slices of the current brick layer
+    std::vector<std::uint32_t> layer;      // its finished slices of the current brick layer
     std::uint32_t slice = 0;               // the level slice being summed
   };
   struct Completed {
     std::uint32_t layer = 0;
-    std::vector<std::uint16_t> values;
+    std::vector<std::uint32_t> values;
   };
   // Level slice `level.slice` is summed (z its last full-resolution slice):
   // its means into the level's layer, which moves out when complete; an
   // exact level's sums go into the coarser exact levels' first.
   void finish_slice(std::size_t index, std::uint64_t z, std::vector<std::vector<Completed>>& completed);
   double cell_sum(const Level& level, std::size_t cell) const;
+  template <class T>
+  void add_slices(const T* values, std::uint32_t z0, std::uint32_t count, const LayerReady& ready);
   // One full-resolution row into the cells of the levels that are not exact.
-  void sum_row_inexact(const std::uint16_t* row, double* const* cells, const std::vector<std::size_t>& inexact) const;
+  template <class T>
+  void sum_row_inexact(const T* row, double* const* cells, const std::vector<std::size_t>& inexact) const;
 
   Dims dims_;
   unsigned brick_log2_;
   ValueEncoding encoding_;
-  std::vector<double> decoded_;          // every 16-bit code's decoded value (spec §9)
+  std::vector<double> decoded_;          // 16-bit encodings: every code's decoded value (spec §9)
   std::vector<std::int64_t> units_;      // exact: every code's value in units; 0 for infinities and NaNs
   std::vector<std::uint8_t> special_;    // exact binary16: every code's flag (above)
   std::vector<Level> levels_;            // finest first

@@ -71,6 +71,13 @@ case_ convert-raw-dims   1 "--dims"                  -- "$IVOL" convert "$work/v
 case_ convert-raw-size   2 "need 126976"             -- "$IVOL" convert "$work/v.raw" "$work/x.ivol" --dims 32,32,31 --type f32
 test ! -e "$work/x.ivol" && case_ no-partial-output 0 "" -- true
 case_ convert-raw-ivol   0 "lossless"                -- "$IVOL" convert "$work/v.raw" "$work/v.ivol" --dims 32,32,32 --type f32 --voxel-size 0.5
+# float32 samples become a bricked grid of float32 (codec 2 bricks, spec
+# §8A.4), every bit back; --structure octree still gives the octree.
+case_ convert-f32-bricked 0 "bricked, bricks of 32^3" -- "$IVOL" info "$work/v.ivol"
+case_ convert-f32-why    0 "as float32 values: bricks of their byte planes" -- "$IVOL" info "$work/v.ivol"
+"$IVOL" -q convert "$work/v.ivol" "$work/v-back.raw" -f
+case_ convert-f32-exact  0 ""                        -- cmp "$work/v.raw" "$work/v-back.raw"
+case_ convert-f32-octree 0 "octree"                  -- "$IVOL" convert "$work/v.raw" "$work/v-octree.ivol" --dims 32,32,32 --type f32 --structure octree
 # --brick sets the brick's side both ways from the default 32 (a
 # 64 and 128 once came out as 32).
 head -c $((128 * 128 * 8 * 2)) /dev/urandom >"$work/b16.raw"

@@ -162,8 +162,8 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember({"1.3", "1.2"}))
       ->capture_default_str();
   into->add_option("--structure", s->structure,
-                   "auto: a bricked regular grid (bricks predicted in 3-D, codec 3) for lossless every-voxel 16-bit "
-                   "values, else an octree; octree or bricked to choose")
+                   "auto: a bricked regular grid for every voxel kept (16-bit values: bricks predicted in 3-D, "
+                   "codec 3; float32: bricks of byte planes, codec 2), else an octree; octree or bricked to choose")
       ->check(CLI::IsMember({"auto", "octree", "bricked"}))
       ->capture_default_str();
   into->add_option("--brick", s->brick,

@@ -123,7 +123,7 @@ convert::ImportOptions dense_import_options(const ReconSettings& s) {
   return import;
 }
 
-// A bricked grid's layer holds its 16-bit values and, at worst, as many
+// A bricked grid's layer holds its values (16-bit, or float32) and, at worst, as many
 // bytes of encoded bricks: at 2048² a layer of 32 slices needs 1 GiB, more
 // than the writer's quarter of a 2 GiB --memory. Where it does not fit the
 // quarter, the layer takes what the filtered rows leave unused (`spare`), up

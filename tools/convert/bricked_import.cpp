@@ -30,11 +30,12 @@ std::uint32_t layer_slices_of(const DenseVolume& shape, const ImportOptions& opt
   return std::min<std::uint32_t>(shape.dims[2], 1u << std::min(options.brick_log2, 31u));
 }
 
-// Bytes per sample read: the sample, and a float32 copy where binary16
-// rounds a type other than float32.
+// Bytes per sample read: the sample, and a float32 copy where the samples
+// are not float32 and not stored as they are (binary16 samples in a
+// binary16 grid, integers as uint16 codes).
 std::uint64_t read_bytes_per_voxel(const DenseVolume& shape, ValueEncoding encoding) {
   const bool codes = encoding == ValueEncoding::UInt16;
-  const bool raw_binary16 = shape.type == SampleType::Float16 && !codes;
+  const bool raw_binary16 = shape.type == SampleType::Float16 && encoding == ValueEncoding::Binary16;
   const bool float_copy = !codes && !raw_binary16 && shape.type != SampleType::Float32;
   return sample_size(shape.type) + (float_copy ? 4 : 0);
 }
@@ -47,18 +48,21 @@ std::uint64_t bricked_layer_bytes(const DenseVolume& shape, const ImportOptions&
   __extension__ using Wide = unsigned __int128;
   const Wide slice = Wide{shape.dims[0]} * shape.dims[1];
   const Wide layer = slice * layer_slices_of(shape, options);
+  const unsigned width = encoding == ValueEncoding::Float32 ? 4 : 2;
   // The stored levels of detail (spec §8A.5, from level 3): per level a
-  // slice of sums (8 bytes and a flag) and a layer of its bricks, and the
-  // 16-bit codes' tables.
+  // slice of sums (8 bytes and a flag), a layer of its values (4 bytes
+  // each) and their copy as the writer's values, and the 16-bit codes'
+  // tables.
   Wide levels = 65536 * 17;
   for (unsigned k = 3; k <= depth_for(shape.dims); ++k) {
     const Dims level = lod_dims(shape.dims, k);
     levels += Wide{level[0]} * level[1] *
-              (9 + 2 * std::min<std::uint64_t>(level[2], std::uint64_t{1} << std::min(options.brick_log2, 31u)));
+              (9 + (4 + width) *
+                       std::min<std::uint64_t>(level[2], std::uint64_t{1} << std::min(options.brick_log2, 31u)));
   }
-  // Whole layers read at once hold their 16-bit values until they are added.
-  const Wide stored = slice * std::max(slices, layer_slices_of(shape, options)) * 2;
-  const Wide bytes = stored + layer * 2 + slice * slices * read_bytes_per_voxel(shape, encoding) + levels;
+  // Whole layers read at once hold their stored values until they are added.
+  const Wide stored = slice * std::max(slices, layer_slices_of(shape, options)) * width;
+  const Wide bytes = stored + layer * width + slice * slices * read_bytes_per_voxel(shape, encoding) + levels;
   return bytes > ~std::uint64_t{0} ? ~std::uint64_t{0} : static_cast<std::uint64_t>(bytes);
 }
 
@@ -91,7 +95,6 @@ bool choose_bricked(const DenseVolume& shape, const ImportOptions& options, Valu
                     ImportReport& report) {
   std::string against;
   if (options.keep) against = "a keep rule coarsens regions, which only an octree holds";
-  if (encoding == ValueEncoding::Float32) against = "float32 values (codecs 3 and 4 hold 16-bit values)";
   if (!options.byte_planes) against = "--codec zstd (codec 1 only, for format 1.0/1.1 readers)";
   if (!options.framed_blocks) against = "format 1.2 (a bricked grid needs format 1.3)";
   if (options.structure == StructureChoice::Bricked) {
@@ -122,8 +125,11 @@ bool choose_bricked(const DenseVolume& shape, const ImportOptions& options, Valu
   }
   report.structure = "bricked";
   report.structure_reason =
-      "every voxel kept, as 16-bit values: bricks predicted in 3-D (codec 3) or masked around their background "
-      "(codec 4) are smaller than an octree of one-voxel leaves (--structure octree overrides)";
+      encoding == ValueEncoding::Float32
+          ? "every voxel kept, as float32 values: bricks of their byte planes (codec 2) are smaller than an octree "
+            "of one-voxel leaves, which stores averages and node words besides them (--structure octree overrides)"
+          : "every voxel kept, as 16-bit values: bricks predicted in 3-D (codec 3) or masked around their background "
+            "(codec 4) are smaller than an octree of one-voxel leaves (--structure octree overrides)";
   return true;
 }
 
@@ -145,6 +151,20 @@ void samples_to_stored(const DenseVolume& shape, const BuildOptions& build, cons
   }
   tally_encoding(build.encoding, values, count, loss);
   for (std::uint64_t i = 0; i < count; ++i) stored[i] = float_to_binary16_keep_nan(values[i]);
+}
+
+void samples_to_stored(const DenseVolume& shape, const BuildOptions& build, const std::uint8_t* samples,
+                       std::uint64_t count, std::vector<float>& scratch, std::uint32_t* stored, LossTally& loss) {
+  (void)loss;  // every sample type ivol reads is a float32 exactly: nothing to count
+  if (build.encoding != ValueEncoding::Float32)
+    throw Error(ErrorClass::InvalidArgument, "samples_to_stored: float32 bits asked for a 16-bit encoding");
+  if (shape.type == SampleType::Float32) {  // every bit as it is: -0 and NaN payloads included
+    std::memcpy(stored, samples, count * 4);
+    return;
+  }
+  checked_resize(scratch, count, "a slab of samples as float32");
+  to_float(shape, samples, count, scratch.data());
+  std::memcpy(stored, scratch.data(), count * 4);
 }
 
 BrickedImport::BrickedImport(const DenseVolume& shape, const std::string& path, const ImportOptions& options,

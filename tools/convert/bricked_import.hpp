@@ -1,7 +1,7 @@
 // The bricked regular grid (spec §8A.4) as an import's structure: whether an
 // import gets one (StructureChoice::Auto's rule), what a layer of its bricks
-// holds in memory, samples turned into the stored 16-bit values, and the
-// writer's side. import_to_ivol uses all of it in one process; a distributed
+// holds in memory, samples turned into the stored values (16-bit, or
+// float32's bits), and the writer's side. import_to_ivol uses all of it in one process; a distributed
 // dense reconstruction (recon_built_layers.hpp) turns each rank's slabs into
 // stored values there and adds them in z order on rank 0, so that both write
 // the same file.
@@ -43,6 +43,18 @@ bool choose_bricked(const DenseVolume& shape, const ImportOptions& options, Valu
 // copies where the samples are not float32.
 void samples_to_stored(const DenseVolume& shape, const BuildOptions& build, const std::uint8_t* samples,
                        std::uint64_t count, std::vector<float>& scratch, std::uint16_t* stored, LossTally& loss);
+// The same for a float32 grid: the samples as float32 bits, every bit of
+// float32 samples as it is (every other sample type is a float32 exactly).
+void samples_to_stored(const DenseVolume& shape, const BuildOptions& build, const std::uint8_t* samples,
+                       std::uint64_t count, std::vector<float>& scratch, std::uint32_t* stored, LossTally& loss);
+
+// The type a grid's stored values are handled in: std::uint16_t, or
+// std::uint32_t for float32; calls `f` with a value of it.
+template <class F>
+decltype(auto) with_stored_type(ValueEncoding encoding, F&& f) {
+  if (encoding == ValueEncoding::Float32) return f(std::uint32_t{});
+  return f(std::uint16_t{});
+}
 
 // The writer's side: layers of stored values in z order, then finish().
 class BrickedImport {
@@ -53,6 +65,7 @@ class BrickedImport {
   std::uint32_t next_layer_first() const { return writer_.next_layer_first(); }
   std::uint32_t next_layer_count() const { return writer_.next_layer_count(); }
   void add_layer(const std::uint16_t* stored) { writer_.add_layer(stored); }
+  void add_layer(const std::uint32_t* stored) { writer_.add_layer(stored); }
   // After the last layer: refuses `loss` unless options.allow_lossy, then
   // writes the metadata (geometry, the choice and its reason, the outcome)
   // and the file; fills report's outcome.

@@ -229,7 +229,9 @@ std::uint64_t memory_that_would_do(const Dims& dims, const ImportOptions& option
 
 // The bricked regular grid, a layer of bricks at a time, its samples read
 // as many slices at once as the layer's budget allows (bricked_read_slices):
-// whole layers, or parts of one.
+// whole layers, or parts of one. T: the stored values' type
+// (with_stored_type).
+template <class T>
 void import_bricked(SlabReader& source, const std::string& path, const ImportOptions& options,
                     const StreamingOptions& streaming, ImportReport& report) {
   const DenseVolume& shape = source.shape();
@@ -247,8 +249,8 @@ void import_bricked(SlabReader& source, const std::string& path, const ImportOpt
   checked_resize(samples, checked_mul(checked_mul(read, slice, what), sample_size(shape.type), what),
                  what + " (samples)");
   std::vector<float> scratch;
-  std::vector<std::uint16_t> stored;
-  checked_resize(stored, checked_mul(std::max(layer, read), slice, what), what + " (as 16-bit values)");
+  std::vector<T> stored;
+  checked_resize(stored, checked_mul(std::max(layer, read), slice, what), what + " (as stored values)");
   LossTally loss;
   ProgressTicker ticker(options.progress, shape.dims[2]);
   while (writer.next_layer_count() > 0) {
@@ -290,7 +292,8 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
   if (options.check_disk_space)
     require_disk_space(ivol_disk_needs(shape.dims, build.encoding, !bricked, path, options.temp_directory));
   if (bricked) {
-    import_bricked(source, path, options, streaming, report);
+    with_stored_type(build.encoding,
+                     [&](auto t) { import_bricked<decltype(t)>(source, path, options, streaming, report); });
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return report;
   }

@@ -32,11 +32,12 @@ KeepRule parse_keep_rule(const std::string& text);
 // Called with the slices done and the slices in all, a few times a second at most.
 using Progress = std::function<void(std::uint64_t done, std::uint64_t total)>;
 
-// How the file holds the voxels. Auto: a bricked regular grid (spec §8A.4,
-// codec 3) for lossless every-voxel 16-bit files, where it is smaller (an
-// octree of one-voxel leaves also stores averages and node words, and its
-// blocks cannot be predicted in 3-D: bench/RESULTS.md); an octree otherwise
-// (a keep rule's coarse leaves, float32, or format 1.2).
+// How the file holds the voxels. Auto: a bricked regular grid (spec §8A.4:
+// codec 3 for 16-bit values, codec 2 for float32) for every-voxel files,
+// where it is smaller (an octree of one-voxel leaves also stores averages
+// and node words, and its blocks cannot be predicted in 3-D:
+// bench/RESULTS.md); an octree otherwise (a keep rule's coarse leaves, or
+// format 1.2).
 enum class StructureChoice { Auto, Octree, Bricked };
 
 struct ImportOptions {

@@ -38,10 +38,11 @@ std::vector<LayerSlab> layer_slabs(std::uint32_t depth, std::uint32_t layer, std
 
 // A slab's stored values, then what rounding them changed, as bytes: the
 // ranks run the same binary, so LossTally travels as it is in memory.
-std::vector<std::uint8_t> pack(const std::uint16_t* stored, std::uint64_t count, const LossTally& loss) {
-  std::vector<std::uint8_t> bytes(count * 2 + sizeof loss);
-  std::memcpy(bytes.data(), stored, count * 2);
-  std::memcpy(bytes.data() + count * 2, &loss, sizeof loss);
+template <class T>
+std::vector<std::uint8_t> pack(const T* stored, std::uint64_t count, const LossTally& loss) {
+  std::vector<std::uint8_t> bytes(count * sizeof(T) + sizeof loss);
+  std::memcpy(bytes.data(), stored, count * sizeof(T));
+  std::memcpy(bytes.data() + count * sizeof(T), &loss, sizeof loss);
   return bytes;
 }
 
@@ -60,17 +61,18 @@ std::uint32_t distributed_layer_slab_slices(std::uint32_t layer_slices, std::uin
   return slab;
 }
 
-DistributedBuild reconstruct_distributed_bricked(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid,
-                                                 const std::string& path, const ImportOptions& options,
-                                                 recon::SlabExchange& exchange, std::uint32_t most_slab_slices,
-                                                 const std::function<void()>& every_slab_received) {
-  const auto start = std::chrono::steady_clock::now();
-  const DenseVolume shape = float_volume_of(grid);
-  DistributedBuild result;
+namespace {
+
+// reconstruct_distributed_bricked's work, T the stored values' type
+// (with_stored_type).
+template <class T>
+DistributedBuild distributed_bricked(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid,
+                                     const std::string& path, const ImportOptions& options,
+                                     recon::SlabExchange& exchange, std::uint32_t most_slab_slices,
+                                     const std::function<void()>& every_slab_received,
+                                     std::chrono::steady_clock::time_point start, const DenseVolume& shape,
+                                     const StreamingOptions& streaming, DistributedBuild result) {
   ImportReport& report = result.written;
-  const StreamingOptions streaming = import_streaming_options(shape, options, report);
-  if (!choose_bricked(shape, options, streaming.build.encoding, report))
-    throw std::logic_error("a distributed bricked grid needs a volume that import_to_ivol writes as one");
   const std::uint32_t depth = shape.dims[2];
   const std::uint32_t layer = std::min<std::uint32_t>(depth, 1u << options.brick_log2);
   // Within the layer's budget, as one process reads it (bricked_read_slices).
@@ -86,7 +88,7 @@ DistributedBuild reconstruct_distributed_bricked(recon::FdkReconstructor& recons
 
   // One of this rank's slabs: reconstructed, then as stored values.
   std::vector<float> values, scratch;
-  auto build_mine = [&](std::size_t k, std::uint16_t* stored, LossTally& loss) {
+  auto build_mine = [&](std::size_t k, T* stored, LossTally& loss) {
     const LayerSlab& s = slabs[k];
     reconstruct_slices(reconstructor, grid, s.z0, s.z0 + s.count, values, result);
     const auto building = std::chrono::steady_clock::now();
@@ -102,7 +104,7 @@ DistributedBuild reconstruct_distributed_bricked(recon::FdkReconstructor& recons
 
   if (exchange.rank() != 0) {
     try {
-      std::vector<std::uint16_t> stored;
+      std::vector<T> stored;
       for (std::size_t k = 0; k < slabs.size(); ++k) {
         if (exchange.owner(k, slabs.size()) != exchange.rank()) continue;
         stored.resize(std::size_t{slabs[k].count} * slice);
@@ -120,14 +122,14 @@ DistributedBuild reconstruct_distributed_bricked(recon::FdkReconstructor& recons
   BrickedImport writer(shape, path, options, streaming);
   // Slabs of whole layers, or a layer gathered from its slabs; `base` is the
   // first slice the buffer holds.
-  std::vector<std::uint16_t> layer_values(std::size_t{std::max(layer, slab_slices)} * slice);
+  std::vector<T> layer_values(std::size_t{std::max(layer, slab_slices)} * slice);
   std::uint32_t base = 0;
   std::vector<std::uint8_t> received;
   LossTally loss;
   for (std::size_t k = 0; k < slabs.size(); ++k) {
     const LayerSlab& s = slabs[k];
     if (s.z0 == writer.next_layer_first()) base = s.z0;
-    std::uint16_t* into = layer_values.data() + std::size_t{s.z0 - base} * slice;
+    T* into = layer_values.data() + std::size_t{s.z0 - base} * slice;
     const std::size_t count = std::size_t{s.count} * slice;
     const int from = exchange.owner(k, slabs.size());
     if (from == 0) {
@@ -139,12 +141,12 @@ DistributedBuild reconstruct_distributed_bricked(recon::FdkReconstructor& recons
       exchange.receive_bytes(k, from, received);
       result.waiting_seconds += seconds_since(waiting);
       LossTally theirs;
-      if (received.size() != count * 2 + sizeof theirs)
+      if (received.size() != count * sizeof(T) + sizeof theirs)
         throw std::runtime_error("rank " + std::to_string(from) + " sent " + std::to_string(received.size()) +
                                  " bytes for slab " + std::to_string(k) + ", not " +
-                                 std::to_string(count * 2 + sizeof theirs));
-      std::memcpy(into, received.data(), count * 2);
-      std::memcpy(&theirs, received.data() + count * 2, sizeof theirs);
+                                 std::to_string(count * sizeof(T) + sizeof theirs));
+      std::memcpy(into, received.data(), count * sizeof(T));
+      std::memcpy(&theirs, received.data() + count * sizeof(T), sizeof theirs);
       loss.merge(theirs);
     }
     // Every layer the slabs have completed.
@@ -161,6 +163,24 @@ DistributedBuild reconstruct_distributed_bricked(recon::FdkReconstructor& recons
   result.writing_seconds += seconds_since(finishing);
   report.seconds = seconds_since(start);
   return result;
+}
+
+}  // namespace
+
+DistributedBuild reconstruct_distributed_bricked(recon::FdkReconstructor& reconstructor, const recon::VolumeGrid& grid,
+                                                 const std::string& path, const ImportOptions& options,
+                                                 recon::SlabExchange& exchange, std::uint32_t most_slab_slices,
+                                                 const std::function<void()>& every_slab_received) {
+  const auto start = std::chrono::steady_clock::now();
+  const DenseVolume shape = float_volume_of(grid);
+  DistributedBuild result;
+  const StreamingOptions streaming = import_streaming_options(shape, options, result.written);
+  if (!choose_bricked(shape, options, streaming.build.encoding, result.written))
+    throw std::logic_error("a distributed bricked grid needs a volume that import_to_ivol writes as one");
+  return with_stored_type(streaming.build.encoding, [&](auto t) {
+    return distributed_bricked<decltype(t)>(reconstructor, grid, path, options, exchange, most_slab_slices,
+                                            every_slab_received, start, shape, streaming, std::move(result));
+  });
 }
 
 }  // namespace ivol::convert

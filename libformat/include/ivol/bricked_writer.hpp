@@ -1,14 +1,15 @@
 // Writing a bricked regular grid (spec §8A.4, structure_kind 5, format 1.3):
 // every voxel kept, in bricks of 2^b voxels per side, one brick per values
-// block, each brick of 16-bit values predicted (codec 3). What a lossless
-// every-voxel volume becomes: an octree of one-voxel leaves stores averages
-// and node words besides the same values, and its Morton-order blocks cannot
-// be predicted in 3-D.
+// block, each brick of 16-bit values predicted (codec 3), each brick of
+// float32 values as its byte planes (codec 2). What a lossless every-voxel
+// volume becomes: an octree of one-voxel leaves stores averages and node
+// words besides the same values, and its Morton-order blocks cannot be
+// predicted in 3-D.
 //
 // The volume arrives as layers of 2^b slices (z increasing); memory holds one
-// layer of 16-bit values and its encoded bricks, and for each stored level
-// of detail k a slice of binary64 sums and a layer of its bricks
-// ((size_x · size_y / 4^k) · (8 + 2 · 2^b) bytes: 18 MB at 4000² for k = 3
+// layer of values and its encoded bricks, and for each stored level of
+// detail k a slice of binary64 sums and a layer of its bricks
+// ((size_x · size_y / 4^k) · (8 + 4 · 2^b) bytes: 34 MB at 4000² for k = 3
 // and bricks of 32).
 #pragma once
 
@@ -25,7 +26,7 @@ namespace ivol {
 
 struct BrickedOptions {
   unsigned brick_log2 = 5;                         // 32^3 bricks: 64 KiB of 16-bit values each (bench/RESULTS.md)
-  ValueEncoding encoding = ValueEncoding::UInt16;  // binary16 or uint16
+  ValueEncoding encoding = ValueEncoding::UInt16;  // binary16, uint16 or float32
   double value_scale = 1.0;
   double value_offset = 0.0;
   int zstd_level = 3;  // codecs 2 and 4; codec 3 at residual_zstd_level(zstd_level)
@@ -51,7 +52,7 @@ constexpr int residual_zstd_level(int zstd_level) { return zstd_level <= 3 ? 1 :
 
 class BrickedGridWriter {
  public:
-  // Throws Error(InvalidArgument) for brick_log2 outside 1 .. 8 or float32.
+  // Throws Error(InvalidArgument) for brick_log2 outside 1 .. 8.
   BrickedGridWriter(const std::string& path, const Dims& dims, const BrickedOptions& options);
   ~BrickedGridWriter();  // an unfinished writer leaves nothing behind
   BrickedGridWriter(const BrickedGridWriter&) = delete;
@@ -62,8 +63,10 @@ class BrickedGridWriter {
   std::uint32_t next_layer_first() const;
   std::uint32_t next_layer_count() const;
   // Adds the next layer: next_layer_count() slices of size_y x size_x stored
-  // 16-bit values (the encoding's bits), [z][y][x].
+  // values (the encoding's bits: std::uint16_t for binary16 and uint16,
+  // std::uint32_t for float32; InvalidArgument for the other), [z][y][x].
   void add_layer(const std::uint16_t* values);
+  void add_layer(const std::uint32_t* values);
   // After the last layer: writes the metadata, the index and the footer.
   WriteStats finish(const Metadata& metadata);
 

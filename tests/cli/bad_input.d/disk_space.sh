@@ -6,13 +6,15 @@
 # statvfs where one can be mounted.
 ds="$work/disk_space"
 mkdir -p "$ds"
-# 16^3 float32: an octree, 16 KiB of values for the file and as much for the spill.
+# 16^3 float32 as an octree (--structure octree; auto would write a bricked
+# grid, which has no spill): 16 KiB of values for the file and as much for
+# the spill.
 bad disk-space-convert 2 "$out: not enough free disk for this run: it needs about 32.0 KiB (32768 bytes: the output" -- \
-  env IVOL_TEST_FREE_BYTES=1000 "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,16
+  env IVOL_TEST_FREE_BYTES=1000 "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,16 --structure octree
 bad disk-space-convert-free 2 "its filesystem has 1000 bytes (1000 bytes) available" -- \
-  env IVOL_TEST_FREE_BYTES=1000 "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,16
+  env IVOL_TEST_FREE_BYTES=1000 "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,16 --structure octree
 bad disk-space-convert-temp-hint 2 "available (--temp-dir puts the temporary files on another disk; --no-disk-check" -- \
-  env IVOL_TEST_FREE_BYTES=1000 "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,16
+  env IVOL_TEST_FREE_BYTES=1000 "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,16 --structure octree
 bad disk-space-recon 2 "$out: not enough free disk for this run" -- \
   env IVOL_TEST_FREE_BYTES=1000 "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 16 --voxel 0.4 -o "$out/x.ivol"
 # A dense recon writes a bricked grid: no spill, no temporary files, so no
@@ -22,13 +24,13 @@ bad disk-space-recon-no-temp-hint 2 "bytes) available (--no-disk-check skips thi
 bad disk-space-recon-structure 2 "not enough free disk" -- \
   env IVOL_TEST_FREE_BYTES=1000 "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 16 --voxel 0.4 --structure octree -o "$out/x.ivol"
 bad temp-dir-missing-convert 2 "$ds/nowhere: cannot write the octree writer's spill file there" -- \
-  "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,16 --temp-dir "$ds/nowhere"
+  "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,16 --structure octree --temp-dir "$ds/nowhere"
 # (--keep: an octree; a dense recon without it is a bricked grid, with no spill)
 bad temp-dir-missing-recon 2 "$ds/nowhere: cannot write the octree writer's spill file there" -- \
   "$IVOL" recon "$work/p.raw" "${scan[@]}" --size 16 --voxel 0.4 --keep threshold=otsu,margin=2 -o "$out/x.ivol" \
   --temp-dir "$ds/nowhere"
 bad tmpdir-missing-convert 2 "$ds/nowhere: cannot write the octree writer's spill file there" -- \
-  env TMPDIR="$ds/nowhere" "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,16
+  env TMPDIR="$ds/nowhere" "$IVOL" convert "$work/v.raw" "$out/x.ivol" --dims 16,16,16 --structure octree
 # The real free space: a 256 KiB tmpfs as the spill directory of a 256 KiB
 # (64^3 u16) octree; --no-disk-check lets the same run fail on the full disk
 # instead, leaving nothing.

@@ -3,7 +3,8 @@
 # lists it (exit 3); plain extract refuses the cut file as truncated; info and
 # verify say what could be salvaged and still fail; a cut 1.2 file (no
 # framing) cannot be salvaged, and extract says why.
-"$IVOL" -q convert "$work/v.raw" "$work/salvage-whole.ivol" --dims 16,16,16 --block-size 512
+# (an octree of small blocks: what is lost is filled from its stored averages)
+"$IVOL" -q convert "$work/v.raw" "$work/salvage-whole.ivol" --dims 16,16,16 --block-size 512 --structure octree
 whole=$(stat -c %s "$work/salvage-whole.ivol")
 head -c $((whole * 2 / 3)) "$work/salvage-whole.ivol" > "$work/salvage-cut.ivol"
 "$IVOL" -q convert "$work/v.raw" "$work/salvage-v12.ivol" --dims 16,16,16 --format-version 1.2

@@ -1,5 +1,5 @@
-# `convert --structure bricked` where a bricked grid (format 1.3, codec 3 on
-# 16-bit values, every voxel) cannot hold the file: refused with exit 2 and
+# `convert --structure bricked` where a bricked grid (format 1.3, every
+# voxel) cannot hold the file: refused with exit 2 and
 # the reason, nothing written.
 /usr/bin/python3 - "$work" <<'PY'
 import sys, numpy as np
@@ -13,8 +13,10 @@ bad structure-octree-for-memory 0 "note: an octree, because a layer of bricks (1
     -- "$IVOL" convert "$work/wide.raw" "$work/wide.ivol" --dims 256,256,32 --type u16 --memory 8 -f
 bad bricked-with-keep 2 "--structure bricked: a keep rule coarsens regions, which only an octree holds" \
     -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --keep threshold=10,margin=1
-bad bricked-float32 2 "--structure bricked: float32 values (codecs 3 and 4 hold 16-bit values)" \
-    -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --encoding float32
+# float32 values are a bricked grid of byte-plane bricks (codec 2), no longer
+# refused. Its output goes outside $out.
+bad bricked-float32 0 "(ivol bricked float32" \
+    -- "$IVOL" convert "$work/u16.raw" "$work/f32-bricked.ivol" --dims 8,8,8 --type u16 --structure bricked --encoding float32 -f
 bad bricked-format-1.2 2 "--structure bricked: format 1.2 (a bricked grid needs format 1.3)" \
     -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --format-version 1.2
 bad bricked-codec-zstd 2 "--structure bricked: --codec zstd (codec 1 only, for format 1.0/1.1 readers)" \
