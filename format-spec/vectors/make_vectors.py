@@ -2901,6 +2901,7 @@ def gen():
     gen_masked()
     gen_stored_lods()
     gen_entropy2()
+    gen_bricked_float32()
     return SAMPLE
 
 
@@ -3257,6 +3258,63 @@ def framed_bricked_file(src, enc, b, codec, mutate=None, **kw):
 
 def add_valid_bricked(name, data, src, enc, b, desc, lods=True):
     add_valid(name, data, src, enc, desc, lods=lods, kind=KIND_BRICKED, extra={"brick_log2": b})
+
+
+def smooth_f32(X, Y, Z, rng, lo=20.0, noise=0.05):
+    """A float32 gradient with a little noise, [z][y][x], each voxel rounded
+    once to binary32 (§9)."""
+    z, y, x = np.mgrid[0:Z, 0:Y, 0:X]
+    return arr_f32(lo + 0.37 * x - 0.21 * y + 0.13 * z + rng.normal(0.0, noise, (Z, Y, X)), (Z, Y, X))
+
+
+def put_bits(src, cells):
+    """Sets voxel (x, y, z) of src to the bit pattern of each (x, y, z): bits."""
+    for (x, y, z), bits in cells.items():
+        src[z, y, x] = bits
+
+
+def gen_bricked_float32():
+    """§8A.4 (1.3 draft): bricked regular grids of float32 values (value_encoding
+    3), whose bricks may use codecs 0, 1 and 2 only (codecs 3 and 4 hold 16-bit
+    values, §7).  Own generator (seed), so the vectors before keep their bytes."""
+    rng = np.random.default_rng(2501)
+
+    src = smooth_f32(9, 7, 5, rng)
+    put_bits(src, {(0, 0, 0): 0x80000000,          # -0, brick (0, 0, 0)
+                   (8, 0, 0): 0x7F800000,          # +inf, the edge brick of 1 voxel along x
+                   (3, 6, 4): 0xFF800000,          # -inf, an edge brick 4x3x1
+                   (5, 2, 1): 0x7FC01234,          # quiet NaN with a payload
+                   (6, 5, 2): 0xFFC00001,          # negative quiet NaN with a payload
+                   (1, 4, 3): 0x7FA00001,          # signalling NaN
+                   (2, 1, 0): 0x00000001,          # smallest subnormal
+                   (7, 3, 3): 0x807FFFFF,          # largest negative subnormal
+                   (8, 6, 4): 0x00400000,          # subnormal, the last voxel (1x3x1 corner brick)
+                   (4, 4, 0): 0x7F7FFFFF,          # largest finite
+                   (0, 6, 1): 0x80800000})         # -(smallest normal)
+    add_valid_bricked(
+        "bricked_9x7x5_float32_specials_codec2", framed_bricked_file(src, FLOAT32, 2, CODEC_PLANES),
+        src, FLOAT32, 2,
+        "Bricked grid (structure_kind 5, §8A.4) 9x7x5 float32, bricks of 4 (edge bricks of extent 1 along "
+        "x, 3 along y and 1 along z, down to the 1x3x1 corner brick), every brick one codec 2 block "
+        "(zstd over the 4 byte planes of its values, §7). A gradient with noise and -0, +inf, -inf, the "
+        "NaNs 0x7FC01234, 0xFFC00001 and 0x7FA00001 (signalling), the subnormals 0x00000001, "
+        "0x807FFFFF and 0x00400000, the largest finite value and -(smallest normal): every bit pattern "
+        "comes back unchanged (§9). Levels of detail by §12.3 (binary64 sum, canonical NaN 0x7FC00000).")
+
+    src = smooth_f32(11, 9, 6, rng, lo=-1.5, noise=0.3)
+    put_bits(src, {(0, 0, 0): 0x80000000,          # -0 in a stored brick (0)
+                   (5, 1, 0): 0x7FC01234,          # NaN payload in a zstd brick (1)
+                   (9, 8, 5): 0xFF800000,          # -inf in the last brick (17, 3x1x2, zstd)
+                   (10, 2, 1): 0x00000003,         # subnormal in brick 2 (3x4x4, stored)
+                   (1, 8, 4): 0x7F800000})         # +inf in brick 15 (4x1x2, zstd)
+    add_valid_bricked(
+        "bricked_11x9x6_float32_codecs_0_and_1", framed_bricked_file(
+            src, FLOAT32, 2, lambda q: (CODEC_STORED, CODEC_ZSTD)[q % 2]),
+        src, FLOAT32, 2,
+        "Bricked grid 11x9x6 float32, bricks of 4 (edge extents 3 along x, 1 along y, 2 along z), 18 "
+        "bricks whose blocks alternate codec 0 (stored: payload 4 bytes a value) and codec 1 (one zstd "
+        "frame of 4n bytes), brick 0 stored; -0, the NaN 0x7FC01234, +inf, -inf and a subnormal in "
+        "bricks of either codec.")
 
 
 def gen_masked():
@@ -3722,6 +3780,20 @@ def gen_stored_lods():
     add_invalid("bricked_lods_float32_codec3", data, "malformed", "codec3.where",
                 "Bricked grid 5x4x3 float32 storing levels 1 .. 3, whose level 2 block has codec 3: codecs "
                 "3 and 4 are valid on stream 7 blocks only in a grid of 16-bit values (§7).")
+
+    def f32_codec4(lod):
+        blk = lod[1][0]
+        vals = [v & 0xFFFF for v in struct.unpack("<%dI" % blk.count, blk.data)]
+        blk.codec = CODEC_MASKED
+        blk.stored = masked_payload(vals, vals[0])
+    data = lods_file(f32src, FLOAT32, 1, {k: dict(codec=CODEC_PLANES) for k in (1, 2, 3)},
+                     values=dict(codec=CODEC_PLANES), mutate=f32_codec4, lods=f32lods)
+    add_invalid("bricked_lods_float32_codec4", data, "malformed", "codec4.where",
+                "Bricked grid 5x4x3 float32 storing levels 1 .. 3 (codec 2), whose first block of level 1 "
+                "(one brick of 8 elements) has codec 4 (a valid form 1 payload of the elements' low 16 "
+                "bits): codec 4 is valid only where codec 3 is, on stream 3 and 7 blocks of a grid of "
+                "16-bit values (§7, §8A.5: \"codecs 3 and 4 only with value_encoding 1 or 2\"), checked "
+                "with the block table.")
     add_invalid("octree_not_ignorable_stream_7", octree_with_stream_7(0), "unsupported-feature", "stream",
                 "octree_ignorable_stream_7 with the block of stream 7 not ignorable (flags 0): outside "
                 "structure_kind 5 stream 7 is an unknown stream, and a non-ignorable block of an unknown "
@@ -3743,6 +3815,37 @@ def gen_stored_lods():
           "coder 2, level 3 (2x2x2) with entropy coder 1. The contexts of a level's brick use the "
           "level's brick extents, which differ from the volume's bricks at the same brick coordinates.",
           values=dict(value_map=0, entropy=2))
+
+    # float32 (value_encoding 3) with NaN and infinities in stored levels; own generator as well
+    rng3 = np.random.default_rng(2502)
+    src = smooth_f32(16, 12, 10, rng3)
+    put_bits(src, {(13, 9, 7): 0x7FC01234,           # NaN payload: level-1 cell (6, 4, 3)
+                   (2, 1, 1): 0x7F800000,            # +inf: level-1 cell (1, 0, 0), level-2 cell (0, 0, 0)
+                   (5, 2, 2): 0xFF800000})           # -inf: level-1 cell (2, 1, 1), level-2 cell (1, 0, 0)
+    src[0:2, 0:2, 8:10] = 0x80000000                 # level-1 cell (4, 0, 0): eight -0
+    src[0:2, 0:2, 10:12] = [0x7F7FFFFF, 0x7F7FFFFE]  # (5, 0, 0): largest finite and the one below
+    src[0:2, 0:2, 12:14] = [0x00000001, 0x00000002]  # (6, 0, 0): subnormals, mean 1.5 * 2^-149
+    src[0:2, 0:2, 14:16] = [0x00000001, 0x00000000]  # (7, 0, 0): mean 2^-150
+    lods = flat_lods(src, FLOAT32, 4)
+    nan, inf, ninf = 0x7FC00000, 0x7F800000, 0xFF800000
+    assert [int(v) for v in lods[1][0, 0, 4:8]] == [0, 0x7F7FFFFE, 2, 0]
+    assert lods[1][0, 0, 1] == inf and lods[1][1, 1, 2] == ninf and lods[1][3, 4, 6] == nan
+    assert lods[2][0, 0, 0] == inf and lods[2][0, 0, 1] == ninf and lods[2][1, 2, 3] == nan
+    assert lods[3][0, 0, 0] == nan and lods[3][0, 1, 1] == nan and lods[4][0, 0, 0] == nan
+    assert all(decode(FLOAT32, v) == decode(FLOAT32, v) for v in (lods[3][0, 0, 1], lods[3][1].reshape(-1)[0]))
+    valid("bricked_lods_16x12x10_float32_nan_inf", src, FLOAT32, 2,
+          {2: dict(codec=CODEC_PLANES), 3: dict(codec=CODEC_ZSTD), 4: dict(codec=CODEC_STORED)},
+          "Bricked grid 16x12x10 float32, bricks of 4, values codec 2, storing levels 2 (4x3x3, one brick; "
+          "codec 2), 3 (2x2x2; codec 1) and 4 (= D, 1x1x1; codec 0), not level 1 (§8A.5). Values per "
+          "§12.3 (binary64 sum from +0.0, z, y, x; divided by the count; encoded once, §9): a NaN "
+          "0x7FC01234 gives the canonical NaN 0x7FC00000 in its cells of every level; +inf and -inf in "
+          "different level-2 cells give +inf and -inf at levels 1 and 2 and, meeting in level-3 cell "
+          "(0, 0, 0), inf + -inf = NaN (0x7FC00000); level 4 is NaN. Level-1 cells of eight -0 (mean "
+          "+0), of four 0x7F7FFFFF and four 0x7F7FFFFE (mean a tie, rounded to even 0x7F7FFFFE; a "
+          "binary32 sum would overflow), of four 0x00000001 and four 0x00000002 (1.5 * 2^-149, to even: "
+          "0x00000002) and of four 0x00000001 and four +0 (2^-150, to even: +0). Level 1 is computed from "
+          "full resolution, the others may be read from stream 7: same bits.",
+          values=dict(codec=CODEC_PLANES), lods=lods)
 
 
 # --------------------------------- codec 3 with entropy coder 2 (§7.2.1, 1.3 draft)
@@ -4698,6 +4801,17 @@ holds), `octree_not_ignorable_stream_7` is `unsupported-feature`.
   stream's length, the bits below and their padding, the entropy byte, the
   limit of §7 on an over-long but correct coding). The older vectors are
   unchanged byte for byte.
+* New (bricked grids of float32 values, §8A.4, §8A.5): 3 valid files,
+  `bricked_9x7x5_float32_specials_codec2` (codec 2 over 4 byte planes, odd
+  sizes, -0, infinities, NaN payloads, subnormals),
+  `bricked_11x9x6_float32_codecs_0_and_1` (codecs 0 and 1 alternating per
+  brick) and `bricked_lods_16x12x10_float32_nan_inf` (stored levels 2 .. 4
+  whose cells hold NaN, +inf, -inf, inf + -inf = NaN, ties rounded to even
+  at the top of the range and among subnormals), and the invalid
+  `bricked_lods_float32_codec4` (codec 4 on a stream-7 block of a float32
+  grid, `malformed`; with `bricked_float32_codec3`, `bricked_float32_codec4`
+  and `bricked_lods_float32_codec3` every place of §7's "value_encoding 1 or
+  2" rule is covered). The older vectors are unchanged byte for byte.
 
 ### Changes to the 1.1 vectors for 1.2
 
