@@ -388,7 +388,13 @@ std::vector<std::uint8_t> encode_with(const std::vector<std::uint16_t>& v, const
   return ivol::encode_predicted(v.data(), d, e, o);
 }
 
-TEST(PredictedCodec, TheWriterKeepsTheSmallerEntropyCoder) {
+// The writer's rule: coder 2, and coder 1 where coder 2 spends under a bit
+// a voxel and coder 1 is smaller.
+TEST(PredictedCodec, TheWriterTriesZstdWhereTokensSpendUnderABitAVoxel) {
+  auto bits_per_voxel = [](const std::vector<std::uint8_t>& payload, const BrickDims& d) {
+    return 8.0 * static_cast<double>(payload.size() - ivol::kPredictedHeaderSize) /
+           (static_cast<double>(d[0]) * d[1] * d[2]);
+  };
   for (ValueEncoding e : {ValueEncoding::Binary16, ValueEncoding::UInt16})
     for (const BrickDims& d : {BrickDims{32, 32, 32}, BrickDims{4, 4, 4}, BrickDims{1, 1, 1}}) {
       const auto v = smooth_brick(d, e, 21);
@@ -397,17 +403,33 @@ TEST(PredictedCodec, TheWriterKeepsTheSmallerEntropyCoder) {
       const auto smaller = encode_with(v, d, e, Entropy::Smaller);
       EXPECT_EQ(planes[3], 1);
       EXPECT_EQ(tokens[3], 2) << d[0];  // these bricks are within codec 3's limit either way
-      EXPECT_EQ(smaller.size(), std::min(planes.size(), tokens.size()));
+      if (bits_per_voxel(tokens, d) >= 1.0)
+        EXPECT_EQ(smaller, tokens) << d[0];
+      else
+        EXPECT_EQ(smaller.size(), std::min(planes.size(), tokens.size())) << d[0];
       for (const auto* p : {&planes, &tokens, &smaller}) {
         EXPECT_EQ(decode(*p, d), v);
         EXPECT_EQ(reference_decode(*p, d), v);
       }
     }
-  // On a smooth CT-like brick the tokens win.
+  // A brick of one value with a repeating line of steps: the residuals
+  // repeat, tokens cost a fraction of a bit a voxel, and zstd's matches win.
   const BrickDims d{32, 32, 32};
+  std::vector<std::uint16_t> flat(std::size_t{32} * 32 * 32, 1000);
+  for (std::size_t i = 0; i < flat.size(); i += 97) flat[i] = static_cast<std::uint16_t>(1000 + 40 * (i % 7));
+  const auto tokens = encode_with(flat, d, ValueEncoding::UInt16, Entropy::Tokens);
+  const auto planes = encode_with(flat, d, ValueEncoding::UInt16, Entropy::ZstdPlanes);
+  ASSERT_LT(bits_per_voxel(tokens, d), 1.0);
+  ASSERT_LT(planes.size(), tokens.size());
+  const auto smaller = encode_with(flat, d, ValueEncoding::UInt16, Entropy::Smaller);
+  EXPECT_EQ(smaller, planes);
+  EXPECT_EQ(decode(smaller, d), flat);
+  // On a smooth CT-like brick the tokens win.
   const auto v = smooth_brick(d, ValueEncoding::UInt16, 4);
   EXPECT_LT(encode_with(v, d, ValueEncoding::UInt16, Entropy::Tokens).size(),
             encode_with(v, d, ValueEncoding::UInt16, Entropy::ZstdPlanes).size());
+  EXPECT_EQ(encode_with(v, d, ValueEncoding::UInt16, Entropy::Smaller),
+            encode_with(v, d, ValueEncoding::UInt16, Entropy::Tokens));
 }
 
 // Residuals of every bit length (tokens 0 .. 31) and context tables made

@@ -214,17 +214,23 @@ std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const Br
     detail::compress_parts(context.get(), {{planes.data(), n}, {planes.data() + n, n}}, out, kPredictedHeaderSize);
   };
   // Either coder's payload obeys codec 3's one limit on stored bytes (spec §7).
-  std::size_t limit = ZSTD_compressBound(2 * n);
-  if (options.entropy != PredictedOptions::Entropy::Tokens) {
+  const std::size_t limit = ZSTD_compressBound(2 * n);
+  if (options.entropy == PredictedOptions::Entropy::ZstdPlanes) {
     zstd_planes();
-    if (options.entropy == PredictedOptions::Entropy::ZstdPlanes) return out;
-    limit = out.size() - kPredictedHeaderSize - 1;  // coder 2 only where it is smaller
+    return out;
   }
   std::vector<std::uint8_t> tokens(out.begin(), out.begin() + kPredictedHeaderSize);
   tokens[3] = kEntropyTokens;
-  if (detail::encode_residual_tokens(best_z.data(), dims, limit, tokens)) return tokens;
-  // Coder 2 is larger, or (asked for alone) past its limit in the spec.
-  if (options.entropy == PredictedOptions::Entropy::Tokens) zstd_planes();
+  const bool coded = detail::encode_residual_tokens(best_z.data(), dims, limit, tokens);
+  if (coded && options.entropy == PredictedOptions::Entropy::Tokens) return tokens;
+  // Coder 1 wins only where coder 2 spends under about a bit a voxel (air
+  // and flat material, where zstd's matches beat any per-voxel cost), and
+  // there zstd is fast: elsewhere trying it cost a fifth of the encoding
+  // time and saved at most 23 bytes of 13 MB (bench/RESULTS.md, issue 22).
+  constexpr std::size_t kTryZstdBelowBitsPerVoxel = 1;
+  if (coded && 8 * (tokens.size() - kPredictedHeaderSize) >= kTryZstdBelowBitsPerVoxel * n) return tokens;
+  zstd_planes();
+  if (coded && tokens.size() <= out.size()) return tokens;
   return out;
 }
 
