@@ -31,9 +31,10 @@ struct BrickedOptions {
   double value_offset = 0.0;
   int zstd_level = 3;  // codecs 2 and 4; codec 3 at residual_zstd_level(zstd_level)
   bool predicted = true;  // false: zstd over byte planes (codec 2), for comparison
-  // Codec 3's entropy coder (spec §7.2): Smaller keeps the smaller of zstd
-  // over byte planes and rANS over tokens (§7.2.1) per brick; ZstdPlanes
-  // only the first, which decodes about 2.5 times as fast (bench/RESULTS.md).
+  // Codec 3's entropy coder (spec §7.2): Smaller takes rANS over tokens
+  // (§7.2.1), or zstd over byte planes where that brick is nearly flat and
+  // zstd is smaller (PredictedOptions); ZstdPlanes only zstd, which decodes
+  // about 2.5 times as fast (bench/RESULTS.md).
   PredictedOptions::Entropy entropy = PredictedOptions::Entropy::Smaller;
   unsigned threads = 0;   // 0: all hardware threads
   // Levels of detail stored (spec §8A.5): every level from this one to the
