@@ -2,7 +2,8 @@
 """Issue 22: ivol's lossless files against the compressors users would pick
 instead, on the same voxels, side by side in one run.
 
-    python bench/peers_codecs.py --work DIR [--ivol BINARY] [--phantoms A,B] [--only TEXT,...] [--skip TEXT,...]
+    python bench/peers_codecs.py --work DIR [--ivol BINARY] [--phantoms A,B] [--ways W,...]
+                                 [--only TEXT,...] [--skip TEXT,...] [--reads] [--reads-only]
 
 DIR holds PHANTOM.f32 (N^3 float32, x fastest: an ivol reconstruction, as
 bench/run_peers_codecs.sh makes it). Each volume is kept four ways, every
@@ -24,6 +25,14 @@ deflate 9 and with blosc zstd 9 + shuffle (hdf5plugin); the zstd CLI (-3 and
 (imagecodecs, on the 16-bit patterns); pcodec; fpzip (lossless, on the
 values as float32). Prints one Markdown table per volume: bytes, against
 ivol, encode seconds (wall, the whole volume) and the round trip checked.
+With --reads, a second table per volume: the share of the file's bytes that
+a z, y and x slice through the centre, a 64^3 box at the centre and the 1/8
+preview read, for ivol's default file (`ivol extract`'s count of the bytes
+its reader read, the open included) and for the HDF5 blosc file (the stored
+sizes of the chunks the read touches, plus the file's bytes outside chunks,
+which an HDF5 reader may read to open it: what a reader of that file
+fetches at the least; HDF5 keeps no preview, so its 1/8 preview reads every
+chunk). --reads-only prints only that table.
 Needs numpy, h5py, hdf5plugin, blosc2, imagecodecs, pcodec, fpzip (a venv:
 bench/run_peers_codecs.sh makes one).
 """
@@ -135,6 +144,52 @@ def method_hdf5(v, kind, tmp, blosc):
     return os.path.getsize(path), t.seconds, same
 
 
+def centre_reads(n):
+    """The reads of the --reads table: (label, ivol --box x0,y0,z0,x1,y1,z1 and
+    --level, numpy index of the same voxels at full resolution)."""
+    c = n // 2
+    return [
+        ("z slice", (0, 0, c, n, n, c + 1), 0, np.s_[c:c + 1, :, :]),
+        ("y slice", (0, c, 0, n, c + 1, n), 0, np.s_[:, c:c + 1, :]),
+        ("x slice", (c, 0, 0, c + 1, n, n), 0, np.s_[:, :, c:c + 1]),
+        ("64^3 box", (c - 32, c - 32, c - 32, c + 32, c + 32, c + 32), 0, np.s_[c - 32:c + 32, c - 32:c + 32,
+                                                                               c - 32:c + 32]),
+        ("1/8 preview", (0, 0, 0, (n + 7) // 8, (n + 7) // 8, (n + 7) // 8), 3, np.s_[::8, ::8, ::8]),
+    ]
+
+
+def read_shares(v, kind, tmp, ivol):
+    """Per read of centre_reads: the share of ivol's default file and of the
+    HDF5 blosc file that it reads (see the module's docstring)."""
+    import re
+    import h5py
+    n = v.shape[0]
+    method_ivol(v, kind, tmp, ivol)
+    path = os.path.join(tmp, "v.ivol")
+    ivol_size = os.path.getsize(path)
+    method_hdf5(v, kind, tmp, True)
+    h5 = os.path.join(tmp, "v.h5")
+    h5_size = os.path.getsize(h5)
+    with h5py.File(h5, "r") as f:
+        d = f["v"]
+        chunks = {}
+        d.id.chunk_iter(lambda info: chunks.__setitem__(info.chunk_offset, info.size))
+        outside = h5_size - sum(chunks.values())
+        cz, cy, cx = d.chunks
+    rows = []
+    for label, box, level, index in centre_reads(n):
+        out = subprocess.run([ivol, "extract", path, "--box", ",".join(map(str, box)), "--level", str(level),
+                              "-o", os.path.join(tmp, "part.raw"), "-f"], check=True, capture_output=True, text=True)
+        m = re.search(r"read (\d+)", out.stdout + out.stderr)
+        ivol_read = int(m.group(1))
+        # The chunks the same voxels lie in (the preview: every 8th voxel).
+        zs, ys, xs = (np.arange(n)[i] for i in index)
+        touched = {(z, y, x) for z in set(zs // cz * cz) for y in set(ys // cy * cy) for x in set(xs // cx * cx)}
+        h5_read = outside + sum(chunks[t] for t in touched)
+        rows.append((label, ivol_read, h5_read))
+    return ivol_size, h5_size, rows
+
+
 def method_zstd(v, kind, tmp, level):
     raw = os.path.join(tmp, "v.raw")
     v.tofile(raw)
@@ -188,6 +243,8 @@ def main():
                         help="which ways of keeping each volume (comma-separated)")
     parser.add_argument("--only", default="", help="methods whose label contains one of these (comma-separated)")
     parser.add_argument("--skip", default="", help="methods whose label contains one of these (comma-separated)")
+    parser.add_argument("--reads", action="store_true", help="also the share of the file a slice, box, preview reads")
+    parser.add_argument("--reads-only", action="store_true", help="only that table")
     args = parser.parse_args()
     only = set(filter(None, args.only.split(",")))
     skip = set(filter(None, args.skip.split(",")))
@@ -231,6 +288,17 @@ def main():
                 print("\n## %s %d^3, %s (raw %d bytes%s)\n" % (
                     phantom, n, name, v.nbytes, ", %.1f %% of the voxels kept" % (100 * keep_share)
                     if name == "object" else ""))
+                if args.reads or args.reads_only:
+                    ivol_size, h5_size, reads = read_shares(v, kind, tmp, args.ivol)
+                    print("| read (share of the file) | ivol (%d bytes) | HDF5 64^3 blosc (%d bytes) |\n|---|---:|---:|"
+                          % (ivol_size, h5_size))
+                    for label, ivol_read, h5_read in reads:
+                        print("| %s | %.2f %% | %.2f %% |" % (label, 100.0 * ivol_read / ivol_size,
+                                                            100.0 * h5_read / h5_size))
+                    print()
+                    sys.stdout.flush()
+                    if args.reads_only:
+                        continue
                 print("| method | bytes | vs ivol | encode s | MB/s | exact |\n|---|---:|---:|---:|---:|---|")
                 rows = list(methods)
                 if name == "object":
