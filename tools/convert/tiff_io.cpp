@@ -64,6 +64,13 @@ PageFormat page_format(TIFF* tif, const std::string& where) {
   TIFFGetFieldDefaulted(tif, TIFFTAG_SAMPLESPERPIXEL, &samples);
   TIFFGetFieldDefaulted(tif, TIFFTAG_SAMPLEFORMAT, &format);
   if (samples != 1) fail(where, std::to_string(samples) + " samples per pixel (only grey images hold a CT slice)");
+  // SGI's volumetric extension (tifffile's volumetric=True): a page that is
+  // a whole 3-D block. Reading its first plane only would drop the rest.
+  std::uint32_t depth = 1;
+  TIFFGetFieldDefaulted(tif, TIFFTAG_IMAGEDEPTH, &depth);
+  if (depth != 1)
+    fail(where, "a volumetric page (ImageDepth " + std::to_string(depth) +
+                    ") is not supported: write the volume as one page a slice, or a folder of slices");
   if (bits == 8 && format == SAMPLEFORMAT_UINT)
     f.type = SampleType::UInt8;
   else if (bits == 16 && format == SAMPLEFORMAT_UINT)

@@ -98,6 +98,10 @@ PageFormat page_format(TIFF* tif, const std::string& where) {
   TIFFGetFieldDefaulted(tif, TIFFTAG_SAMPLESPERPIXEL, &samples);
   TIFFGetFieldDefaulted(tif, TIFFTAG_SAMPLEFORMAT, &format);
   if (samples != 1) fail(where, std::to_string(samples) + " samples per pixel; a projection has one");
+  std::uint32_t depth = 1;  // SGI's volumetric extension: a page that is a 3-D block
+  TIFFGetFieldDefaulted(tif, TIFFTAG_IMAGEDEPTH, &depth);
+  if (depth != 1)
+    fail(where, "a volumetric page (ImageDepth " + std::to_string(depth) + ") is not supported: one page a projection");
   if (bits == 16 && format == SAMPLEFORMAT_UINT)
     f.is_float = false;
   else if (bits == 32 && format == SAMPLEFORMAT_IEEEFP)

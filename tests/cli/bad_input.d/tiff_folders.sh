@@ -44,3 +44,16 @@ bad tiff-folder-step-two   0 "every_other (tiff u16 8x8x4" -- "$IVOL" convert "$
 # shift every later angle.
 bad recon-tiff-folder-gap  2 "gap/s58.tif follows s56.tif: s57.tif is missing; every view needs its projection" -- "$IVOL" recon "$work/gap" --sid 600 --sdd 1200 --pitch 1.5 --size 16 --voxel 1.5 -o "$out/x.ivol"
 bad recon-tiff-folder-multipage 2 "multipage/s3.tif: holds more than one page, but among several TIFF files each must be one projection" -- "$IVOL" recon "$work/multipage" --sid 600 --sdd 1200 --pitch 1.5 --size 16 --voxel 1.5 -o "$out/x.ivol"
+
+# A volumetric TIFF (SGI's ImageDepth, as tifffile writes with
+# volumetric=True): one page that is a whole 3-D block. It was read as its
+# first plane only, exit 0 and "lossless"; now refused, naming the tag.
+/usr/bin/python3 - "$work" <<'PY'
+import os, sys, numpy as np, tifffile
+d = sys.argv[1]
+v = np.random.default_rng(3).random((9, 7, 33)).astype(np.float32)
+tifffile.imwrite(os.path.join(d, "volumetric-tiled.tif"), v, tile=(8, 16, 16), volumetric=True)
+tifffile.imwrite(os.path.join(d, "volumetric.tif"), v, volumetric=True)
+PY
+bad tiff-volumetric-tiled 2 "volumetric-tiled.tif: a volumetric page (ImageDepth 9) is not supported" -- "$IVOL" convert "$work/volumetric-tiled.tif" "$out/x.ivol"
+bad tiff-volumetric       2 "volumetric.tif: a volumetric page (ImageDepth 9) is not supported" -- "$IVOL" convert "$work/volumetric.tif" "$out/x.raw"
