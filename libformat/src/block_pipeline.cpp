@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "ivol/error.hpp"
+#include "thread_parts.hpp"
 
 namespace ivol {
 
@@ -22,25 +23,15 @@ unsigned thread_count(const WriteOptions& options) {
 std::vector<EncodedBlock> encode_blocks(const RawBlock* blocks, std::size_t count, const WriteOptions& options) {
   std::vector<EncodedBlock> encoded(count);
   std::atomic<std::size_t> next{0};
-  std::exception_ptr failure;
-  std::mutex failure_mutex;
   auto work = [&] {
     for (std::size_t i; (i = next.fetch_add(1)) < count;) {
       const RawBlock& b = blocks[i];
-      try {
-        encoded[i] =
-            encode_block(b.stream, b.level, b.first_element, b.element_count, b.width, b.bytes.data(), options);
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(failure_mutex);
-        failure = std::current_exception();
-      }
+      encoded[i] = encode_block(b.stream, b.level, b.first_element, b.element_count, b.width, b.bytes.data(), options);
     }
   };
-  std::vector<std::thread> pool;
-  for (unsigned t = 1; t < std::min<std::size_t>(thread_count(options), count); ++t) pool.emplace_back(work);
-  work();
-  for (auto& th : pool) th.join();
-  if (failure) std::rethrow_exception(failure);
+  detail::run_parts(
+      static_cast<unsigned>(std::max<std::size_t>(1, std::min<std::size_t>(thread_count(options), count))),
+      [&](unsigned) { work(); });
   return encoded;
 }
 

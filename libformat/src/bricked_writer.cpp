@@ -13,6 +13,7 @@
 #include "ivol/predicted_codec.hpp"
 #include "layout.hpp"
 #include "stored_levels.hpp"
+#include "thread_parts.hpp"
 
 namespace ivol {
 
@@ -173,28 +174,14 @@ std::vector<EncodedBlock> BrickedGridWriter::Impl::encode_layer(const T* values,
   const unsigned hardware = std::max(1u, std::thread::hardware_concurrency());
   const unsigned threads =
       static_cast<unsigned>(std::min<std::size_t>(options.threads ? options.threads : hardware, count));
-  std::vector<std::thread> pool;
-  std::exception_ptr failure;
-  std::mutex failure_lock;
-  for (unsigned t = 1; t < threads; ++t)
-    pool.emplace_back([&] {
-      try {
-        work();
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(failure_lock);
-        failure = std::current_exception();
-        next = count;
-      }
-    });
-  try {
-    work();
-  } catch (...) {
-    next = count;
-    for (auto& t : pool) t.join();
-    throw;
-  }
-  for (auto& t : pool) t.join();
-  if (failure) std::rethrow_exception(failure);
+  detail::run_parts(threads, [&](unsigned) {
+    try {
+      work();
+    } catch (...) {
+      next = count;  // the other parts stop early
+      throw;
+    }
+  });
   return merge_background_runs(std::move(blocks));
 }
 

@@ -12,6 +12,7 @@
 
 #include "brick_grid.hpp"
 #include "reader_impl.hpp"
+#include "thread_parts.hpp"
 
 namespace ivol {
 
@@ -98,10 +99,7 @@ void Reader::Impl::load_chunk(const std::vector<std::size_t>& todo) {
     }
   };
   const unsigned threads = decode_threads(todo.size(), decoded, this->threads);
-  std::vector<std::thread> pool;
-  for (unsigned t = 1; t < threads; ++t) pool.emplace_back(work);
-  work();
-  for (std::thread& t : pool) t.join();
+  detail::run_parts(threads, [&](unsigned) { work(); });
   for (std::size_t n = 0; n < todo.size(); ++n) {
     if (errors[n])
       failures.emplace(todo[n], *errors[n]);

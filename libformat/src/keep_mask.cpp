@@ -4,6 +4,8 @@
 #include <cmath>
 #include <thread>
 
+#include "thread_parts.hpp"
+
 namespace ivol {
 namespace {
 
@@ -38,10 +40,7 @@ void dilate_axis(std::vector<std::uint8_t>& mask, const Dims& dims, int axis, un
       }
     }
   };
-  std::vector<std::thread> pool;
-  for (unsigned t = 1; t < threads; ++t) pool.emplace_back(work, lines * t / threads, lines * (t + 1) / threads);
-  work(0, lines / threads);
-  for (auto& th : pool) th.join();
+  detail::run_parts(threads, [&](unsigned t) { work(lines * t / threads, lines * (t + 1) / threads); });
 }
 
 }  // namespace

@@ -18,6 +18,7 @@
 #include "ivol/build.hpp"
 #include "ivol/error.hpp"
 #include "octree_builder.hpp"
+#include "thread_parts.hpp"
 
 namespace ivol {
 namespace {
@@ -47,11 +48,7 @@ class ParallelBuild {
         results_[t] = b_.build(split_, i, j, k, arrays_[t], stats_[t]);
       }
     };
-    std::vector<std::thread> pool;
-    const unsigned n = std::max(1u, std::min(threads, task_count));
-    for (unsigned w = 1; w < n; ++w) pool.emplace_back(work);
-    work();
-    for (auto& th : pool) th.join();
+    detail::run_parts(std::max(1u, std::min(threads, task_count)), [&](unsigned) { work(); });
   }
 
   // Builds the levels above the split from the subtrees' results.

@@ -16,6 +16,7 @@
 #include "ivol/error.hpp"
 #include "ivol/streaming_writer.hpp"
 #include "octree_builder.hpp"
+#include "thread_parts.hpp"
 
 namespace ivol::detail {
 
@@ -133,10 +134,7 @@ BuildStats build_slab_subtrees(Builder<Source, Stored>& builder, const SlabGrid&
       }
     }
   };
-  std::vector<std::thread> pool;
-  for (unsigned t = 1; t < threads; ++t) pool.emplace_back(work, t);
-  work(0);
-  for (auto& th : pool) th.join();
+  detail::run_parts(threads, work);
   builder.set_slab(nullptr, 0, nullptr);
   if (failure) std::rethrow_exception(failure);
   BuildStats stats;

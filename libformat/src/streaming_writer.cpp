@@ -15,6 +15,7 @@
 #include "ivol/octree_slab_builder.hpp"
 #include "slab_subtrees.hpp"
 #include "spill_file.hpp"
+#include "thread_parts.hpp"
 
 namespace ivol {
 namespace {
@@ -45,10 +46,7 @@ void parallel_for(std::uint32_t count, unsigned threads, Work&& work) {
       }
     }
   };
-  std::vector<std::thread> pool;
-  for (unsigned t = 1; t < std::min<unsigned>(threads, count); ++t) pool.emplace_back(run);
-  run();
-  for (auto& thread : pool) thread.join();
+  detail::run_parts(std::max(1u, std::min<unsigned>(threads, count)), [&](unsigned) { run(); });
   if (failure) std::rethrow_exception(failure);
 }
 

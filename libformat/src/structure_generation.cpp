@@ -12,6 +12,7 @@
 #include "ivol/keep_mask.hpp"
 #include "ivol/structures.hpp"
 #include "octree_builder.hpp"
+#include "thread_parts.hpp"
 
 namespace ivol {
 namespace {
@@ -224,10 +225,7 @@ class OctreeStructure final : public VoxelStructure {
         parts[t].shrink_to_fit();
       }
     };
-    std::vector<std::thread> pool;
-    for (unsigned n = 1; n < std::max(1u, threads); ++n) pool.emplace_back(work);
-    work();
-    for (auto& th : pool) th.join();
+    detail::run_parts(std::max(1u, threads), [&](unsigned) { work(); });
     inner_nodes_ = count_top(pyramid, 0, 0, 0, 0, split);
     // Each part freed as soon as it is copied: the bricks are held about
     // once, not twice (16 bytes each; tens of millions at 1152³, issue 23).

@@ -3,6 +3,7 @@
 #include <glob.h>
 
 #include <filesystem>
+#include <system_error>
 
 #include "ivol/error.hpp"
 #include "stdio_volume.hpp"
@@ -38,18 +39,26 @@ std::string manifest_digest(const std::vector<FileDigest>& files, const std::str
 
 SourceDigests::SourceDigests(const std::vector<std::string>& inputs, const std::vector<nlohmann::json>& fields)
     : inputs_(inputs), fields_(fields), digests_(inputs.size()) {
-  thread_ = std::thread([this] {
-    try {
-      for (std::size_t i = 0; i < inputs_.size(); ++i)
-        if (inputs_[i] != "-")  // standard input is read once, by the conversion
-          for (const std::string& file : input_files(inputs_[i])) {
-            if (cancel_) return;
-            digests_[i].push_back(digest_file(file, &cancel_));
-          }
-    } catch (...) {
-      failure_ = std::current_exception();
-    }
-  });
+  try {
+    thread_ = std::thread([this] { hash_inputs(); });
+  } catch (const std::system_error&) {
+    // No thread to be had (a process or address-space limit): sources()
+    // hashes them itself, after the conversion.
+  }
+}
+
+void SourceDigests::hash_inputs() {
+  hashed_ = true;
+  try {
+    for (std::size_t i = 0; i < inputs_.size(); ++i)
+      if (inputs_[i] != "-")  // standard input is read once, by the conversion
+        for (const std::string& file : input_files(inputs_[i])) {
+          if (cancel_) return;
+          digests_[i].push_back(digest_file(file, &cancel_));
+        }
+  } catch (...) {
+    failure_ = std::current_exception();
+  }
 }
 
 SourceDigests::~SourceDigests() {
@@ -59,6 +68,7 @@ SourceDigests::~SourceDigests() {
 
 nlohmann::json SourceDigests::sources() {
   if (thread_.joinable()) thread_.join();
+  if (!hashed_) hash_inputs();
   if (failure_) std::rethrow_exception(failure_);
   nlohmann::json list = nlohmann::json::array();
   for (std::size_t i = 0; i < inputs_.size(); ++i) {

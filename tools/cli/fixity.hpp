@@ -51,7 +51,9 @@ class SourceDigests {
   std::vector<std::vector<FileDigest>> digests_;  // per input
   std::exception_ptr failure_;
   std::atomic<bool> cancel_{false};  // the conversion failed: stop hashing
+  bool hashed_ = false;              // hash_inputs() ran (on thread_ or in sources())
   std::thread thread_;
+  void hash_inputs();
 };
 
 // argv as one line a POSIX shell reads back as the same words.

@@ -3,10 +3,11 @@
 #include <map>
 #include <new>
 #include <stdexcept>
+#include <system_error>
 
 #include "commands.hpp"
-#include "isolated_worker.hpp"
 #include "fixity.hpp"
+#include "isolated_worker.hpp"
 #include "ivol/error.hpp"
 #include "ivol/metadata.hpp"
 #include "option_parsing.hpp"
@@ -76,7 +77,17 @@ int run(int argc, char** argv) {
       // A last resort: sizes are weighed before they are allocated
       // (tools/convert/sizes.hpp), so this is an allocation nobody foresaw.
       std::cerr << "ivol " << sub->get_name() << ": error (" << ivol::error_class_name(ivol::ErrorClass::LimitExceeded)
-                << "): out of memory: an allocation failed while running the command; --memory may bound it\n";
+                << "): out of memory: an allocation failed while running the command"
+                << (sub->get_option_no_throw("--memory") ? "; --memory may bound it" : "") << "\n";
+      return kExitFailure;
+    } catch (const std::system_error& e) {
+      // Threads that cannot start (EAGAIN): an address-space or process
+      // limit. Work that can run on fewer threads does; this is what cannot.
+      const bool limit = e.code() == std::errc::resource_unavailable_try_again;
+      std::cerr << "ivol " << sub->get_name() << ": error ("
+                << ivol::error_class_name(limit ? ivol::ErrorClass::LimitExceeded : ivol::ErrorClass::Io)
+                << "): " << (limit ? "a thread could not be started (an address-space or process limit): " : "")
+                << e.what() << "\n";
       return kExitFailure;
     } catch (const std::length_error& e) {
       // The same for a size past what a container can hold at all.

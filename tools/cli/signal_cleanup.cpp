@@ -8,6 +8,7 @@
 
 #include <ctime>
 #include <mutex>
+#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -62,20 +63,27 @@ void start_signal_cleanup() {
   temporary_outputs();  // its clock starts now
   const sigset_t signals = ending_signals();
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
-  std::thread([signals] {
-    int received = 0;
-    if (sigwait(&signals, &received) != 0) return;
-    temporary_outputs().remove();
-    // End by the signal itself: its default action, unblocked in this
-    // thread, kills the process as it would have without this thread.
-    ::signal(received, SIG_DFL);
-    sigset_t one;
-    sigemptyset(&one);
-    sigaddset(&one, received);
-    pthread_sigmask(SIG_UNBLOCK, &one, nullptr);
-    ::raise(received);
-    ::_exit(128 + received);
-  }).detach();
+  try {
+    std::thread([signals] {
+      int received = 0;
+      if (sigwait(&signals, &received) != 0) return;
+      temporary_outputs().remove();
+      // End by the signal itself: its default action, unblocked in this
+      // thread, kills the process as it would have without this thread.
+      ::signal(received, SIG_DFL);
+      sigset_t one;
+      sigemptyset(&one);
+      sigaddset(&one, received);
+      pthread_sigmask(SIG_UNBLOCK, &one, nullptr);
+      ::raise(received);
+      ::_exit(128 + received);
+    }).detach();
+  } catch (const std::system_error&) {
+    // No thread to be had (a process or address-space limit): the signals'
+    // default actions again; a killed run then leaves its temporary output,
+    // as after SIGKILL, and the next writer of that name removes it.
+    pthread_sigmask(SIG_UNBLOCK, &signals, nullptr);
+  }
 }
 
 void remove_temporaries_on_signal(const std::string& output) {
