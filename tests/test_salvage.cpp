@@ -12,6 +12,7 @@
 #include <functional>
 #include <random>
 
+#include "ivol/bricked_writer.hpp"
 #include "ivol/build.hpp"
 #include "ivol/check.hpp"
 #include "ivol/error.hpp"
@@ -381,6 +382,59 @@ TEST(Salvage, FallsBackToTheEarlyMetadata) {
   EXPECT_EQ(cut.read_box_bits(full_box(info.layout.dims), 0, &damaged),
             whole.read_box_bits(full_box(info.layout.dims)));
   EXPECT_TRUE(damaged.empty());
+}
+
+// A bricked grid learns its final metadata after the values (the sources'
+// digests, what rounding lost), so it writes the metadata block last; the
+// early metadata before the first value keeps voxel size, origin and unit
+// in a file cut anywhere after it (spec §15). A bricked file cut in half
+// lost them before.
+TEST(Salvage, ABrickedGridWritesItsEarlyMetadataFirst) {
+  const Dims dims{40, 36, 70};
+  std::vector<std::uint32_t> values(std::size_t{dims[0]} * dims[1] * dims[2]);
+  std::mt19937 rng(17);
+  for (auto& v : values) {
+    const float f = std::uniform_real_distribution<float>(0.0f, 1.0f)(rng);
+    std::memcpy(&v, &f, 4);
+  }
+  const std::string path = test::temp_path("bricked-early.ivol");
+  BrickedOptions options;
+  options.encoding = ValueEncoding::Float32;
+  options.brick_log2 = 3;
+  {
+    BrickedGridWriter writer(path, dims, options);
+    Metadata early;
+    early.voxel_size = {0.05, 0.05, 0.2};
+    early.origin = {1.0, 2.0, 3.0};
+    early.unit = "mm";
+    writer.write_early_metadata(early);
+    const std::size_t slice = std::size_t{dims[0]} * dims[1];
+    for (std::uint32_t z; (z = writer.next_layer_first()), writer.next_layer_count() != 0;)
+      writer.add_layer(values.data() + z * slice);
+    EXPECT_THROW(writer.write_early_metadata(early), Error);  // after the first layer
+    Metadata final_metadata = early;
+    final_metadata.provenance["sources"] = nlohmann::json::array({{{"sha256", "00"}}});
+    writer.finish(final_metadata);
+  }
+  Reader whole(path);
+  const FileInfo& info = whole.info();
+  ASSERT_EQ(info.blocks.front().stream, 6);
+  EXPECT_EQ(info.blocks.front().flags, 1);  // ignorable
+  EXPECT_EQ(info.blocks.back().stream, 1);
+  EXPECT_TRUE(whole.metadata().provenance.contains("sources"));  // the final metadata, not the early one
+  EXPECT_TRUE(check_file(path).ok());
+  auto bytes = test::read_bytes(path);
+  bytes.resize(bytes.size() / 2);
+  const std::string cut_path = test::temp_path("bricked-early-cut.ivol");
+  test::write_bytes(cut_path, bytes);
+  ReaderOptions salvage;
+  salvage.salvage = true;
+  Reader cut(cut_path, salvage);
+  EXPECT_EQ(cut.info().salvage->metadata, "early");
+  EXPECT_EQ(cut.metadata().voxel_size[2], 0.2);
+  EXPECT_EQ(cut.metadata().origin[1], 2.0);
+  EXPECT_EQ(cut.metadata().unit, "mm");
+  EXPECT_FALSE(cut.metadata().provenance.contains("sources"));
 }
 
 }  // namespace

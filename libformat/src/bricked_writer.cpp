@@ -185,6 +185,12 @@ std::vector<EncodedBlock> BrickedGridWriter::Impl::encode_layer(const T* values,
   return merge_background_runs(std::move(blocks));
 }
 
+void BrickedGridWriter::write_early_metadata(const Metadata& metadata) {
+  if (impl_->next_layer != 0)
+    throw Error(ErrorClass::InvalidArgument, "bricked grid: early metadata after the first layer");
+  impl_->file.write_early_metadata(metadata);
+}
+
 void BrickedGridWriter::add_layer(const std::uint16_t* values) {
   if (impl_->options.encoding == ValueEncoding::Float32)
     throw Error(ErrorClass::InvalidArgument, "bricked grid: 16-bit values given for a float32 grid");

@@ -141,7 +141,8 @@ void FileWriter::append(const EncodedBlock& block) {
               static_cast<std::uint8_t>(block.stream),
               static_cast<std::uint8_t>(block.codec),
               block.level,
-              block.stream == Stream::StoredLevel ? layout::kFlagIgnorable : std::uint8_t{0}};
+              block.stream == Stream::StoredLevel || block.stream == Stream::EarlyMetadata ? layout::kFlagIgnorable
+                                                                                           : std::uint8_t{0}};
   if (framed_) {
     // Framed here, not in encode_block, so that wherever a block was
     // compressed (another rank, block_encoder.hpp) the file is the same.
@@ -163,18 +164,38 @@ void FileWriter::append(const EncodedBlock& block) {
   entries_.push_back(entry);
 }
 
-void FileWriter::write_metadata(const Metadata& metadata) {
-  if (!metadata_json_.empty()) throw Error(ErrorClass::InvalidArgument, path_ + ": the metadata is written already");
+namespace {
+
+// The metadata as its block holds it, within §11's limits.
+std::string metadata_text(const Metadata& metadata, const std::string& path) {
   std::string json = metadata.to_json().dump();
   if (json.size() > layout::kMaxMetadataBytes)
-    throw Error(ErrorClass::InvalidArgument, path_ + ": metadata exceeds 16 MiB");
+    throw Error(ErrorClass::InvalidArgument, path + ": metadata exceeds 16 MiB");
   if (json_nesting_depth(json, kMaxMetadataDepth) > kMaxMetadataDepth)
-    throw Error(ErrorClass::InvalidArgument, path_ + ": metadata nests arrays and objects deeper than " +
+    throw Error(ErrorClass::InvalidArgument, path + ": metadata nests arrays and objects deeper than " +
                                                  std::to_string(kMaxMetadataDepth) + " levels");
+  return json;
+}
+
+}  // namespace
+
+void FileWriter::write_metadata(const Metadata& metadata) {
+  if (!metadata_json_.empty()) throw Error(ErrorClass::InvalidArgument, path_ + ": the metadata is written already");
+  std::string json = metadata_text(metadata, path_);
   WriteOptions metadata_options;
   append(
       encode_block(Stream::Metadata, 0, 0, static_cast<std::uint32_t>(json.size()), 1, json.data(), metadata_options));
   metadata_json_ = std::move(json);
+}
+
+void FileWriter::write_early_metadata(const Metadata& metadata) {
+  if (!framed_) return;  // salvage needs framed blocks (spec §18)
+  if (!metadata_json_.empty())
+    throw Error(ErrorClass::InvalidArgument, path_ + ": early metadata after the metadata itself");
+  const std::string json = metadata_text(metadata, path_);
+  WriteOptions metadata_options;
+  append(encode_block(Stream::EarlyMetadata, 0, 0, static_cast<std::uint32_t>(json.size()), 1, json.data(),
+                      metadata_options));
 }
 
 void FileWriter::finish(const Metadata& metadata, const std::vector<std::uint64_t>& inner_count) {

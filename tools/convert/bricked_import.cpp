@@ -174,7 +174,21 @@ BrickedImport::BrickedImport(const DenseVolume& shape, const std::string& path, 
       path_(path),
       encoding_(streaming.build.encoding),
       layer_slices_(layer_slices_of(shape, options)),
-      writer_(path, shape.dims, bricked_options(options, streaming)) {}
+      writer_(path, shape.dims, bricked_options(options, streaming)) {
+  // The metadata block is written last (the sources' digests and what
+  // rounding lost are known only then): what is known now goes first, so
+  // that a cut file keeps its voxel size, origin and unit (spec §15).
+  Metadata early = options.metadata;
+  if (shape.has_geometry) {
+    early.voxel_size = shape.voxel_size;
+    early.origin = shape.origin;
+    early.unit = shape.unit;
+  }
+  early.structure["kind"] = "bricked";
+  early.structure["brick"] = 1u << options.brick_log2;
+  early.structure["source_encoding"] = sample_type_name(shape.type);
+  writer_.write_early_metadata(early);
+}
 
 void BrickedImport::finish(const LossTally& loss, ImportReport& report) {
   report.encoding_loss = loss;

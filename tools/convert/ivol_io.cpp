@@ -406,7 +406,11 @@ DenseVolume export_shape(const Reader& reader, const Box& box, unsigned lod, Sam
   out.type = type;
   const Metadata& m = reader.metadata();
   const double scale = std::ldexp(1.0, static_cast<int>(lod));
-  out.has_geometry = !(m.provenance.contains("voxel_size_known") && m.provenance["voxel_size_known"] == false);
+  // A salvaged file whose metadata was lost has the defaults' voxel size,
+  // not its own: the export says nothing rather than 1 a voxel.
+  const bool metadata_lost = reader.info().salvage && reader.info().salvage->metadata == "missing";
+  out.has_geometry =
+      !metadata_lost && !(m.provenance.contains("voxel_size_known") && m.provenance["voxel_size_known"] == false);
   out.unit = m.unit;
   out.voxel_size_from = out.origin_from = out.unit_from = "the .ivol metadata";
   out.quantity = m.quantity;

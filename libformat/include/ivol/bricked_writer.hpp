@@ -66,6 +66,9 @@ class BrickedGridWriter {
   // Adds the next layer: next_layer_count() slices of size_y x size_x stored
   // values (the encoding's bits: std::uint16_t for binary16 and uint16,
   // std::uint32_t for float32; InvalidArgument for the other), [z][y][x].
+  // What the metadata will hold, as far as the caller knows it before the
+  // values (FileWriter::write_early_metadata): before the first layer.
+  void write_early_metadata(const Metadata& metadata);
   void add_layer(const std::uint16_t* values);
   void add_layer(const std::uint32_t* values);
   // After the last layer: writes the metadata, the index and the footer.

@@ -19,7 +19,15 @@ class BlockEncoder;  // ivol/block_encoder.hpp
 
 // StoredLevel: a bricked grid's stored level of detail (spec §8A.5; format
 // 1.3), an ignorable stream: its blocks carry the ignorable flag.
-enum class Stream : std::uint8_t { Metadata = 1, Nodes = 2, Values = 3, Borders = 4, Cells = 5, StoredLevel = 7 };
+enum class Stream : std::uint8_t {
+  Metadata = 1,
+  Nodes = 2,
+  Values = 3,
+  Borders = 4,
+  Cells = 5,
+  EarlyMetadata = 6,  // ignorable: the metadata as known before the values (spec §15)
+  StoredLevel = 7,
+};
 // Spec §7. ZstdBytePlanes: zstd over the elements' bytes regrouped by byte
 // position (since format 1.2). Predicted: a brick of 16-bit values, predicted
 // (ivol/predicted_codec.hpp; format 1.3).
@@ -79,6 +87,13 @@ class FileWriter {
   // Writes the metadata block now: writers of framed files call it before the
   // first value (spec §15), so that a cut file keeps its metadata.
   void write_metadata(const Metadata& metadata);
+  // Writes an early metadata block (stream 6, ignorable; spec §15): for a
+  // writer that learns part of its metadata only after the values (the
+  // sources' digests, what rounding lost), what it knows before them, so
+  // that a file cut before its metadata block still has voxel size, origin
+  // and unit for salvage. Framed files only (nothing is written otherwise);
+  // before the first value.
+  void write_early_metadata(const Metadata& metadata);
   // Writes the metadata block unless write_metadata() did (then `metadata`
   // must be the same), the index and the footer, flushes, and renames the
   // temporary file to `path` (replacing any file there atomically).
