@@ -2,6 +2,7 @@
 #include <cstdio>
 #include <iostream>
 #include <optional>
+#include <sstream>
 #include <string>
 
 #include "commands.hpp"
@@ -65,11 +66,27 @@ Runner add_info_command(CLI::App& app, const GlobalOptions& /*global*/) {
     std::optional<Reader> opened;
     try {
       opened.emplace(*file);
-    } catch (const Error&) {
+    } catch (const Error& e) {
       // A cut or damaged file: say what a salvaging read would get, then fail
-      // as for any bad file.
-      std::cout << *file << ": cannot be read as it is\n";
-      print_salvage_prospect(std::cout, "  ", *file);
+      // as for any bad file (the error itself goes to standard error).
+      if (!*json) {
+        std::cout << *file << ": cannot be read as it is\n";
+        print_salvage_prospect(std::cout, "  ", *file);
+        throw;
+      }
+      // With --json, still one JSON object on standard output.
+      std::ostringstream prospect;
+      print_salvage_prospect(prospect, "", *file);
+      nlohmann::json lines = nlohmann::json::array();
+      std::istringstream text(prospect.str());
+      for (std::string line; std::getline(text, line);)
+        if (!line.empty()) lines.push_back(line);
+      const nlohmann::json d = {{"path", *file},
+                                {"status", "unreadable"},
+                                {"error_class", error_class_name(e.error_class())},
+                                {"error", e.what()},
+                                {"salvage", lines}};
+      std::cout << d.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
       throw;
     }
     Reader& reader = *opened;
