@@ -4,6 +4,7 @@
 #include <climits>
 #include <cstdint>
 #include <cstring>
+#include <thread>
 
 #include "ivol/binary16.hpp"
 #include "ivol/error.hpp"
@@ -14,8 +15,19 @@
 namespace ivol::convert {
 namespace {
 
-BrickedOptions bricked_options(const ImportOptions& options, const StreamingOptions& streaming) {
+// What one encoding thread holds besides the layer: a brick several times
+// over (its values, their byte planes or residuals and a candidate's, the
+// compressed output's bound, zstd's tables, which grow with their input).
+std::uint64_t brick_encoding_bytes(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding) {
+  const std::uint64_t edge = std::uint64_t{1} << std::min(options.brick_log2, 31u);
+  std::uint64_t brick = encoding == ValueEncoding::Float32 ? 4 : 2;
+  for (int a = 0; a < 3; ++a) brick *= std::min<std::uint64_t>(edge, shape.dims[a]);
+  return 6 * brick;
+}
+
+BrickedOptions bricked_options(const ImportOptions& options, const StreamingOptions& streaming, unsigned threads) {
   BrickedOptions bricked;
+  bricked.threads = threads;
   bricked.brick_log2 = options.brick_log2;
   bricked.zstd_level = options.zstd_level;
   bricked.entropy =
@@ -62,7 +74,12 @@ std::uint64_t bricked_layer_bytes(const DenseVolume& shape, const ImportOptions&
   }
   // Whole layers read at once hold their stored values until they are added.
   const Wide stored = slice * std::max(slices, layer_slices_of(shape, options)) * width;
-  const Wide bytes = stored + layer * width + slice * slices * read_bytes_per_voxel(shape, encoding) + levels;
+  // One encoding thread (the writer runs as many more as the budget holds:
+  // encoder_threads) and a layer's blocks, held until written: --brick 128
+  // held twice its --memory before they were counted.
+  const Wide encoding_bytes = brick_encoding_bytes(shape, options, encoding) + layer * width;
+  const Wide bytes =
+      stored + layer * width + slice * slices * read_bytes_per_voxel(shape, encoding) + levels + encoding_bytes;
   return bytes > ~std::uint64_t{0} ? ~std::uint64_t{0} : static_cast<std::uint64_t>(bytes);
 }
 
@@ -89,6 +106,14 @@ std::uint32_t bricked_read_slices(const DenseVolume& shape, const ImportOptions&
   // Halving keeps the reads whole divisions of a layer of 2^b slices.
   while (slices > 1 && !fits(slices)) slices = (slices + 1) / 2;
   return slices;
+}
+
+unsigned encoder_threads(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding) {
+  const std::uint64_t budget = bricked_layer_budget(options);
+  const std::uint64_t held =
+      bricked_layer_bytes(shape, options, encoding, std::max(1u, bricked_read_slices(shape, options, encoding)));
+  const std::uint64_t spare = budget > held ? (budget - held) / brick_encoding_bytes(shape, options, encoding) : 0;
+  return static_cast<unsigned>(std::min<std::uint64_t>(std::max(1u, std::thread::hardware_concurrency()), 1 + spare));
 }
 
 bool choose_bricked(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding,
@@ -174,7 +199,7 @@ BrickedImport::BrickedImport(const DenseVolume& shape, const std::string& path, 
       path_(path),
       encoding_(streaming.build.encoding),
       layer_slices_(layer_slices_of(shape, options)),
-      writer_(path, shape.dims, bricked_options(options, streaming)) {
+      writer_(path, shape.dims, bricked_options(options, streaming, encoder_threads(shape, options, encoding_))) {
   // The metadata block is written last (the sources' digests and what
   // rounding lost are known only then): what is known now goes first, so
   // that a cut file keeps its voxel size, origin and unit (spec §15).

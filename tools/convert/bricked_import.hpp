@@ -57,6 +57,10 @@ decltype(auto) with_stored_type(ValueEncoding encoding, F&& f) {
 }
 
 // The writer's side: layers of stored values in z order, then finish().
+// Threads the writer encodes bricks on: one, and as many more as the
+// budget holds beside the layers read (bricked_layer_bytes counts one).
+unsigned encoder_threads(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding);
+
 class BrickedImport {
  public:
   BrickedImport(const DenseVolume& shape, const std::string& path, const ImportOptions& options,

@@ -9,7 +9,7 @@ PY
 # auto under a --memory that holds the octree's slabs but not a layer of
 # bricks: an octree, said on stderr with the --memory that
 # writes the bricked grid (only `info` said it). Its output goes outside $out.
-bad structure-octree-for-memory 0 "note: an octree, because a layer of bricks (10 MiB) exceeds the memory budget (--memory), a slab of the octree writer does not; --memory 10 writes a bricked grid" \
+bad structure-octree-for-memory 0 "note: an octree, because a layer of bricks (14 MiB) exceeds the memory budget (--memory), a slab of the octree writer does not; --memory 14 writes a bricked grid" \
     -- "$IVOL" convert "$work/wide.raw" "$work/wide.ivol" --dims 256,256,32 --type u16 --memory 8 -f
 bad bricked-with-keep 2 "--structure bricked: a keep rule coarsens regions, which only an octree holds" \
     -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --keep threshold=10,margin=1
@@ -23,3 +23,36 @@ bad bricked-codec-zstd 2 "--structure bricked: --codec zstd (codec 1 only, for f
     -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --codec zstd
 bad structure-unknown      1 "--structure" \
     -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure kdtree
+
+# A bricked grid holds what --memory gives it: the encoding threads' bricks
+# and a layer's encoded blocks are counted, and the writer runs as many
+# encoding threads as the budget holds. --brick 128 held about twice its
+# --memory before (the threads' bricks were not counted). Peak resident
+# memory above ivol's own (a 2x2x2 conversion), not in the sanitizer build.
+brickmem="$work/brickmem"
+mkdir -p "$brickmem"
+/usr/bin/python3 -c "
+import numpy as np
+z, y, x = np.mgrid[0:128, 0:256, 0:256].astype(np.float32)
+(np.sin(x / 9) + np.cos(y / 7) * np.sin(z / 11)).astype(np.float32).tofile('$brickmem/s.raw')"
+head -c 32 "$brickmem/s.raw" > "$brickmem/tiny.raw"
+brickmem_need=$("$IVOL" convert "$brickmem/s.raw" "$brickmem/probe.ivol" --dims 256,256,128 --type f32 --brick 128 --memory 8 2>&1 |
+  grep -o -- "--memory [0-9]* writes a bricked grid" | grep -o "[0-9]*")
+bands_check bricked-memory-held "
+import os, subprocess, sys
+ivol, folder, need = '$IVOL', '$brickmem', int('${brickmem_need:-0}')
+def peak_mib(args):
+    probe = 'import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True); ' \\
+            'print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024)'
+    done = subprocess.run([sys.executable, '-c', probe, ivol, '-q', 'convert'] + args, capture_output=True, text=True)
+    if done.returncode != 0:
+        sys.exit('ivol failed: ' + done.stderr.strip()[-300:])
+    return float(done.stdout.split()[-1])
+own = peak_mib([folder + '/tiny.raw', folder + '/tiny.ivol', '--dims', '2,2,2', '--type', 'f32'])
+big = peak_mib([folder + '/s.raw', folder + '/s.ivol', '--dims', '256,256,128', '--type', 'f32', '--brick', '128',
+                '--memory', str(need)])
+kind = subprocess.run([ivol, 'info', folder + '/s.ivol'], capture_output=True, text=True).stdout
+sanitized = os.environ.get('IVOL_SANITIZED', '0') == '1'
+ok = need > 0 and 'bricked, bricks of 128' in kind and (sanitized or big - own <= need)
+print('same' if ok else 'need %d MiB, held %.0f MiB above %.0f; %s' % (need, big - own, own, kind[:200]))"
+rm -rf "$brickmem"
