@@ -227,8 +227,12 @@ std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const Br
   // and flat material, where zstd's matches beat any per-voxel cost), and
   // there zstd is fast: elsewhere trying it cost a fifth of the encoding
   // time and saved at most 23 bytes of 13 MB (bench/RESULTS.md, issue 22).
+  // Small bricks (a volume's edges) try both: coder 2's 12 bytes of states
+  // and length weigh there, and zstd costs nothing to try.
   constexpr std::size_t kTryZstdBelowBitsPerVoxel = 1;
-  if (coded && 8 * (tokens.size() - kPredictedHeaderSize) >= kTryZstdBelowBitsPerVoxel * n) return tokens;
+  constexpr std::size_t kTryZstdBelowVoxels = 4096;
+  if (coded && n >= kTryZstdBelowVoxels && 8 * (tokens.size() - kPredictedHeaderSize) >= kTryZstdBelowBitsPerVoxel * n)
+    return tokens;
   zstd_planes();
   if (coded && tokens.size() <= out.size()) return tokens;
   return out;
