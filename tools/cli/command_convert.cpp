@@ -150,11 +150,12 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
                    "zstd-planes: values over byte planes (format 1.2, smaller); zstd: format 1.0/1.1 readers read it")
       ->check(CLI::IsMember({"zstd-planes", "zstd"}))
       ->capture_default_str();
-  into->add_option("--entropy-coder", s->entropy_coder,
-                   "Bricked grid: how a predicted brick's residuals are coded (codec 3). auto: rANS over tokens with "
-                   "contexts (spec 7.2.1), zstd over byte planes where a brick is nearly flat and that is smaller "
-                   "(1-6 % smaller files, whose "
-                   "predicted bricks decode at about 130 MB/s a core); zstd: byte planes only (about 330 MB/s)")
+  into->add_option(
+          "--entropy-coder", s->entropy_coder,
+          "Bricked grid: how a predicted brick's residuals are coded (codec 3). auto: rANS over tokens with "
+          "contexts (spec 7.2.1), zstd over byte planes where a brick is nearly flat or small and that is smaller "
+          "(1-6 % smaller files, whose "
+          "predicted bricks decode at about 130 MB/s a core); zstd: byte planes only (about 330 MB/s)")
       ->check(CLI::IsMember({"auto", "zstd"}))
       ->capture_default_str();
   into->add_option("--format-version", s->format_version,

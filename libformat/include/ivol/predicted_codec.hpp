@@ -28,7 +28,8 @@ struct PredictedOptions {
   enum class Taps { Best, Lorenzo, LeastSquares } taps = Taps::Best;
   // Which entropy coder (§7.2, header byte 3) the encoder may use. Smaller:
   // coder 2 (rANS over tokens), or coder 1 (zstd over byte planes) where
-  // coder 2 spends under a bit a voxel and coder 1 is smaller (elsewhere
+  // coder 2 spends under a bit a voxel or the brick has fewer than 4096
+  // voxels, and coder 1 is smaller (elsewhere
   // coder 1 did not win by more than a few bytes a file and cost a fifth of
   // the encoding time). ZstdPlanes, Tokens: only that one (Tokens falls back
   // to coder 1 where coder 2 passes the spec's limit).
