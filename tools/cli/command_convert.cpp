@@ -168,12 +168,14 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
                    "codec 3; float32: bricks of byte planes, codec 2), else an octree; octree or bricked to choose")
       ->check(CLI::IsMember({"auto", "octree", "bricked"}))
       ->capture_default_str();
-  into->add_option("--brick", s->brick,
-                   "Bricked grid: voxels per brick side, 4 to 128, a power of two (32: smallest file; 16: a slice "
-                   "reads about half the bytes, the file at 512^3 1.6 % larger with every voxel kept, 6-7 % at object "
-                   "fidelity)")
-      ->check(CLI::IsMember({4u, 8u, 16u, 32u, 64u, 128u}))
-      ->capture_default_str();
+  CLI::Option* brick_option =
+      into->add_option(
+              "--brick", s->brick,
+              "Bricked grid: voxels per brick side, 4 to 128, a power of two (32: smallest file; 16: a slice "
+              "reads about half the bytes, the file at 512^3 1.6 % larger with every voxel kept, 6-7 % at object "
+              "fidelity)")
+          ->check(CLI::IsMember({4u, 8u, 16u, 32u, 64u, 128u}))
+          ->capture_default_str();
   into->add_option("--zstd-level", s->zstd_level,
                    "zstd level of every block, 1 to 19: higher is smaller and slower to write, never slower to read "
                    "(19: 0.5 % smaller for a bricked grid, 3 % for an octree, at a twentieth of the speed); a bricked "
@@ -197,7 +199,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       ->check(checked([](const std::string& v) { parse_sample_type(v, "--out-type"); }));
   out_of->add_option("--level", s->level, "Level of detail: 1/2^K resolution")->check(whole_number());
 
-  return [s, &global]() {
+  return [s, &global, brick_option]() {
     const auto start = std::chrono::steady_clock::now();
     const Format from = detect_format(s->input, s->from, "--from");
     const Format to = output_format(s->output, s->to, "OUT");
@@ -225,6 +227,22 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     foreign.allow_gaps = s->allow_gaps;
 
     if (to == Format::Ivol) {
+      // Options that cannot hold together are a bad command line (exit 1),
+      // refused before any work.
+      if (s->structure == "bricked") {
+        if (!s->keep.empty())
+          throw UsageError("--structure", "bricked: a keep rule (--keep) coarsens regions, which only an octree holds");
+        if (s->codec == "zstd")
+          throw UsageError("--structure", "bricked: --codec zstd (codec 1 only, for format 1.0/1.1 readers)");
+        if (s->format_version == "1.2")
+          throw UsageError("--structure", "bricked: format 1.2 (a bricked grid needs format 1.3)");
+      }
+      if (brick_option->count() > 0) {
+        if (s->structure == "octree")
+          throw UsageError("--brick", "bricks belong to a bricked grid, and --structure octree asks for an octree");
+        if (s->format_version == "1.2")
+          throw UsageError("--brick", "bricks belong to a bricked grid, which format 1.2 (--format-version) lacks");
+      }
       bool rounded = false;  // by the reader (HDF5 float64), already said
       auto opened = open_source(s->input, from, foreign, &rounded);
       convert::DenseVolume shape = convert::shape_of(opened->shape());
@@ -368,6 +386,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     const convert::SampleType natural = natural_export_type(to, reader);
     const convert::SampleType type = s->out_type.empty() ? natural : parse_sample_type(s->out_type, "--out-type");
     check_export_type(to, type, "--out-type");
+    require_level_within(s->level, reader);
     const Box box = full_box(reader.layout().dims, s->level);
     convert::DenseVolume shape = convert::export_shape(reader, box, s->level, type);
     settle_metadata(shape, *s, from, global.command_line);

@@ -74,6 +74,7 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
     const convert::SampleType type = s->type.empty() ? natural : parse_sample_type(s->type, "--type");
     check_export_type(to, type, "--type");
     const Box box = parse_box(s->box, "--box");
+    require_level_within(s->level, reader);
     ForeignOptions options;
     options.big_endian = s->endian == "big";
     options.allow_lossy = s->allow_lossy;

@@ -48,9 +48,7 @@ Runner add_slice_command(CLI::App& app, const GlobalOptions& global) {
     const int axis = s->axis[0] - 'x';
     std::optional<std::array<double, 2>> window;
     if (!s->window.empty()) window = parse_window(s->window, "--window");
-    if (s->level > reader.layout().depth)
-      throw UsageError("--level", std::to_string(s->level) + " is past the file's coarsest level " +
-                                      std::to_string(reader.layout().depth));
+    require_level_within(s->level, reader);
     const Dims extent = lod_dims(reader.layout().dims, s->level);
     if (s->index >= extent[axis])
       throw UsageError("--index", std::to_string(s->index) + " is outside the volume (" + std::to_string(extent[axis]) +

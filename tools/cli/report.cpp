@@ -7,6 +7,7 @@
 #include <set>
 
 #include "ivol/structures.hpp"
+#include "option_parsing.hpp"
 
 namespace ivol::cli {
 
@@ -40,6 +41,12 @@ void warn_if_fetched_whole(const Reader& reader, const std::string& command) {
     std::cerr << command << ": warning: " << reader.path() << ": the server ignores range requests, so the whole file ("
               << human_bytes(reader.info().file_size)
               << ") was downloaded, and will be at every open; serve it with byte ranges to read only what is needed\n";
+}
+
+void require_level_within(unsigned level, const Reader& reader) {
+  if (level > reader.layout().depth)
+    throw UsageError("--level", std::to_string(level) + " is past the file's coarsest level " +
+                                    std::to_string(reader.layout().depth));
 }
 
 nlohmann::json describe_file(Reader& reader) {

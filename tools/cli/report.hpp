@@ -19,6 +19,9 @@ convert::Progress progress_bar(const std::string& label, bool quiet);
 // On stderr, when the server of a remote file ignored range requests and
 // sent it whole: every open downloads it whole again.
 void warn_if_fetched_whole(const Reader& reader, const std::string& command);
+// --level past the file's coarsest level: a bad command line (exit 1), as
+// every out-of-range option value is (README, exit codes).
+void require_level_within(unsigned level, const Reader& reader);
 
 // Everything `ivol info` reports, as JSON.
 nlohmann::json describe_file(Reader& reader);

@@ -24,6 +24,8 @@ bad opt-memory-negative    1 "--memory"               -- "$IVOL" "${raw[@]}" --m
 bad opt-window-reversed    1 "--window"               -- "$IVOL" slice "$work/v.ivol" --index 0 --window 10,5 -o "$out/x.png"
 bad opt-window-one         1 "--window"               -- "$IVOL" slice "$work/v.ivol" --index 0 --window 10 -o "$out/x.png"
 bad opt-slice-level        1 "--level"                -- "$IVOL" slice "$work/v.ivol" --index 0 --level 9 -o "$out/x.png"
+bad opt-extract-level      1 "--level: 9 is past the file's coarsest level" -- "$IVOL" extract "$work/v.ivol" --box 0,0,0,1,1,1 --level 9 -o "$out/x.raw"
+bad opt-convert-level      1 "--level: 99 is past the file's coarsest level" -- "$IVOL" convert "$work/v.ivol" "$out/x.raw" --level 99
 bad opt-box-reversed       1 "--box"                  -- "$IVOL" extract "$work/v.ivol" --box 8,0,0,4,4,4 -o "$out/x.raw"
 bad opt-box-five           1 "--box"                  -- "$IVOL" extract "$work/v.ivol" --box 0,0,0,4,4 -o "$out/x.raw"
 bad opt-box-negative       1 "--box"                  -- "$IVOL" extract "$work/v.ivol" --box -1,0,0,4,4,4 -o "$out/x.raw"

@@ -11,16 +11,22 @@ PY
 # writes the bricked grid (only `info` said it). Its output goes outside $out.
 bad structure-octree-for-memory 0 "note: an octree, because a layer of bricks (14 MiB) exceeds the memory budget (--memory), a slab of the octree writer does not; --memory 14 writes a bricked grid" \
     -- "$IVOL" convert "$work/wide.raw" "$work/wide.ivol" --dims 256,256,32 --type u16 --memory 8 -f
-bad bricked-with-keep 2 "--structure bricked: a keep rule coarsens regions, which only an octree holds" \
+# Options that cannot hold together are a bad command line: exit 1 (README).
+bad bricked-with-keep 1 "--structure: bricked: a keep rule (--keep) coarsens regions, which only an octree holds" \
     -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --keep threshold=10,margin=1
 # float32 values are a bricked grid of byte-plane bricks (codec 2), no longer
 # refused. Its output goes outside $out.
 bad bricked-float32 0 "(ivol bricked float32" \
     -- "$IVOL" convert "$work/u16.raw" "$work/f32-bricked.ivol" --dims 8,8,8 --type u16 --structure bricked --encoding float32 -f
-bad bricked-format-1.2 2 "--structure bricked: format 1.2 (a bricked grid needs format 1.3)" \
+bad bricked-format-1.2 1 "--structure: bricked: format 1.2 (a bricked grid needs format 1.3)" \
     -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --format-version 1.2
-bad bricked-codec-zstd 2 "--structure bricked: --codec zstd (codec 1 only, for format 1.0/1.1 readers)" \
+bad bricked-codec-zstd 1 "--structure: bricked: --codec zstd (codec 1 only, for format 1.0/1.1 readers)" \
     -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --codec zstd
+# --brick where no bricked grid can be written: refused, not ignored.
+bad brick-with-octree 1 "--brick: bricks belong to a bricked grid, and --structure octree asks for an octree" \
+    -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure octree --brick 16
+bad brick-with-format-1.2 1 "--brick: bricks belong to a bricked grid, which format 1.2 (--format-version) lacks" \
+    -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --format-version 1.2 --brick 16
 bad structure-unknown      1 "--structure" \
     -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure kdtree
 
