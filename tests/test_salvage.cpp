@@ -357,6 +357,18 @@ TEST(Salvage, UnframedFilesSayWhyNot) {
 
 namespace {
 
+// The first `size` bytes of the file at `from`, as a file of its own,
+// opened salvaging.
+Reader salvage_prefix(const std::string& from, std::size_t size, const std::string& name) {
+  auto bytes = test::read_bytes(from);
+  bytes.resize(size);
+  const std::string path = test::temp_path(name);
+  test::write_bytes(path, bytes);
+  ReaderOptions options;
+  options.salvage = true;
+  return Reader(path, options);
+}
+
 // A file whose final metadata comes last, after an early metadata block
 // (stream 6, spec §15): cut before the final one, salvage uses the early
 // one and says so; uncut, a reader uses stream 1 and skips stream 6.
@@ -368,13 +380,7 @@ TEST(Salvage, FallsBackToTheEarlyMetadata) {
   ASSERT_EQ(info.blocks.front().stream, 6);
   ASSERT_EQ(info.blocks.back().stream, 1);
   EXPECT_EQ(whole.metadata().voxel_size[0], 0.05);
-  auto bytes = test::read_bytes(vector);
-  bytes.resize(info.blocks.back().file_offset);
-  const std::string path = test::temp_path("early.ivol");
-  test::write_bytes(path, bytes);
-  ReaderOptions options;
-  options.salvage = true;
-  Reader cut(path, options);
+  Reader cut = salvage_prefix(vector, info.blocks.back().file_offset, "early.ivol");
   EXPECT_EQ(cut.info().salvage->metadata, "early");
   EXPECT_EQ(cut.metadata().voxel_size[0], 0.1);
   EXPECT_EQ(cut.info().salvage->finest_complete_lod, 0);
@@ -423,13 +429,7 @@ TEST(Salvage, ABrickedGridWritesItsEarlyMetadataFirst) {
   EXPECT_EQ(info.blocks.back().stream, 1);
   EXPECT_TRUE(whole.metadata().provenance.contains("sources"));  // the final metadata, not the early one
   EXPECT_TRUE(check_file(path).ok());
-  auto bytes = test::read_bytes(path);
-  bytes.resize(bytes.size() / 2);
-  const std::string cut_path = test::temp_path("bricked-early-cut.ivol");
-  test::write_bytes(cut_path, bytes);
-  ReaderOptions salvage;
-  salvage.salvage = true;
-  Reader cut(cut_path, salvage);
+  Reader cut = salvage_prefix(path, test::read_bytes(path).size() / 2, "bricked-early-cut.ivol");
   EXPECT_EQ(cut.info().salvage->metadata, "early");
   EXPECT_EQ(cut.metadata().voxel_size[2], 0.2);
   EXPECT_EQ(cut.metadata().origin[1], 2.0);

@@ -34,20 +34,9 @@ using detail::SubtreeRecord;
 template <class Work>
 void parallel_for(std::uint32_t count, unsigned threads, Work&& work) {
   std::atomic<std::uint32_t> next{0};
-  std::mutex failure_mutex;
-  std::exception_ptr failure;
-  auto run = [&] {
-    for (std::uint32_t n; (n = next.fetch_add(1)) < count;) {
-      try {
-        work(n);
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(failure_mutex);
-        if (!failure) failure = std::current_exception();
-      }
-    }
-  };
-  detail::run_parts(std::max(1u, std::min<unsigned>(threads, count)), [&](unsigned) { run(); });
-  if (failure) std::rethrow_exception(failure);
+  detail::run_parts(std::max(1u, std::min<unsigned>(threads, count)), [&](unsigned) {
+    for (std::uint32_t n; (n = next.fetch_add(1)) < count;) work(n);
+  });
 }
 
 std::string directory_of(const std::string& path) {
