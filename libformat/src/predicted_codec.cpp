@@ -93,6 +93,21 @@ void face_residuals(const BrickDims& d, const std::uint16_t* u, std::uint16_t* z
       [](std::uint16_t*, const RowNeighbours&) {});
 }
 
+// Σ of the bit lengths of z[0 .. len): floor(log2(2z + 1)), the exponent of
+// 2z + 1 as a binary32 (exact below 2^24), so that the loop vectorises where
+// a count of leading zeros per voxel does not (it took a quarter of the
+// candidates' time).
+std::uint32_t bit_lengths(const std::uint16_t* z, std::uint32_t len) {
+  std::uint32_t sum = 0;
+  for (std::uint32_t x = 0; x < len; ++x) {
+    const float f = static_cast<float>(2 * static_cast<std::int32_t>(z[x]) + 1);
+    std::uint32_t bits;
+    std::memcpy(&bits, &f, sizeof bits);
+    sum += (bits >> 23) - 127;
+  }
+  return sum;
+}
+
 // Zigzag residuals of the interior voxels under `taps` into z[]; returns
 // the sum of their bit lengths (what the candidate taps are judged by: the
 // faces' residuals do not depend on the taps).
@@ -108,9 +123,7 @@ std::uint64_t interior_residuals(const BrickDims& d, const PredictorTaps& taps, 
           detail::residual_row<std::int32_t>(p, c, n, d[0], row);
         else
           detail::residual_row<std::int64_t>(p, c, n, d[0], row);
-        std::uint32_t sum = 0;
-        for (std::uint32_t x = 1; x < d[0]; ++x) sum += row[x] ? 32 - static_cast<unsigned>(__builtin_clz(row[x])) : 0;
-        cost += sum;
+        cost += bit_lengths(row + 1, d[0] - 1);
       });
   return cost;
 }
