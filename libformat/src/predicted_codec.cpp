@@ -271,7 +271,10 @@ void decode_predicted(const std::uint8_t* payload, std::size_t size, const Brick
   taps.bias = static_cast<std::int32_t>(std::uint32_t{payload[18]} | std::uint32_t{payload[19]} << 8 |
                                         std::uint32_t{payload[20]} << 16 | std::uint32_t{payload[21]} << 24);
 
-  std::vector<std::uint8_t> planes(2 * n);
+  // Kept per thread: either coder writes every byte, and a brick's 64 KiB
+  // zeroed anew for every brick showed in the profile of a whole read.
+  thread_local std::vector<std::uint8_t> planes;
+  planes.resize(2 * n);
   if (payload[3] == kEntropyTokens)
     detail::decode_residual_tokens(payload + kPredictedHeaderSize, size - kPredictedHeaderSize, dims, planes.data());
   else

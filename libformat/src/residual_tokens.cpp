@@ -301,7 +301,8 @@ void decode_residual_tokens(const std::uint8_t* data, std::size_t size, const Br
   std::uint64_t pending = 0;
   unsigned pending_bits = 0;
   std::vector<DecoderModel> models(kContexts);
-  std::vector<std::uint8_t> lengths(n);
+  thread_local std::vector<std::uint8_t> lengths;  // each written before it is read
+  lengths.resize(n);
   walk_rows(dims, lengths.data(), [&](std::size_t row, const std::uint8_t* contexts, std::uint8_t* row_lengths) {
     // Locals, so that the loop keeps them in registers.
     std::uint32_t x_now = current, x_next = other;
