@@ -120,9 +120,9 @@ std::uint64_t interior_residuals(const BrickDims& d, const PredictorTaps& taps, 
       [&](std::uint16_t* c, const RowNeighbours& n) {
         std::uint16_t* row = z + (c - u);
         if (p.narrow)
-          detail::residual_row<std::int32_t>(p, c, n, d[0], row);
+          detail::residual_row<std::int32_t>(p, c, n, detail::first_x(u, n), d[0], row);
         else
-          detail::residual_row<std::int64_t>(p, c, n, d[0], row);
+          detail::residual_row<std::int64_t>(p, c, n, detail::first_x(u, n), d[0], row);
         cost += bit_lengths(row + 1, d[0] - 1);
       });
   return cost;
@@ -296,9 +296,11 @@ void decode_predicted(const std::uint8_t* payload, std::size_t size, const Brick
       [&](std::uint16_t* c, const RowNeighbours& neighbours) {
         const std::size_t i = static_cast<std::size_t>(c - out);
         if (p.narrow)
-          detail::decode_row<std::int32_t>(p, c, neighbours, dims[0], lo + i, hi + i, partial32.data(), delta.data());
+          detail::decode_row<std::int32_t>(p, c, neighbours, detail::first_x(out, neighbours), dims[0], lo + i, hi + i,
+                                           partial32.data(), delta.data());
         else
-          detail::decode_row<std::int64_t>(p, c, neighbours, dims[0], lo + i, hi + i, partial64.data(), delta.data());
+          detail::decode_row<std::int64_t>(p, c, neighbours, detail::first_x(out, neighbours), dims[0], lo + i, hi + i,
+                                           partial64.data(), delta.data());
       });
   if (payload[1] == kMapBinary16Order)
     for (std::size_t i = 0; i < n; ++i) out[i] = unmap_binary16(out[i]);

@@ -72,21 +72,27 @@ struct RowNeighbours {
   const std::uint16_t* up_back;
 };
 
-// Residuals z[1 .. len) of an interior row (y, z > 0) whose values are all
-// known (the encoder): independent voxels, one vectorisable loop. z[0] is
-// written too, with a value of no meaning (the caller's face prediction
-// replaces it): the loop then runs over the whole row, a multiple of the
-// vector width for the usual bricks, with no scalar remainder, which took
-// a third of its time. Its neighbours at x − 1 = −1 are the ends of earlier
-// rows of the brick (y, z > 0), so every read is inside the brick.
+// Where an interior row's loops may start: at x = 0, though voxel 0 is
+// predicted from the faces (its value there has no meaning and the caller
+// replaces or ignores it), so that a loop runs over the whole row, a
+// multiple of the vector width for the usual bricks, with no scalar
+// remainder (which took a third of its time). The neighbours at x − 1 = −1
+// are then the ends of earlier rows of the brick, except in the first
+// interior row (y = z = 1), whose up-back row starts the brick: that row
+// starts at x = 1. `brick` is the brick's first voxel.
+inline std::uint32_t first_x(const std::uint16_t* brick, const RowNeighbours& n) { return n.up_back == brick ? 1 : 0; }
+
+// Residuals z[first .. len) of an interior row (y, z > 0) whose values are
+// all known (the encoder): independent voxels, one vectorisable loop;
+// first = first_x(), z[0] of no meaning when it is 0.
 template <class Acc>
-void residual_row(const RowPredictor& p, const std::uint16_t* c, const RowNeighbours& n, std::uint32_t len,
-                  std::uint16_t* z) {
+void residual_row(const RowPredictor& p, const std::uint16_t* c, const RowNeighbours& n, std::uint32_t first,
+                  std::uint32_t len, std::uint16_t* z) {
   const Acc t0 = p.t[0], t1 = p.t[1], t2 = p.t[2], t3 = p.t[3], t4 = p.t[4], t5 = p.t[5], t6 = p.t[6];
   const Acc round = p.round, level = static_cast<Acc>(p.level);
   const unsigned shift = p.shift;
   const std::uint16_t *up = n.up, *back = n.back, *ub = n.up_back;
-  for (std::ptrdiff_t x = 0; x < static_cast<std::ptrdiff_t>(len); ++x) {
+  for (std::ptrdiff_t x = first; x < static_cast<std::ptrdiff_t>(len); ++x) {
     const Acc s = t0 * centred<Acc>(c[x - 1]) + t1 * centred<Acc>(up[x]) + t2 * centred<Acc>(back[x]) +
                   t3 * centred<Acc>(up[x - 1]) + t4 * centred<Acc>(back[x - 1]) + t5 * centred<Acc>(ub[x]) +
                   t6 * centred<Acc>(ub[x - 1]);
@@ -118,15 +124,14 @@ std::int64_t level_row(const RowPredictor& p, const std::uint16_t* c, const RowN
 // are summed and the residuals unzigzagged for the whole row first
 // (vectorised), which leaves the chain along x as short as it can be.
 template <class Acc>
-void decode_row(const RowPredictor& p, std::uint16_t* c, const RowNeighbours& n, std::uint32_t len,
+void decode_row(const RowPredictor& p, std::uint16_t* c, const RowNeighbours& n, std::uint32_t first, std::uint32_t len,
                 const std::uint8_t* lo, const std::uint8_t* hi, Acc* partial, std::uint16_t* delta) {
   const Acc t0 = p.t[0], t1 = p.t[1], t2 = p.t[2], t3 = p.t[3], t4 = p.t[4], t5 = p.t[5], t6 = p.t[6];
   const Acc round = p.round, level = static_cast<Acc>(p.level);
   const unsigned shift = p.shift;
   const std::uint16_t *up = n.up, *back = n.back, *ub = n.up_back;
-  // From x = 0 (partial[0] and delta[0] unused), for the reason
-  // residual_row gives.
-  for (std::ptrdiff_t x = 0; x < static_cast<std::ptrdiff_t>(len); ++x) {
+  // From first_x() (partial[0] and delta[0] unused).
+  for (std::ptrdiff_t x = first; x < static_cast<std::ptrdiff_t>(len); ++x) {
     partial[x] = t1 * centred<Acc>(up[x]) + t2 * centred<Acc>(back[x]) + t3 * centred<Acc>(up[x - 1]) +
                  t4 * centred<Acc>(back[x - 1]) + t5 * centred<Acc>(ub[x]) + t6 * centred<Acc>(ub[x - 1]) + round;
     delta[x] = unzigzag16(static_cast<std::uint16_t>(lo[x] | hi[x] << 8), 0);
