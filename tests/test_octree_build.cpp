@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
 #include <random>
 
 #include "ivol/build.hpp"
@@ -184,6 +185,131 @@ TEST(Build, KeepMaskCoarsensEverythingElseToMeans) {
     for (int y = 6; y < 8; ++y)
       for (int x = 6; x < 8; ++x) sum += volume[(z * 16 + y) * 16 + x];
   EXPECT_NEAR(tree.voxel_value(7, 7, 7), sum / 8, 1e-6);
+}
+
+// A coarse leaf holds the mean of its voxels summed in binary64 child by
+// child in octant order (the writer's rule, so that a leaf does not depend
+// on how the volume was cut into slabs): with values of 1e20, -1e20 and 1
+// any other order gives other sums. The reference below is that rule as
+// plainly as it can be written, one voxel at a time; the volume's sides
+// are not powers of two (nodes cut by its edges), its leaves up to 32^3,
+// and it holds NaN, -0 and infinities.
+TEST(Build, CoarseLeavesSumTheirVoxelsInOctantOrder) {
+  const Dims dims{45, 38, 53};
+  const unsigned depth = depth_for(dims);
+  std::mt19937_64 rng(19);
+  std::vector<float> volume(voxel_count(dims));
+  const float choices[] = {1e20f, -1e20f, 1.0f, 3.0f, -0.0f, 0.5f};
+  for (auto& v : volume) v = choices[rng() % 6];
+  auto at = [&](std::uint32_t x, std::uint32_t y, std::uint32_t z) -> float& {
+    return volume[(std::uint64_t{z} * dims[1] + y) * dims[0] + x];
+  };
+  // Above z = 20 (the large leaves) whole 2^3 cells: in every 4^3 node the
+  // first cell (octant order) all 1e20, the third all -1e20, the others
+  // small values: the second cell's sum is lost in octant order and kept in
+  // any order that adds the third before it, so the cells' order counts as
+  // well as the voxels'.
+  for (std::uint32_t z = 20; z + 1 < dims[2]; z += 2)
+    for (std::uint32_t y = 0; y + 1 < dims[1]; y += 2)
+      for (std::uint32_t x = 0; x + 1 < dims[0]; x += 2) {
+        const unsigned octant = ((x >> 1) & 1u) | ((y >> 1) & 1u) << 1 | ((z >> 1) & 1u) << 2;
+        for (unsigned c = 0; c < 8; ++c) {
+          float& v = at(x + (c & 1u), y + ((c >> 1) & 1u), z + ((c >> 2) & 1u));
+          v = octant == 0 ? 1e20f : octant == 2 ? -1e20f : choices[2 + rng() % 4];
+        }
+      }
+  at(40, 3, 3) = NAN;                      // a leaf whose mean is NaN
+  at(2, 33, 40) = INFINITY;                // one of +inf
+  at(20, 20, 50) = -INFINITY;              // one of -inf
+  for (std::uint32_t z = 32; z < 40; ++z)  // an 8^3 leaf of -0 alone keeps its sign
+    for (std::uint32_t y = 0; y < 8; ++y)
+      for (std::uint32_t x = 8; x < 16; ++x) at(x, y, z) = -0.0f;
+  // Kept voxels scattered in z < 20 (coarse leaves of 2^3 and 4^3 by the
+  // hundred there) and three more elsewhere (leaves of 8^3 to 32^3).
+  std::vector<std::uint8_t> keep(volume.size(), 0);
+  for (std::uint32_t z = 0; z < 20; ++z)
+    for (std::uint32_t y = 0; y < dims[1]; ++y)
+      for (std::uint32_t x = 0; x < dims[0]; ++x)
+        keep[(std::uint64_t{z} * dims[1] + y) * dims[0] + x] = rng() % 30 == 0;
+  for (const auto& v : {Dims{5, 6, 37}, Dims{33, 17, 42}, Dims{44, 37, 52}})
+    keep[(std::uint64_t{v[2]} * dims[1] + v[1]) * dims[0] + v[0]] = 1;
+  BuildOptions options;
+  options.encoding = ValueEncoding::Float32;
+  options.keep_mask = keep.data();
+  const Octree tree = build_octree(volume.data(), dims, options).octree;
+  ASSERT_NO_THROW(tree.validate());
+
+  auto inside = [&](std::uint64_t x, std::uint64_t y, std::uint64_t z) {
+    return x < dims[0] && y < dims[1] && z < dims[2];
+  };
+  // The sum and the kept voxels of the node of `level` at (i, j, k).
+  struct Region {
+    double sum = 0.0;
+    std::uint64_t weight = 0;
+    bool kept = false;
+  };
+  std::function<Region(unsigned, std::uint32_t, std::uint32_t, std::uint32_t)> region =
+      [&](unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k) {
+        Region r;
+        if (level == depth) {
+          if (!inside(i, j, k)) return r;
+          r.sum = 0.0 + static_cast<double>(at(i, j, k));
+          r.weight = 1;
+          r.kept = keep[(std::uint64_t{k} * dims[1] + j) * dims[0] + i] != 0;
+          return r;
+        }
+        for (unsigned c = 0; c < 8; ++c) {
+          const Region child = region(level + 1, 2 * i + (c & 1u), 2 * j + ((c >> 1) & 1u), 2 * k + ((c >> 2) & 1u));
+          if (child.weight == 0) continue;
+          r.sum = r.sum + child.sum;
+          r.weight += child.weight;
+          r.kept = r.kept || child.kept;
+        }
+        return r;
+      };
+  std::uint64_t checked = 0, cancelling = 0;
+  // Top down: a node without a kept voxel is a leaf; every voxel of it must
+  // hold its mean (or, where they are all one value, that value's bits).
+  std::function<void(unsigned, std::uint32_t, std::uint32_t, std::uint32_t)> visit =
+      [&](unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k) {
+        const Region r = region(level, i, j, k);
+        if (r.weight == 0 || level == depth) return;
+        if (r.kept) {
+          for (unsigned c = 0; c < 8; ++c)
+            visit(level + 1, 2 * i + (c & 1u), 2 * j + ((c >> 1) & 1u), 2 * k + ((c >> 2) & 1u));
+          return;
+        }
+        const unsigned s = depth - level;
+        const std::uint32_t x0 = i << s, y0 = j << s, z0 = k << s;
+        const std::uint32_t x1 = std::min<std::uint32_t>(dims[0], x0 + (1u << s));
+        const std::uint32_t y1 = std::min<std::uint32_t>(dims[1], y0 + (1u << s));
+        const std::uint32_t z1 = std::min<std::uint32_t>(dims[2], z0 + (1u << s));
+        const double mean = r.sum / static_cast<double>(r.weight);
+        bool uniform = true;
+        for (std::uint32_t z = z0; z < z1; ++z)
+          for (std::uint32_t y = y0; y < y1; ++y)
+            for (std::uint32_t x = x0; x < x1; ++x)
+              uniform =
+                  uniform && at(x, y, z) == at(x0, y0, z0) && std::signbit(at(x, y, z)) == std::signbit(at(x0, y0, z0));
+        for (std::uint32_t z = z0; z < z1; ++z)
+          for (std::uint32_t y = y0; y < y1; ++y)
+            for (std::uint32_t x = x0; x < x1; ++x) {
+              const float got = static_cast<float>(tree.voxel_value(x, y, z));
+              if (std::isnan(mean)) {
+                EXPECT_TRUE(std::isnan(got)) << x << "," << y << "," << z;
+              } else if (uniform) {
+                EXPECT_EQ(std::signbit(got), std::signbit(at(x0, y0, z0))) << x << "," << y << "," << z;
+                EXPECT_EQ(got, at(x0, y0, z0));
+              } else {
+                EXPECT_EQ(got, static_cast<float>(mean)) << x << "," << y << "," << z << " level " << level;
+              }
+              ++checked;
+            }
+        cancelling += std::fabs(mean) < 1e19 && r.weight >= 8;
+      };
+  visit(0, 0, 0, 0);
+  EXPECT_GT(checked, voxel_count(dims) / 2);  // most voxels lie in coarse leaves
+  EXPECT_GT(cancelling, 200u) << "leaves where 1e20 and -1e20 cancel, and the order decides";
 }
 
 TEST(Build, ResultDoesNotDependOnThreads) {

@@ -172,9 +172,89 @@ class Builder {
       r.add(static_cast<double>(data_[(std::uint64_t{k - z_origin_} * d[1] + j) * d[0] + i]));
       return r;
     }
+    const unsigned side_log2 = layout_.depth - level;
+    if (side_log2 <= kBlockLog2 && inside(side_log2, i, j, k))
+      return block_stats(side_log2, i << side_log2, j << side_log2, k << side_log2);
     for (unsigned c = 0; c < 8; ++c)
       r.merge(region_stats(level + 1, 2 * i + (c & 1u), 2 * j + ((c >> 1) & 1u), 2 * k + ((c >> 2) & 1u)));
     return r;
+  }
+
+  // region_stats of a node of side 2^side_log2 ≤ 2^kBlockLog2 whose voxels
+  // all lie in the volume, from (x0, y0, z0): the same numbers as the
+  // recursion, without a call and a weight per voxel (which took a third of
+  // an object-fidelity conversion's time). The sum is the recursion's,
+  // operation for operation: a voxel's is 0 + v (+0 for −0), a node's adds
+  // its children's to 0 in octant order (x, then y, then z), and since no
+  // such sum is −0, 0 + the first child's is that sum. The minimum, the
+  // maximum and the NaN flag do not depend on the order.
+  RegionStats block_stats(unsigned side_log2, std::uint32_t x0, std::uint32_t y0, std::uint32_t z0) const {
+    const Dims& d = layout_.dims;
+    const std::uint32_t side = 1u << side_log2;
+    auto at = [&](std::uint32_t x, std::uint32_t y, std::uint32_t z) {
+      return static_cast<double>(data_[(std::uint64_t{z - z_origin_} * d[1] + y) * d[0] + x]);
+    };
+    RegionStats r;
+    // Minimum and maximum as RegionStats::below orders them: -0 below +0.
+    for (std::uint32_t z = z0; z < z0 + side; ++z)
+      for (std::uint32_t y = y0; y < y0 + side; ++y)
+        for (std::uint32_t x = x0; x < x0 + side; ++x) {
+          const double v = at(x, y, z);
+          if (std::isnan(v)) {
+            r.has_nan = true;
+            continue;
+          }
+          if (RegionStats::below(v, r.min)) r.min = v;
+          if (RegionStats::below(r.max, v)) r.max = v;
+        }
+    // Sums level by level, in place: sums[(c·h + b)·h + a] for the nodes of
+    // side 2 at first (h = side / 2 of them a row), then of side 4, ...
+    double sums[(std::size_t{1} << (3 * kBlockLog2)) / 8];
+    std::uint32_t h = side / 2;
+    for (std::uint32_t c = 0; c < h; ++c)
+      for (std::uint32_t b = 0; b < h; ++b)
+        for (std::uint32_t a = 0; a < h; ++a) {
+          const std::uint32_t x = x0 + 2 * a, y = y0 + 2 * b, z = z0 + 2 * c;
+          double t = 0.0 + at(x, y, z);
+          t = t + (0.0 + at(x + 1, y, z));
+          t = t + (0.0 + at(x, y + 1, z));
+          t = t + (0.0 + at(x + 1, y + 1, z));
+          t = t + (0.0 + at(x, y, z + 1));
+          t = t + (0.0 + at(x + 1, y, z + 1));
+          t = t + (0.0 + at(x, y + 1, z + 1));
+          t = t + (0.0 + at(x + 1, y + 1, z + 1));
+          sums[(std::size_t{c} * h + b) * h + a] = t;
+        }
+    for (; h > 1; h /= 2) {
+      const std::uint32_t g = h / 2;
+      auto child = [&](std::uint32_t a, std::uint32_t b, std::uint32_t c) {
+        return sums[(std::size_t{c} * h + b) * h + a];
+      };
+      // Each parent is written after its children are read, at an index no
+      // larger than theirs: in place.
+      for (std::uint32_t c = 0; c < g; ++c)
+        for (std::uint32_t b = 0; b < g; ++b)
+          for (std::uint32_t a = 0; a < g; ++a) {
+            double t = child(2 * a, 2 * b, 2 * c);
+            t = t + child(2 * a + 1, 2 * b, 2 * c);
+            t = t + child(2 * a, 2 * b + 1, 2 * c);
+            t = t + child(2 * a + 1, 2 * b + 1, 2 * c);
+            t = t + child(2 * a, 2 * b, 2 * c + 1);
+            t = t + child(2 * a + 1, 2 * b, 2 * c + 1);
+            t = t + child(2 * a, 2 * b + 1, 2 * c + 1);
+            t = t + child(2 * a + 1, 2 * b + 1, 2 * c + 1);
+            sums[(std::size_t{c} * g + b) * g + a] = t;
+          }
+    }
+    r.sum = sums[0];
+    return r;
+  }
+
+  // Whether a node of side 2^side_log2 lies in the volume whole.
+  bool inside(unsigned side_log2, std::uint32_t i, std::uint32_t j, std::uint32_t k) const {
+    const Dims& d = layout_.dims;
+    return (std::uint64_t{i} + 1) << side_log2 <= d[0] && (std::uint64_t{j} + 1) << side_log2 <= d[1] &&
+           (std::uint64_t{k} + 1) << side_log2 <= d[2];
   }
 
   // A node without kept voxels becomes one leaf holding their mean.
@@ -283,6 +363,10 @@ class Builder {
     note_error(v, r.bits, stats);
     return r;
   }
+
+  // Nodes of up to 2^kBlockLog2 voxels a side take block_stats (its sums,
+  // 4 KiB, on the stack).
+  static constexpr unsigned kBlockLog2 = 4;
 
   const Source* data_;
   std::uint32_t z_origin_ = 0;  // the slice data_ starts with
