@@ -221,6 +221,9 @@ TEST(Build, CoarseLeavesSumTheirVoxelsInOctantOrder) {
   at(40, 3, 3) = NAN;                      // a leaf whose mean is NaN
   at(2, 33, 40) = INFINITY;                // one of +inf
   at(20, 20, 50) = -INFINITY;              // one of -inf
+  for (std::uint32_t z = 32; z < 40; ++z)  // an 8^3 leaf of -0 and +0 holds +0 (their sum's sign)
+    for (std::uint32_t y = 8; y < 16; ++y)
+      for (std::uint32_t x = 0; x < 8; ++x) at(x, y, z) = (x + y + z) % 2 ? -0.0f : 0.0f;
   for (std::uint32_t z = 32; z < 40; ++z)  // an 8^3 leaf of -0 alone keeps its sign
     for (std::uint32_t y = 0; y < 8; ++y)
       for (std::uint32_t x = 8; x < 16; ++x) at(x, y, z) = -0.0f;
@@ -302,6 +305,7 @@ TEST(Build, CoarseLeavesSumTheirVoxelsInOctantOrder) {
                 EXPECT_EQ(got, at(x0, y0, z0));
               } else {
                 EXPECT_EQ(got, static_cast<float>(mean)) << x << "," << y << "," << z << " level " << level;
+                EXPECT_EQ(std::signbit(got), std::signbit(mean)) << x << "," << y << "," << z;
               }
               ++checked;
             }
