@@ -80,16 +80,6 @@ std::uint64_t VolumeLayout::first_value(unsigned level) const {
 
 std::uint64_t VolumeLayout::level_values(unsigned level) const { return level == 0 ? 1 : 8 * inner_count[level - 1]; }
 
-std::uint64_t VolumeLayout::weight(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k) const {
-  const std::uint64_t side = std::uint64_t{1} << (depth - level);
-  auto overlap = [side](std::uint64_t a, std::uint64_t n) -> std::uint64_t {
-    const std::uint64_t lo = a * side;
-    const std::uint64_t hi = std::min(n, lo + side);
-    return hi > lo ? hi - lo : 0;
-  };
-  return overlap(i, dims[0]) * overlap(j, dims[1]) * overlap(k, dims[2]);
-}
-
 double VolumeLayout::weight_f64(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k) const {
   // The exact product (up to 2^93) rounded once to binary64, as spec §10 says.
   const std::uint64_t side = std::uint64_t{1} << (depth - level);

@@ -333,7 +333,8 @@ class Salvager {
     }
     std::uint64_t total = ~std::uint64_t{0};  // unknown until the borders or cells are read
     if (v.kind == StructureKind::Regular || v.kind == StructureKind::Bricked) {
-      const unsigned __int128 voxels = static_cast<unsigned __int128>(v.dims[0]) * v.dims[1] * v.dims[2];
+      __extension__ using Wide = unsigned __int128;
+      const Wide voxels = static_cast<Wide>(v.dims[0]) * v.dims[1] * v.dims[2];
       if (voxels <= (std::uint64_t{1} << 56)) total = static_cast<std::uint64_t>(voxels);
     }
     for (const BlockInfo& b : stream_blocks(3)) {

@@ -61,8 +61,17 @@ struct VolumeLayout {
   std::uint64_t first_inner(unsigned level) const;
   std::uint64_t first_value(unsigned level) const;
   std::uint64_t level_values(unsigned level) const;
-  // Non-padding voxels covered by node (i, j, k) of `level` (§8.1).
-  std::uint64_t weight(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k) const;
+  // Non-padding voxels covered by node (i, j, k) of `level` (§8.1). Inline:
+  // the builders ask it of every node and voxel.
+  std::uint64_t weight(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k) const {
+    const std::uint64_t side = std::uint64_t{1} << (depth - level);
+    auto overlap = [side](std::uint64_t a, std::uint64_t n) -> std::uint64_t {
+      const std::uint64_t lo = a * side;
+      const std::uint64_t hi = n < lo + side ? n : lo + side;
+      return hi > lo ? hi - lo : 0;
+    };
+    return overlap(i, dims[0]) * overlap(j, dims[1]) * overlap(k, dims[2]);
+  }
   // The same as a binary64 product, as spec §10 evaluates it (exact below 2^53).
   double weight_f64(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k) const;
   // With scale 1 and offset 0 the decoded number itself: 0 + 1 × −0 would be
