@@ -51,6 +51,10 @@ struct RegionStats {
   static bool below(double a, double b) { return a < b || (a == b && std::signbit(a) && !std::signbit(b)); }
   void add(double v) {
     sum = sum + v;
+    extend(v);
+  }
+  // The minimum, the maximum and the NaN flag alone.
+  void extend(double v) {
     if (std::isnan(v)) {
       has_nan = true;
       return;
@@ -168,14 +172,15 @@ class Builder {
   // how the volume was cut into slabs or subtrees.
   RegionStats region_stats(unsigned level, std::uint32_t i, std::uint32_t j, std::uint32_t k) const {
     RegionStats r;
-    if (layout_.weight(level, i, j, k) == 0) return r;
+    const std::uint64_t weight = layout_.weight(level, i, j, k);
+    if (weight == 0) return r;
     if (level == layout_.depth) {
       const Dims& d = layout_.dims;
       r.add(static_cast<double>(data_[(std::uint64_t{k - z_origin_} * d[1] + j) * d[0] + i]));
       return r;
     }
     const unsigned side_log2 = layout_.depth - level;
-    if (side_log2 <= kBlockLog2 && inside(side_log2, i, j, k))
+    if (side_log2 <= kBlockLog2 && weight == std::uint64_t{1} << (3 * side_log2))  // inside the volume whole
       return block_stats(side_log2, i << side_log2, j << side_log2, k << side_log2);
     for (unsigned c = 0; c < 8; ++c)
       r.merge(region_stats(level + 1, 2 * i + (c & 1u), 2 * j + ((c >> 1) & 1u), 2 * k + ((c >> 2) & 1u)));
@@ -207,17 +212,10 @@ class Builder {
           row[q] =
               data_ + (std::uint64_t{z0 + 2 * c + (q >> 1) - z_origin_} * d[1] + y0 + 2 * b + (q & 1u)) * d[0] + x0;
         double* out = sums + (std::size_t{c} * h + b) * h;
-        for (std::uint32_t a = 0; a < h; ++a) {
-          double t = 0.0 + static_cast<double>(row[0][2 * a]);
-          t = t + (0.0 + static_cast<double>(row[0][2 * a + 1]));
-          t = t + (0.0 + static_cast<double>(row[1][2 * a]));
-          t = t + (0.0 + static_cast<double>(row[1][2 * a + 1]));
-          t = t + (0.0 + static_cast<double>(row[2][2 * a]));
-          t = t + (0.0 + static_cast<double>(row[2][2 * a + 1]));
-          t = t + (0.0 + static_cast<double>(row[3][2 * a]));
-          t = t + (0.0 + static_cast<double>(row[3][2 * a + 1]));
-          out[a] = t;
-        }
+        for (std::uint32_t a = 0; a < h; ++a)
+          out[a] = octant_sum([&](unsigned dx, unsigned dy, unsigned dz) {
+            return 0.0 + static_cast<double>(row[2 * dz + dy][2 * a + dx]);
+          });
       }
     for (; h > 1; h /= 2) {
       const std::uint32_t g = h / 2;
@@ -228,20 +226,21 @@ class Builder {
       // larger than theirs: in place.
       for (std::uint32_t c = 0; c < g; ++c)
         for (std::uint32_t b = 0; b < g; ++b)
-          for (std::uint32_t a = 0; a < g; ++a) {
-            double t = child(2 * a, 2 * b, 2 * c);
-            t = t + child(2 * a + 1, 2 * b, 2 * c);
-            t = t + child(2 * a, 2 * b + 1, 2 * c);
-            t = t + child(2 * a + 1, 2 * b + 1, 2 * c);
-            t = t + child(2 * a, 2 * b, 2 * c + 1);
-            t = t + child(2 * a + 1, 2 * b, 2 * c + 1);
-            t = t + child(2 * a, 2 * b + 1, 2 * c + 1);
-            t = t + child(2 * a + 1, 2 * b + 1, 2 * c + 1);
-            sums[(std::size_t{c} * g + b) * g + a] = t;
-          }
+          for (std::uint32_t a = 0; a < g; ++a)
+            sums[(std::size_t{c} * g + b) * g + a] = octant_sum(
+                [&](unsigned dx, unsigned dy, unsigned dz) { return child(2 * a + dx, 2 * b + dy, 2 * c + dz); });
     }
     r.sum = sums[0];
     return r;
+  }
+
+  // Σ of child(dx, dy, dz) over the eight octants, added one by one in
+  // octant order (x, then y, then z) from the first.
+  template <class Child>
+  static double octant_sum(Child&& child) {
+    double t = child(0u, 0u, 0u);
+    for (unsigned c = 1; c < 8; ++c) t = t + child(c & 1u, (c >> 1) & 1u, (c >> 2) & 1u);
+    return t;
   }
 
   // The minimum and maximum (-0 below +0) and whether a NaN is among the
@@ -282,24 +281,9 @@ class Builder {
       for (std::uint32_t z = z0; z < z0 + side; ++z)
         for (std::uint32_t y = y0; y < y0 + side; ++y) {
           const Source* row = data_ + (std::uint64_t{z - z_origin_} * d[1] + y) * d[0] + x0;
-          for (std::uint32_t x = 0; x < side; ++x) {
-            const double v = static_cast<double>(row[x]);
-            if (std::isnan(v)) {
-              r.has_nan = true;
-              continue;
-            }
-            if (RegionStats::below(v, r.min)) r.min = v;
-            if (RegionStats::below(r.max, v)) r.max = v;
-          }
+          for (std::uint32_t x = 0; x < side; ++x) r.extend(static_cast<double>(row[x]));
         }
     }
-  }
-
-  // Whether a node of side 2^side_log2 lies in the volume whole.
-  bool inside(unsigned side_log2, std::uint32_t i, std::uint32_t j, std::uint32_t k) const {
-    const Dims& d = layout_.dims;
-    return (std::uint64_t{i} + 1) << side_log2 <= d[0] && (std::uint64_t{j} + 1) << side_log2 <= d[1] &&
-           (std::uint64_t{k} + 1) << side_log2 <= d[2];
   }
 
   // A node without kept voxels becomes one leaf holding their mean.
