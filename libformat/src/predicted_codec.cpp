@@ -143,9 +143,11 @@ void check_frame(const std::uint8_t* frame, std::size_t size, std::size_t conten
     bad("the bytes after the codec header are not exactly one complete zstd frame");
 }
 
-// Entropy coder 1: the residuals' byte planes from one zstd frame.
-void decode_zstd_planes(const std::uint8_t* frame, std::size_t frame_size, std::vector<std::uint8_t>& planes) {
+// Entropy coder 1: the residuals from their byte planes in one zstd frame.
+void decode_zstd_planes(const std::uint8_t* frame, std::size_t frame_size, std::size_t n, std::uint16_t* residuals) {
   auto bad = [](ErrorClass c, const std::string& what) { throw Error(c, "codec 3: " + what); };
+  thread_local std::vector<std::uint8_t> planes;  // every byte written before it is read
+  planes.resize(2 * n);
   check_frame(frame, frame_size, planes.size());
   thread_local std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> context(ZSTD_createDCtx(), ZSTD_freeDCtx);
   const std::size_t got = ZSTD_decompressDCtx(context.get(), planes.data(), planes.size(), frame, frame_size);
@@ -157,6 +159,8 @@ void decode_zstd_planes(const std::uint8_t* frame, std::size_t frame_size, std::
   if (got != planes.size())
     bad(ErrorClass::Malformed,
         "the residuals decoded to " + std::to_string(got) + " bytes, the brick needs " + std::to_string(planes.size()));
+  const std::uint8_t *lo = planes.data(), *hi = planes.data() + n;
+  for (std::size_t i = 0; i < n; ++i) residuals[i] = static_cast<std::uint16_t>(lo[i] | hi[i] << 8);
 }
 
 }  // namespace
@@ -271,35 +275,34 @@ void decode_predicted(const std::uint8_t* payload, std::size_t size, const Brick
   taps.bias = static_cast<std::int32_t>(std::uint32_t{payload[18]} | std::uint32_t{payload[19]} << 8 |
                                         std::uint32_t{payload[20]} << 16 | std::uint32_t{payload[21]} << 24);
 
-  // Kept per thread: either coder writes every byte, and a brick's 64 KiB
-  // zeroed anew for every brick showed in the profile of a whole read.
-  thread_local std::vector<std::uint8_t> planes;
-  planes.resize(2 * n);
+  // Kept per thread: either coder writes every residual, and a brick's
+  // 64 KiB zeroed anew for every brick showed in the profile of a whole read.
+  thread_local std::vector<std::uint16_t> residuals;
+  residuals.resize(n);
   if (payload[3] == kEntropyTokens)
-    detail::decode_residual_tokens(payload + kPredictedHeaderSize, size - kPredictedHeaderSize, dims, planes.data());
+    detail::decode_residual_tokens(payload + kPredictedHeaderSize, size - kPredictedHeaderSize, dims, residuals.data());
   else
-    decode_zstd_planes(payload + kPredictedHeaderSize, size - kPredictedHeaderSize, planes);
+    decode_zstd_planes(payload + kPredictedHeaderSize, size - kPredictedHeaderSize, n, residuals.data());
   const RowPredictor p(taps);
-  const std::uint8_t *lo = planes.data(), *hi = planes.data() + n;
+  const std::uint16_t* z = residuals.data();
   const std::ptrdiff_t sy = dims[0], sz = std::ptrdiff_t{dims[0]} * dims[1];
   // The row's sums of the neighbours in earlier rows (decode_row).
-  std::vector<std::int32_t> partial32(p.narrow ? dims[0] : 0);
-  std::vector<std::int64_t> partial64(p.narrow ? 0 : dims[0]);
+  std::vector<std::int32_t> partial32(p.decode_narrow ? dims[0] : 0);
+  std::vector<std::int64_t> partial64(p.decode_narrow ? 0 : dims[0]);
   std::vector<std::uint16_t> delta(dims[0]);
   walk_rows(
       dims, out,
-      [&](std::size_t i, std::uint32_t y, std::uint32_t z, std::uint32_t count) {
+      [&](std::size_t i, std::uint32_t y, std::uint32_t z_, std::uint32_t count) {
         for (std::uint32_t x = 0; x < count; ++x)
-          out[i + x] = detail::unzigzag16(static_cast<std::uint16_t>(lo[i + x] | hi[i + x] << 8),
-                                          face_prediction(out, i + x, x > 0, y > 0, z > 0, sy, sz));
+          out[i + x] = detail::unzigzag16(z[i + x], face_prediction(out, i + x, x > 0, y > 0, z_ > 0, sy, sz));
       },
       [&](std::uint16_t* c, const RowNeighbours& neighbours) {
         const std::size_t i = static_cast<std::size_t>(c - out);
-        if (p.narrow)
-          detail::decode_row<std::int32_t>(p, c, neighbours, detail::first_x(out, neighbours), dims[0], lo + i, hi + i,
+        if (p.decode_narrow)
+          detail::decode_row<std::int32_t>(p, c, neighbours, detail::first_x(out, neighbours), dims[0], z + i,
                                            partial32.data(), delta.data());
         else
-          detail::decode_row<std::int64_t>(p, c, neighbours, detail::first_x(out, neighbours), dims[0], lo + i, hi + i,
+          detail::decode_row<std::int64_t>(p, c, neighbours, detail::first_x(out, neighbours), dims[0], z + i,
                                            partial64.data(), delta.data());
       });
   if (payload[1] == kMapBinary16Order)

@@ -36,12 +36,15 @@ struct RowPredictor {
     const std::int64_t s_max = 32768 * sum_abs + round;
     const std::int64_t q_max = (s_max >> shift) + 1;
     narrow = s_max < (std::int64_t{1} << 31) && q_max + std::llabs(level) < (std::int64_t{1} << 31);
+    decode_narrow =
+        narrow && s_max + (std::llabs(level) << shift) + 32768 * std::int64_t{std::abs(t[0])} < (std::int64_t{1} << 31);
   }
   std::array<std::int16_t, 7> t;  // every tap is an i16 (spec §7.2), and products of i16 vectorise best
   unsigned shift;
   std::int32_t round;
   std::int64_t level;  // L + Σt·2^(15−s)
   bool narrow;         // every sum and prediction fits 32 bits
+  bool decode_narrow;  // and decode_row's sums, which hold the level too
 };
 
 inline std::uint16_t zigzag16(std::uint16_t value, std::uint16_t prediction) {
@@ -119,28 +122,33 @@ std::int64_t level_row(const RowPredictor& p, const std::uint16_t* c, const RowN
   return sum;
 }
 
-// Decodes c[1 .. len) of an interior row from its residuals (low bytes lo[],
-// high bytes hi[]): the six neighbours in earlier rows (and the rounding)
-// are summed and the residuals unzigzagged for the whole row first
-// (vectorised), which leaves the chain along x as short as it can be.
+// Decodes c[1 .. len) of an interior row from its residuals z[]. What
+// does not depend on the voxel before along x is summed for the whole row
+// first (vectorised): the six neighbours in earlier rows, the rounding, the
+// level times 2^s (floor(a / 2^s) + L = floor((a + L·2^s) / 2^s)) and t_0's
+// share of centring, so that the chain from one voxel to the next is a
+// multiply, an add, a shift and the residual's add. The clamp is a branch
+// that is almost never taken, off that chain. Acc must hold those sums:
+// RowPredictor::decode_narrow says when 32 bits do.
 template <class Acc>
 void decode_row(const RowPredictor& p, std::uint16_t* c, const RowNeighbours& n, std::uint32_t first, std::uint32_t len,
-                const std::uint8_t* lo, const std::uint8_t* hi, Acc* partial, std::uint16_t* delta) {
+                const std::uint16_t* z, Acc* partial, std::uint16_t* delta) {
   const Acc t0 = p.t[0], t1 = p.t[1], t2 = p.t[2], t3 = p.t[3], t4 = p.t[4], t5 = p.t[5], t6 = p.t[6];
-  const Acc round = p.round, level = static_cast<Acc>(p.level);
   const unsigned shift = p.shift;
+  const Acc constant = p.round + static_cast<Acc>(p.level * (std::int64_t{1} << shift)) - 32768 * t0;
   const std::uint16_t *up = n.up, *back = n.back, *ub = n.up_back;
   // From first_x() (partial[0] and delta[0] unused).
   for (std::ptrdiff_t x = first; x < static_cast<std::ptrdiff_t>(len); ++x) {
     partial[x] = t1 * centred<Acc>(up[x]) + t2 * centred<Acc>(back[x]) + t3 * centred<Acc>(up[x - 1]) +
-                 t4 * centred<Acc>(back[x - 1]) + t5 * centred<Acc>(ub[x]) + t6 * centred<Acc>(ub[x - 1]) + round;
-    delta[x] = unzigzag16(static_cast<std::uint16_t>(lo[x] | hi[x] << 8), 0);
+                 t4 * centred<Acc>(back[x - 1]) + t5 * centred<Acc>(ub[x]) + t6 * centred<Acc>(ub[x - 1]) + constant;
+    delta[x] = unzigzag16(z[x], 0);
   }
-  std::uint16_t previous = c[0];
+  Acc previous = c[0];
   for (std::uint32_t x = 1; x < len; ++x) {
-    const Acc q = clamp16<Acc>(((partial[x] + t0 * centred<Acc>(previous)) >> shift) + level);
+    Acc q = (partial[x] + t0 * previous) >> shift;
+    if (__builtin_expect(q < 0 || q > 65535, 0)) q = q < 0 ? 0 : 65535;
     previous = static_cast<std::uint16_t>(q + delta[x]);
-    c[x] = previous;
+    c[x] = static_cast<std::uint16_t>(previous);
   }
 }
 

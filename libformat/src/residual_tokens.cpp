@@ -4,6 +4,7 @@
 // first out) so that the decoder reads the stream front to back.
 #include "residual_tokens.hpp"
 
+#include <algorithm>
 #include <array>
 #include <cstring>
 #include <string>
@@ -64,6 +65,16 @@ constexpr std::array<TokenBits, kTokens> kTokenBits = [] {
   }
   return bits;
 }();
+// The same for the decoder, in one word that stays in a register: length
+// in bits 0–7, e in bits 8–15, lead << e in bits 16–31.
+constexpr std::array<std::uint32_t, kTokens> kTokenWord = [] {
+  std::array<std::uint32_t, kTokens> words{};
+  for (unsigned t = 0; t < kTokens; ++t) {
+    const TokenBits b = kTokenBits[t];
+    words[t] = b.length | std::uint32_t{b.below} << 8 | (std::uint32_t{b.lead} << b.below) << 16;
+  }
+  return words;
+}();
 
 // After the m-th token of a context its table is made again when m is a
 // power of two from 4 on or a multiple of 128: quickly while the counts say
@@ -72,18 +83,17 @@ std::uint32_t next_refresh(std::uint32_t seen) {
   return seen < 4 ? 4 : seen < kRefreshEvery ? 2 * seen : seen + kRefreshEvery;
 }
 
-// One context's adaptive counts and the table made from them.
+// One context's adaptive counts and the table made from them. Their sum is
+// not kept: it follows from how many tokens the context has seen.
 struct ContextModel {
   std::array<std::uint32_t, kTokens> count;
   std::array<std::uint16_t, kTokens> freq;
   std::array<std::uint16_t, kTokens + 1> start;  // cumulative frequencies
-  std::uint64_t total = 0;
   std::uint32_t seen = 0;
   std::uint32_t refresh_at = next_refresh(0);
 
   ContextModel() {
     count.fill(kCountStart);
-    total = std::uint64_t{kCountStart} * kTokens;
     make_table();
   }
 
@@ -91,16 +101,20 @@ struct ContextModel {
   // (one division a table); what that leaves over or takes beyond 2^12 goes
   // to the largest freq (the lowest token on a tie).
   void make_table() {
+    const std::uint64_t total = std::uint64_t{kCountStart} * kTokens + std::uint64_t{kCountStep} * seen;
     const std::uint64_t scale = (std::uint64_t{1} << 44) / total;
-    std::uint32_t sum = 0;
+    std::uint32_t sum = 0, largest_freq = 0;
     unsigned largest = 0;
     for (unsigned t = 0; t < kTokens; ++t) {
-      const std::uint64_t f = (count[t] * scale) >> 32;
-      freq[t] = static_cast<std::uint16_t>(f == 0 ? 1 : f);
-      sum += freq[t];
-      if (freq[t] > freq[largest]) largest = t;
+      const std::uint64_t scaled = (count[t] * scale) >> 32;
+      const auto f = static_cast<std::uint32_t>(scaled == 0 ? 1 : scaled);
+      freq[t] = static_cast<std::uint16_t>(f);
+      sum += f;
+      // The largest so far in a register, not read back from freq[]: the
+      // comparisons then chain through no load.
+      if (f > largest_freq) largest = t, largest_freq = f;
     }
-    freq[largest] = static_cast<std::uint16_t>(freq[largest] + kTotal - sum);
+    freq[largest] = static_cast<std::uint16_t>(largest_freq + kTotal - sum);
     start[0] = 0;
     for (unsigned t = 0; t < kTokens; ++t) start[t + 1] = static_cast<std::uint16_t>(start[t] + freq[t]);
   }
@@ -108,7 +122,6 @@ struct ContextModel {
   // Counts token t; true when the table was made again.
   bool note(unsigned t) {
     count[t] += kCountStep;
-    total += kCountStep;
     if (++seen != refresh_at) return false;
     refresh_at = next_refresh(seen);
     make_table();
@@ -119,9 +132,24 @@ struct ContextModel {
 // A decoder's model: the same, and which token each of the 2^12 slots is.
 struct DecoderModel : ContextModel {
   std::array<std::uint8_t, kTotal> token_at;
-  DecoderModel() { fill(); }
-  void fill() {
+  std::array<std::uint16_t, kTokens + 1> filled;  // the starts token_at holds
+  DecoderModel() {
     for (unsigned t = 0; t < kTokens; ++t) std::memset(token_at.data() + start[t], static_cast<int>(t), freq[t]);
+    filled = start;
+  }
+  // The table is made again every 128 tokens of a context, and by then its
+  // starts have mostly moved by a few slots: only the slots whose token
+  // changed are written, those of each token's new range outside its old
+  // one. (Writing all 4096, with 32 calls of memset, took a sixth of the
+  // decoder's time.)
+  void fill() {
+    for (unsigned t = 0; t < kTokens; ++t) {
+      const unsigned from = start[t], to = start[t + 1], old_from = filled[t], old_to = filled[t + 1];
+      const auto token = static_cast<std::uint8_t>(t);
+      for (unsigned s = from; s < std::min(to, old_from); ++s) token_at[s] = token;
+      for (unsigned s = std::max(from, old_to); s < to; ++s) token_at[s] = token;
+    }
+    filled = start;
   }
 };
 
@@ -276,7 +304,8 @@ bool encode_residual_tokens(const std::uint16_t* residuals, const BrickDims& dim
   return true;
 }
 
-void decode_residual_tokens(const std::uint8_t* data, std::size_t size, const BrickDims& dims, std::uint8_t* planes) {
+void decode_residual_tokens(const std::uint8_t* data, std::size_t size, const BrickDims& dims,
+                            std::uint16_t* residuals) {
   const std::size_t n = std::size_t{dims[0]} * dims[1] * dims[2];
   if (size < 4) bad("the " + std::to_string(size) + " bytes after the codec header hold no stream length");
   const std::uint32_t rans_size = read_u32(data);
@@ -288,6 +317,9 @@ void decode_residual_tokens(const std::uint8_t* data, std::size_t size, const Br
   p += 8;
   // An encoder's states stay below 2^31 (its renormalisation keeps them
   // under 2^19·f before a step of at most ·2^12 / f): one coding per brick.
+  // A decoder's do too, whatever the bytes: from X < 2^31 a step leaves
+  // f·floor(X / 2^12) + (slot − s) < 2^31, and renormalising shifts in
+  // bytes only while X < 2^23.
   for (std::uint32_t x : {current, other})
     if (x < kStateLow || x >= (1u << 31))
       bad("an initial rANS state " + std::to_string(x) + " is not in 2^23 .. 2^31 - 1");
@@ -304,59 +336,76 @@ void decode_residual_tokens(const std::uint8_t* data, std::size_t size, const Br
   thread_local std::vector<std::uint8_t> lengths;  // each written before it is read
   lengths.resize(n);
   walk_rows(dims, lengths.data(), [&](std::size_t row, const std::uint8_t* contexts, std::uint8_t* row_lengths) {
-    // Locals, so that the loop keeps them in registers.
+    // Locals, so that the loops keep them in registers.
     std::uint32_t x_now = current, x_next = other;
     const std::uint8_t* in = p;
     const std::uint8_t* bits_in = q;
     std::uint64_t bits = pending;
     unsigned bit_count = pending_bits;
-    std::uint8_t* const lo = planes + row;
-    std::uint8_t* const hi = planes + n + row;
-    for (std::uint32_t x = 0; x < dims[0]; ++x) {
+    std::uint16_t* const out = residuals + row;
+    const std::uint32_t nx = dims[0];
+    // Voxel x's token, its state's step, and what the token says
+    // (kTokenWord); the caller renormalises the state and supplies the bits
+    // below.
+    auto token = [&](std::uint32_t x) {
       DecoderModel& m = models[contexts[x]];
       const std::uint32_t slot = x_now & (kTotal - 1);
       const unsigned t = m.token_at[slot];
       x_now = m.freq[t] * (x_now >> kPrecision) + slot - m.start[t];
-      // A decoding step leaves 2^11 ≤ X < 2^31 (X ≥ 2^23 and f ≥ 1 before
-      // it; states never reach 2^31, see above), so k = (clz(X) − 1) / 8
-      // bytes, at most two, renormalise: taken at once, without branches
-      // (whose outcome the data decides) or a second dependent step, while
-      // two bytes remain.
-      if (end - in >= 2) {
-        const unsigned k = (static_cast<unsigned>(__builtin_clz(x_now)) - 1) >> 3;
-        const std::uint32_t next = std::uint32_t{in[0]} << 8 | in[1];
-        x_now = x_now << (8 * k) | next >> (16 - 8 * k);
-        in += k;
-      } else {
+      if (m.note(t)) m.fill();
+      const std::uint32_t word = kTokenWord[t];
+      row_lengths[x] = static_cast<std::uint8_t>(word);
+      return word;
+    };
+    auto below = [](std::uint32_t word) { return (word >> 8) & 0xFF; };
+    auto take_bits = [&](std::uint32_t x, std::uint32_t word) {
+      const unsigned e = below(word);
+      out[x] = static_cast<std::uint16_t>((word >> 16) | static_cast<unsigned>(bits & ((1u << e) - 1)));
+      bits >>= e;
+      bit_count -= e;
+    };
+    // A voxel takes at most two bytes of the rANS stream (a step leaves X ≥
+    // 2^11) and 14 bits below its token. Where the row's share of both
+    // surely remains, the loop reads without bounds checks: the bits are
+    // topped up to 56 or more every four voxels, without branches, and each
+    // state takes its 0–2 bytes at once, their number from two compares. The
+    // branches left are the model's refreshes and the loops'.
+    if (static_cast<std::size_t>(end - in) >= 2 * std::size_t{nx} + 2 &&
+        static_cast<std::size_t>(q_end - bits_in) >= 2 * std::size_t{nx} + 16) {
+      for (std::uint32_t x = 0; x < nx; x += 4) {
+        // Bits above bit_count may come in too: they are the bytes after
+        // the ones counted, in their places, and a later refill ORs the same
+        // bits over them.
+        std::uint64_t word;
+        std::memcpy(&word, bits_in, 8);
+        bits |= le64(word) << bit_count;
+        bits_in += (63 - bit_count) >> 3;
+        bit_count |= 56;
+        const std::uint32_t stop = nx - x < 4 ? nx : x + 4;
+        for (std::uint32_t v = x; v < stop; ++v) {
+          const std::uint32_t word = token(v);
+          // Two compares rather than a count of leading zeros: a shorter
+          // chain from one state to its next.
+          const unsigned k = static_cast<unsigned>(x_now < kStateLow) + static_cast<unsigned>(x_now < (kStateLow >> 8));
+          const std::uint32_t next = std::uint32_t{in[0]} << 8 | in[1];
+          x_now = x_now << (8 * k) | next >> (16 - 8 * k);
+          in += k;
+          std::swap(x_now, x_next);
+          take_bits(v, word);
+        }
+      }
+    } else {
+      for (std::uint32_t x = 0; x < nx; ++x) {
+        const std::uint32_t word = token(x);
         while (x_now < kStateLow) {
           if (in == end) bad("the rANS stream ends before the brick's last voxel");
           x_now = x_now << 8 | *in++;
         }
+        std::swap(x_now, x_next);
+        for (; bit_count <= 56 && bits_in != q_end; bit_count += 8) bits |= std::uint64_t{*bits_in++} << bit_count;
+        if (bit_count < below(word)) bad("the bits below the tokens end before the brick's last voxel");
+        take_bits(x, word);
       }
-      std::swap(x_now, x_next);
-      if (m.note(t)) m.fill();
-      const TokenBits tb = kTokenBits[t];
-      row_lengths[x] = tb.length;
-      const unsigned e = tb.below;
-      if (bit_count < 16) {
-        if (q_end - bits_in >= 8) {
-          const unsigned take = (63 - bit_count) >> 3;  // whole bytes that fit
-          std::uint64_t word;
-          std::memcpy(&word, bits_in, 8);
-          word = le64(word) & ((std::uint64_t{1} << (8 * take)) - 1);
-          bits |= word << bit_count;
-          bits_in += take;
-          bit_count += 8 * take;
-        } else {
-          for (; bit_count <= 56 && bits_in != q_end; bit_count += 8) bits |= std::uint64_t{*bits_in++} << bit_count;
-          if (bit_count < e) bad("the bits below the tokens end before the brick's last voxel");
-        }
-      }
-      const unsigned r = static_cast<unsigned>(tb.lead) << e | static_cast<unsigned>(bits & ((1u << e) - 1));
-      bits >>= e;
-      bit_count -= e;
-      lo[x] = static_cast<std::uint8_t>(r);
-      hi[x] = static_cast<std::uint8_t>(r >> 8);
     }
     current = x_now, other = x_next;
     p = in, q = bits_in, pending = bits, pending_bits = bit_count;

@@ -28,9 +28,9 @@ bool encode_residual_tokens(const std::uint16_t* residuals, const BrickDims& dim
                             std::vector<std::uint8_t>& out);
 
 // Decodes the coded residuals [data, data + size) of a brick of `dims` into
-// their two byte planes, as entropy coder 1's frame holds them: low bytes
-// planes[0 .. n), high bytes planes[n .. 2n). Throws Error(Malformed), the
-// message saying what is wrong, for any byte string that breaks §7.2.1.
-void decode_residual_tokens(const std::uint8_t* data, std::size_t size, const BrickDims& dims, std::uint8_t* planes);
+// residuals[0 .. n). Throws Error(Malformed), the message saying what is
+// wrong, for any byte string that breaks §7.2.1.
+void decode_residual_tokens(const std::uint8_t* data, std::size_t size, const BrickDims& dims,
+                            std::uint16_t* residuals);
 
 }  // namespace ivol::detail
