@@ -296,9 +296,10 @@ TEST(PredictedCodec, ArbitraryTapsDecodeAsTheSpecSays) {
 
 TEST(PredictedCodec, TapsAtTheEdgeOf32BitSumsDecodeAsTheSpecSays) {
   // The decoder sums in 32 bits when the taps and level allow it (Σ|t| up
-  // to 65534, |level| below 2^31 less the prediction's reach) and in 64 bits
-  // otherwise: taps and levels on either side of that line, against the
-  // spec's formulas in 64 bits.
+  // to 65534, and the level times 2^s, which decode_row adds before the
+  // shift, within what 32 bits leave over) and in 64 bits otherwise: taps,
+  // levels and shifts on either side of that line, against the spec's
+  // formulas in 64 bits. (Deciding on the taps alone fails here.)
   std::mt19937 rng(2024);
   const BrickDims d{9, 6, 5};
   const std::int64_t levels[] = {0, 1000, -70000, 1 << 20, -(1 << 29), (1LL << 31) - 1, -(1LL << 31), 1 << 30};
