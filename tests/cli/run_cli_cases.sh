@@ -118,6 +118,15 @@ case_ extract-outside    1 "outside the volume"      -- "$IVOL" extract "$work/v
 case_ slice-png          0 "32x32 slice z=5"         -- "$IVOL" slice "$work/k.ivol" --axis z --index 5 --borders -o "$work/s.png"
 case_ slice-is-png       0 "PNG 32 x 32"             -- /usr/bin/python3 -c "import struct; b=open('$work/s.png','rb').read(24); assert b[:8]==bytes([137,80,78,71,13,10,26,10]); print('PNG %d x %d' % struct.unpack('>II', b[16:24]))"
 case_ slice-bad-index    1 "--index"                 -- "$IVOL" slice "$work/k.ivol" --axis y --index 99 -o "$work/s2.png"
+# A slice with no finite value has no range of its own: the summary says so
+# (it once said "window inf .. inf"), +inf shows white, -inf and NaN black.
+/usr/bin/python3 -c "import struct; inf=float('inf'); open('$work/inf.raw','wb').write(struct.pack('<32f', *([inf] * 16 + [-inf, float('nan')] * 8)))"
+case_ convert-infinities 0 "lossless"                -- "$IVOL" convert "$work/inf.raw" "$work/inf.ivol" --dims 4,4,2 --type f32
+case_ slice-all-inf      0 "no finite value"         -- "$IVOL" slice "$work/inf.ivol" --index 0 -o "$work/inf0.png"
+grey_levels="/usr/bin/python3 $(cd "$(dirname "$0")" && pwd)/png_grey_levels.py"
+case_ slice-all-inf-white 0 "levels: 255."           -- bash -c "echo levels: \$($grey_levels '$work/inf0.png')."
+case_ slice-nan-minus-inf 0 "window 0 .. 1 (no finite" -- "$IVOL" slice "$work/inf.ivol" --index 1 -o "$work/inf1.png"
+case_ slice-nan-black    0 "levels: 0."             -- bash -c "echo levels: \$($grey_levels '$work/inf1.png')."
 
 # HDF5 and OpenVDB through the command line (their libraries are tested in
 # test_hdf5_io and test_vdb_io).

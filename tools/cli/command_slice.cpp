@@ -61,6 +61,7 @@ Runner add_slice_command(CLI::App& app, const GlobalOptions& global) {
     if (!global.quiet) {
       std::cout << s->output << ": " << image.width << "x" << image.height << " slice " << s->axis << "=" << s->index
                 << " of " << s->file << ", window " << lo << " .. " << hi;
+      if (!slice.finite) std::cout << " (no finite value in the slice: +inf white, -inf and NaN black)";
       if (s->borders) std::cout << ", " << leaves << " leaves";
       std::cout << "\n";
     }

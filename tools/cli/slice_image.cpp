@@ -30,6 +30,7 @@ SliceImage render_slice(Reader& reader, int axis, std::uint32_t index, unsigned 
   // The image's axes: the two axes other than the slice's, the lower first.
   const int u = axis == 0 ? 1 : 0;
   const int v = axis == 2 ? 1 : 2;
+  SliceImage slice;
   double lo, hi;
   if (window) {
     lo = (*window)[0], hi = (*window)[1];
@@ -38,8 +39,12 @@ SliceImage render_slice(Reader& reader, int axis, std::uint32_t index, unsigned 
     for (float f : values)
       if (std::isfinite(f)) lo = std::min<double>(lo, f), hi = std::max<double>(hi, f);
   }
+  // A slice of infinities and NaNs only has no range of its own: 0 .. 1
+  // then, so that +inf still shows white and -inf black, and the summary
+  // says so rather than print a window of inf .. inf.
+  slice.finite = std::isfinite(lo);
+  if (!slice.finite) lo = 0, hi = 1;
   if (!(hi > lo)) hi = lo + 1;
-  SliceImage slice;
   RgbImage& image = slice.image;
   image.width = box.hi[u] - box.lo[u];
   image.height = box.hi[v] - box.lo[v];

@@ -15,6 +15,7 @@ namespace ivol::cli {
 struct SliceImage {
   RgbImage image;
   double low = 0, high = 0;  // the window used
+  bool finite = true;        // false: no window given and no finite value in the slice
   std::uint64_t leaves = 0;  // leaves met, when borders were drawn
 };
 
