@@ -53,10 +53,12 @@ std::vector<std::uint32_t> make_volume(const Dims& d, unsigned seed, bool specia
   return v;
 }
 
-std::string write(const std::string& name, const Dims& d, const std::vector<std::uint32_t>& v, unsigned log2) {
+std::string write(const std::string& name, const Dims& d, const std::vector<std::uint32_t>& v, unsigned log2,
+                  int zstd_level = 3) {
   const std::string path = ivol::test::temp_path(name);
   BrickedOptions o;
   o.brick_log2 = log2;
+  o.zstd_level = zstd_level;
   o.encoding = ValueEncoding::Float32;
   o.threads = 2;
   BrickedGridWriter writer(path, d, o);
@@ -119,6 +121,35 @@ TEST(BrickedFloat32, EveryVoxelsBitsComeBackThroughBoxesSlicesAndVoxels) {
       }
     EXPECT_EQ(values_blocks, bricks);
     EXPECT_GT(planes, 0u);
+  }
+}
+
+// From zstd level 13 the bricks' byte planes are a frame each (codec 5)
+// where a brick holds 4096 values or more, codec 2 below: every bit comes
+// back, the stored levels of detail too, and check_file passes.
+TEST(BrickedFloat32, AtLevel13AndUpBricksAreAFrameAPlane) {
+  const Dims d{40, 35, 33};
+  const auto v = make_volume(d, 4, true);
+  for (int level : {13, 19}) {
+    const std::string path = write("bricked32-c5.ivol", d, v, 4, level);
+    Reader r(path);
+    ASSERT_EQ(bits_of(r, full_box(d)), v);
+    ReaderOptions summed;
+    summed.stored_levels = false;
+    Reader computed(path, summed);
+    for (unsigned lod : {1u, 2u, 3u})
+      EXPECT_EQ(bits_of(r, full_box(d, lod), lod), bits_of(computed, full_box(d, lod), lod));
+    const CheckReport report = check_file(path);
+    EXPECT_TRUE(report.ok()) << (report.problems.empty() ? "" : report.problems[0].message);
+    std::uint64_t frames = 0, planes = 0;
+    for (const BlockInfo& b : r.info().blocks) {
+      if (b.stream == 3 && b.element_count == 4096) EXPECT_EQ(b.codec, 5) << b.first_element;
+      if (b.codec == 5) EXPECT_GE(b.element_count, 4096u);
+      frames += b.codec == 5;
+      planes += b.codec == 2;
+    }
+    EXPECT_GT(frames, 0u);
+    EXPECT_GT(planes, 0u);  // the edge bricks and small stored levels
   }
 }
 

@@ -536,7 +536,12 @@ def read_index(header, footer, idx):
             fail("malformed", "block table: %s: codec %d is valid only on values and stored "
                  "level of detail blocks of a bricked regular grid of 16-bit values"
                  % (ix.where(e), e.codec))
-        if e.stream == STREAM_STORED_LOD:     # §8A.5: the limits of §7 (SPEC-NOTES 64)
+        if e.codec == CODEC_PLANE_FRAMES and stream_width(ix, e.stream) < 2:   # §7 codec 5
+            fail("malformed", "block table: %s: codec 5 (byte planes, a zstd frame each) is "
+                 "valid only on streams whose elements are wider than one byte, not on the "
+                 "metadata (width 1)" % ix.where(e))
+        if e.stream == STREAM_STORED_LOD or e.codec == CODEC_PLANE_FRAMES:
+            # §8A.5, §7: the limits of §7 with the block table (SPEC-NOTES 64, 81)
             check_block_limits(ix, e)
         entries.append(e)
     if expected_offset != footer.index_offset:
@@ -801,14 +806,17 @@ def zstd_compress_bound(n):
     return n + (n >> 8) + (((128 << 10) - n) >> 11 if n < (128 << 10) else 0)
 
 
-KNOWN_CODECS = (0, 1, 2, 3, 4)
+CODEC_PLANE_FRAMES = 5                   # §7 codec 5, byte planes a zstd frame each (1.3)
+KNOWN_CODECS = (0, 1, 2, 3, 4, 5)
 
 
 def stored_size_bound(ix, e):
-    """§7: the largest stored_size of a block of codec 1 to 4 (None for others)."""
-    if e.codec not in (1, 2, 3, 4):
+    """§7: the largest stored_size of a block of codec 1 to 5 (None for others)."""
+    if e.codec not in (1, 2, 3, 4, 5):
         return None
     bound = zstd_compress_bound(e.element_count * stream_width(ix, e.stream))
+    if e.codec == 5:       # §7: w frames of n bytes each, w·bound(n)
+        bound = stream_width(ix, e.stream) * zstd_compress_bound(e.element_count)
     if e.codec == 3:       # §7.2: the codec header and a frame of 2n bytes
         bound = PREDICTED_HEADER + zstd_compress_bound(2 * e.element_count)
     if e.codec == 4:       # §7.3: the codec header and a frame of the mask and every value
@@ -818,14 +826,23 @@ def stored_size_bound(ix, e):
     return bound
 
 
+def bound_meaning(ix, e):
+    """What the bound of stored_size_bound() is, for messages."""
+    if e.codec == 5:
+        return ("w = %d times the largest zstd frame of n = %d bytes (codec 5: a frame per "
+                "byte plane)" % (stream_width(ix, e.stream), e.element_count))
+    return "the largest zstd frame of its decoded size"
+
+
 def check_block_limits(ix, e):
     """§6.4, §7, checked with the block table: a known codec, the decoded-size
-    limit, and the stored_size of codec 0 and the bound of codecs 1 to 4.
-    This reader does it for stream 7 (§8A.5); for the other streams it checks
-    the same when it reads the block (SPEC-NOTES 8, 54, 64)."""
+    limit, and the stored_size of codec 0 and the bound of codecs 1 to 5.
+    This reader does it for stream 7 (§8A.5) and for every block of codec 5;
+    for the other blocks of streams 1 to 5 it checks the same when it reads
+    the block (SPEC-NOTES 8, 54, 64, 81)."""
     where = ix.where(e)
     if e.codec not in KNOWN_CODECS:   # §7 (SPEC-NOTES 63)
-        fail("unsupported-feature", "block table: %s: codec %d, this reader knows 0 .. 4"
+        fail("unsupported-feature", "block table: %s: codec %d, this reader knows 0 .. 5"
              % (where, e.codec))
     size = e.element_count * stream_width(ix, e.stream)
     if size > MAX_BLOCK_DECODED:
@@ -836,8 +853,8 @@ def check_block_limits(ix, e):
              "expected %d" % (where, e.stored_size, framing + size))
     bound = stored_size_bound(ix, e)
     if bound is not None and e.stored_size > bound:
-        fail("malformed", "block table: %s: stored_size %d exceeds %d, the largest zstd frame "
-             "of its decoded size" % (where, e.stored_size, bound))
+        fail("malformed", "block table: %s: stored_size %d exceeds %d, %s"
+             % (where, e.stored_size, bound, bound_meaning(ix, e)))
 
 
 def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
@@ -845,8 +862,8 @@ def read_block(r, ix, e, limit=MAX_BLOCK_DECODED):
     where = ix.where(e)
     bound = stored_size_bound(ix, e)   # §7: bounded before the stored bytes are read
     if bound is not None and e.stored_size > bound:
-        fail("malformed", "%s: stored_size %d exceeds %d, the largest zstd frame of its "
-             "decoded size" % (where, e.stored_size, bound))
+        fail("malformed", "%s: stored_size %d exceeds %d, %s"
+             % (where, e.stored_size, bound, bound_meaning(ix, e)))
     stored = r.read(e.file_offset, e.stored_size)
     actual = crc32c(stored)
     if actual != e.crc:   # §7: the CRC is checked before decoding
@@ -862,8 +879,8 @@ def decode_payload(ix, e, stored, limit=MAX_BLOCK_DECODED):
     where = ix.where(e)
     if e.codec not in KNOWN_CODECS:   # checked when the block is read (SPEC-NOTES 8)
         fail("unsupported-feature", "%s: codec %d, this reader knows 0 (stored), 1 (zstd), "
-             "2 (zstd over byte planes), 3 (predicted 16-bit) and 4 (masked 16-bit)"
-             % (where, e.codec))
+             "2 (zstd over byte planes), 3 (predicted 16-bit), 4 (masked 16-bit) and 5 (byte "
+             "planes, a zstd frame each)" % (where, e.codec))
     width = stream_width(ix, e.stream)
     size = e.element_count * width
     if size > MAX_BLOCK_DECODED:
@@ -882,6 +899,10 @@ def decode_payload(ix, e, stored, limit=MAX_BLOCK_DECODED):
         if e.codec == 3:
             return decode_predicted(stored, ext, where)
         return decode_masked(stored, e.element_count, where)
+    if e.codec == CODEC_PLANE_FRAMES:   # §7 codec 5: w frames, one per byte plane
+        if width < 2:   # refused with the block table already (metadata)
+            fail("malformed", "%s: codec 5 on a stream of width 1" % where)
+        return decode_plane_frames(stored, e.element_count, width, where)
     content = decode_zstd_frame(stored, size, where)
     if e.codec == 1:
         return content
@@ -1116,7 +1137,8 @@ def unshuffle_byte_planes(content, n, w):
     """§7 codec 2 (since 1.2): the frame's content holds the decoded bytes
     regrouped by byte position; decoded byte i·w + p = content byte p·n + i.
     The width w is the block's stream width (§6.4), whatever the stream
-    (SPEC-NOTES 56); for w = 1 the content is the decoded bytes."""
+    (SPEC-NOTES 56); for w = 1 the content is the decoded bytes.  Codec 5
+    gives the same planes, one frame each, joined in order of p."""
     if w == 1:
         return content
     planes = np.frombuffer(content, dtype=np.uint8).reshape(w, n)   # planes[p, i] = byte p·n + i
@@ -1124,22 +1146,34 @@ def unshuffle_byte_planes(content, n, w):
 
 
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
+ZstdFrame = collections.namedtuple("ZstdFrame", "start end blocks_end fhd content_size checksum")
 
 
-def decode_zstd_frame(data, size, where, size_rule=None):
-    """§7 codecs 1 and 2: exactly one zstd frame (RFC 8878 §3.1.1) with
-    Frame_Content_Size.  Codec 2 applies the same frame rules (SPEC-NOTES 57).
-    size_rule (codec 4, whose content size the frame states): checks the
-    stated size and returns it, in place of a known `size`."""
+def is_skippable_magic(b):
+    """RFC 8878 §3.1.2: a skippable frame starts with 0x184D2A50 .. 0x184D2A5F (LE)."""
+    return len(b) >= 4 and b[0] & 0xF0 == 0x50 and b[1:4] == b"\x2a\x4d\x18"
+
+
+def parse_zstd_frame(data, start, size, where, size_rule=None,
+                     size_name="element_count x width"):
+    """RFC 8878 §3.1.1: the zstd frame that starts at data[start], checked as
+    §7 asks of codec 1's frame before it is decoded, in the order of
+    SPEC-NOTES 9: magic, reserved bit, Frame_Content_Size present, no
+    dictionary, Frame_Content_Size equal to `size` (size_rule: see
+    decode_zstd_frame); then its blocks are walked to find where it ends.
+    A frame that does not end within data is malformed.  Returns a
+    ZstdFrame (end: one past its last byte, its checksum included)."""
     def need(n, what):
-        if len(data) < n:
+        if len(data) < start + n:
             fail("malformed", "%s: zstd frame ends inside the %s" % (where, what))
 
     need(5, "frame header")
-    if data[:4] != ZSTD_MAGIC:
-        fail("malformed", "%s: stored bytes do not start with a zstd frame (magic %s)"
-             % (where, data[:4].hex(" ")))
-    fhd = data[4]
+    if data[start:start + 4] != ZSTD_MAGIC:
+        fail("malformed", "%s: stored bytes%s do not start with a zstd frame (magic %s%s)"
+             % (where, " from payload byte %d" % start if start else "",
+                data[start:start + 4].hex(" "),
+                ": a skippable frame" if is_skippable_magic(data[start:start + 4]) else ""))
+    fhd = data[start + 4]
     fcs_flag, single_segment = fhd >> 6, (fhd >> 5) & 1
     reserved_bit, has_checksum, did_flag = (fhd >> 3) & 1, (fhd >> 2) & 1, fhd & 3
     if reserved_bit:
@@ -1148,6 +1182,7 @@ def decode_zstd_frame(data, size, where, size_rule=None):
     did_size = (0, 1, 2, 4)[did_flag]
     fcs_size = (1 if single_segment else 0, 2, 4, 8)[fcs_flag]
     need(p + did_size + fcs_size, "frame header")
+    p += start
     dictionary_id = int.from_bytes(data[p:p + did_size], "little")
     p += did_size
     if fcs_size == 0:
@@ -1160,12 +1195,13 @@ def decode_zstd_frame(data, size, where, size_rule=None):
     if dictionary_id != 0:
         fail("malformed", "%s: zstd frame needs dictionary %d" % (where, dictionary_id))
     if content_size != size:
-        fail("malformed", "%s: zstd Frame_Content_Size is %d, expected element_count x "
-             "width = %d" % (where, content_size, size))
+        fail("malformed", "%s: zstd Frame_Content_Size is %d, expected %s = %d"
+             % (where, content_size, size_name, size))
+    p -= start
     # Walk the zstd blocks to find the end of the frame (RFC 8878 §3.1.1.2).
     while True:
         need(p + 3, "block header")
-        block_header = int.from_bytes(data[p:p + 3], "little")
+        block_header = int.from_bytes(data[start + p:start + p + 3], "little")
         p += 3
         last, block_type, block_size = block_header & 1, (block_header >> 1) & 3, block_header >> 3
         if block_type == 3:
@@ -1174,17 +1210,24 @@ def decode_zstd_frame(data, size, where, size_rule=None):
         need(p, "last zstd block")
         if last:
             break
-    end_of_blocks = p
+    blocks_end = start + p
+    checksum = None
     if has_checksum:
         need(p + 4, "content checksum")
-        (stored_checksum,) = struct.unpack_from("<I", data, p)
+        (checksum,) = struct.unpack_from("<I", data, start + p)
         p += 4
-    if p != len(data):
-        fail("malformed", "%s: %d bytes follow the zstd frame (only one frame is allowed)"
-             % (where, len(data) - p))
+    return ZstdFrame(start, start + p, blocks_end, fhd, content_size, checksum)
+
+
+def decompress_zstd_frame(data, fr, where):
+    """Decode a frame found by parse_zstd_frame: it must decode to exactly its
+    Frame_Content_Size bytes (`malformed` otherwise), and its content checksum,
+    when present, must match (`checksum`, §13)."""
+    size = fr.content_size
     # Decode the frame without its checksum; the checksum is verified below, so
     # that a wrong checksum is reported as class `checksum`.
-    frame = data[:4] + bytes([fhd & ~0x04]) + data[5:end_of_blocks]
+    frame = (data[fr.start:fr.start + 4] + bytes([fr.fhd & ~0x04])
+             + data[fr.start + 5:fr.blocks_end])
     try:
         out = zstandard.ZstdDecompressor(max_window_size=1 << 31).decompress(
             frame, max_output_size=size)
@@ -1193,12 +1236,53 @@ def decode_zstd_frame(data, size, where, size_rule=None):
     if len(out) != size:
         fail("malformed", "%s: zstd frame decodes to %d bytes, expected %d"
              % (where, len(out), size))
-    if has_checksum:
+    if fr.checksum is not None:
         actual = xxh64(out) & 0xFFFFFFFF
-        if actual != stored_checksum:
+        if actual != fr.checksum:
             fail("checksum", "%s: zstd content checksum is 0x%08X, XXH64 of the content "
-                 "gives 0x%08X" % (where, stored_checksum, actual))
+                 "gives 0x%08X" % (where, fr.checksum, actual))
     return out
+
+
+def decode_zstd_frame(data, size, where, size_rule=None):
+    """§7 codecs 1 and 2: exactly one zstd frame (RFC 8878 §3.1.1) with
+    Frame_Content_Size.  Codec 2 applies the same frame rules (SPEC-NOTES 57).
+    size_rule (codec 4, whose content size the frame states): checks the
+    stated size and returns it, in place of a known `size`."""
+    fr = parse_zstd_frame(data, 0, size, where, size_rule)
+    if fr.end != len(data):
+        fail("malformed", "%s: %d bytes follow the zstd frame (only one frame is allowed)"
+             % (where, len(data) - fr.end))
+    return decompress_zstd_frame(data, fr, where)
+
+
+def decode_plane_frames(payload, n, w, where):
+    """§7 codec 5 (1.3): exactly w zstd frames back to back and nothing else,
+    frame p holding byte plane p (decoded byte i·w + p for i = 0 .. n - 1), each
+    under every rule of codec 1 for its own content of n bytes.  Every frame
+    is found and its header checked first, then that nothing follows the w-th
+    frame, then each frame is decoded and its checksum verified, in order
+    (SPEC-NOTES 82).  Returns the decoded bytes (the planes put back as for
+    codec 2)."""
+    frames = []
+    at = 0
+    for p in range(w):
+        what = "%s: codec 5 frame %d (byte plane %d of %d)" % (where, p, p, w)
+        if at == len(payload):   # fewer than w frames
+            fail("malformed", "%s: the payload ends after %d zstd frame%s, codec 5 holds "
+                 "w = %d (one per byte plane)" % (where, p, "" if p == 1 else "s", w))
+        frames.append(parse_zstd_frame(payload, at, n, what, size_name="element_count n"))
+        at = frames[-1].end
+    if at != len(payload):       # more than w frames, a skippable frame, other bytes
+        rest = payload[at:at + 4]
+        kind = ("a further zstd frame" if rest == ZSTD_MAGIC else
+                "a skippable frame" if is_skippable_magic(rest) else "bytes that are no frame")
+        fail("malformed", "%s: %d bytes (%s) follow the %d zstd frames of codec 5, which holds "
+             "exactly w frames and nothing else" % (where, len(payload) - at, kind, w))
+    planes = b"".join(decompress_zstd_frame(
+        payload, fr, "%s: codec 5 frame %d (byte plane %d of %d)" % (where, p, p, w))
+        for p, fr in enumerate(frames))
+    return unshuffle_byte_planes(planes, n, w)
 
 
 # ============================================================ §11 Metadata
@@ -2184,7 +2268,8 @@ def salvage_usable(ix, found, stream):
     for e, payload in sorted((b for b in found if b[0].stream == stream),
                              key=lambda b: b[0].first_element):
         size = e.element_count * stream_width(ix, stream)
-        if (e.flags != 0 or e.codec > 2 or e.element_count < 1 or size > MAX_BLOCK_DECODED
+        if (e.flags != 0 or e.codec not in (0, 1, 2, 5) or e.element_count < 1
+                or size > MAX_BLOCK_DECODED
                 or (e.codec == 0 and len(payload) != size) or e.level > ix.depth
                 or (ix.structure_kind != KIND_OCTREE and e.level != 0)):
             continue
@@ -2210,7 +2295,9 @@ def salvage(data):
     # §15: the metadata block when it survived, else the early metadata (stream 6).
     for stream, name in ((STREAM_METADATA, "complete"), (6, "early")):
         for e, payload in found:
-            if e.stream != stream or summary["metadata"] != "missing":
+            # codecs 0, 1 and 2 (which is codec 1 for w = 1) hold text; codec 5
+            # is not valid on a stream of width 1 (§7, SPEC-NOTES 84)
+            if e.stream != stream or summary["metadata"] != "missing" or e.codec not in (0, 1, 2):
                 continue
             try:
                 text = payload if e.codec == 0 else decode_zstd_frame(

@@ -74,6 +74,7 @@ CODEC_STORED, CODEC_ZSTD = 0, 1
 CODEC_PLANES = 2                 # zstd over byte planes, since 1.2 (§7)
 CODEC_PREDICTED = 3              # predicted 16-bit, since 1.3 (§7.2)
 CODEC_MASKED = 4                 # masked 16-bit, since 1.3 (§7.3)
+CODEC_FRAMES = 5                 # byte planes, a zstd frame each, since 1.3 (§7)
 LORENZO = (1, 1, 1, -1, -1, -1, 1)
 
 
@@ -819,6 +820,8 @@ class Blk:
             return zframe(self.data, self.zcheck, self.zsize)
         if self.codec == CODEC_PLANES:
             return zframe(byte_planes(self.data, len(self.data) // self.count), self.zcheck, self.zsize)
+        if self.codec == CODEC_FRAMES:
+            return plane_frames(self.data, len(self.data) // self.count, self.zcheck, self.zsize)
         return self.data            # unknown codec: raw bytes
 
 
@@ -840,6 +843,121 @@ def from_byte_planes(content, w):
     for p in range(w):
         out[p::w] = content[p * n:(p + 1) * n]
     return bytes(out)
+
+
+def planes_of(data, w):
+    """The w byte planes of `data` (elements of width w): plane p is decoded
+    byte i*w + p for i = 0 .. n-1."""
+    assert len(data) % w == 0
+    return [data[p::w] for p in range(w)]
+
+
+def plane_frames(data, w, checksum=True, content_size=True, frame=None):
+    """§7 codec 5: w zstd frames back to back, frame p holding byte plane p of
+    the decoded bytes `data`.  frame(p, plane) may return a frame of its own
+    for plane p (None: a compressor's frame, with or without the content
+    checksum)."""
+    out = b""
+    for p, plane in enumerate(planes_of(data, w)):
+        f = frame(p, plane) if frame is not None else None
+        out += f if f is not None else zframe(plane, checksum, content_size)
+    return out
+
+
+def zstd_checksum(content):
+    """The content checksum of a zstd frame of `content` (the low 32 bits of
+    XXH64, RFC 8878 §3.1.1), taken from the reference library's own frame."""
+    return zstandard.ZstdCompressor(level=1, write_checksum=True).compress(content)[-4:]
+
+
+def hand_zframe(content, blocks=None, fcs_bytes=4, single_segment=True, checksum=False, empties=0):
+    """A zstd frame (RFC 8878 §3.1.1) built by hand, without a compressor.
+    Frame header: Single_Segment_flag (else a Window_Descriptor of a window of
+    at least the content), Frame_Content_Size in a field of fcs_bytes (1 only
+    with the single segment flag; 2 holds the size - 256), no Dictionary_ID.
+    Then `empties` empty raw blocks, then `blocks`: a list of ("raw", length)
+    or ("rle", length) covering the content in order (default: one raw
+    block), the last one with Last_Block set; then the content checksum if
+    asked."""
+    n = len(content)
+    flag = {1: 0, 2: 1, 4: 2, 8: 3}[fcs_bytes]
+    assert fcs_bytes != 1 or single_segment
+    fhd = flag << 6 | (1 << 5 if single_segment else 0) | (1 << 2 if checksum else 0)
+    out = bytearray(b"\x28\xb5\x2f\xfd") + bytes([fhd])
+    if not single_segment:
+        exponent = max(0, (max(n, 1) - 1).bit_length() - 10)     # window 2^(10 + exponent) >= n
+        out.append(exponent << 3)
+    fcs = n - 256 if fcs_bytes == 2 else n
+    assert 0 <= fcs < 1 << (8 * fcs_bytes)
+    out += fcs.to_bytes(fcs_bytes, "little")
+    for _ in range(empties):
+        out += (0 << 3 | 0 << 1 | 0).to_bytes(3, "little")          # raw, size 0, not last
+    blocks = blocks or [("raw", n)]
+    assert sum(k for _, k in blocks) == n
+    at = 0
+    for q, (kind, k) in enumerate(blocks):
+        last = 1 if q == len(blocks) - 1 else 0
+        part = content[at:at + k]
+        if kind == "raw":
+            out += (k << 3 | 0 << 1 | last).to_bytes(3, "little") + part
+        else:
+            assert k >= 1 and part == part[:1] * k
+            out += (k << 3 | 1 << 1 | last).to_bytes(3, "little") + part[:1]
+        at += k
+    if checksum:
+        out += zstd_checksum(content)
+    fr = bytes(out)
+    assert zstandard.ZstdDecompressor().decompress(fr) == content
+    return fr
+
+
+def runs_as_blocks(content, shortest=3):
+    """("rle", k) for every run of at least `shortest` equal bytes, ("raw", k)
+    for what lies between: the blocks of a hand-built frame of `content`."""
+    blocks, at, raw = [], 0, 0
+    while at < len(content):
+        k = 1
+        while at + k < len(content) and content[at + k] == content[at]:
+            k += 1
+        if k >= shortest:
+            if raw:
+                blocks.append(("raw", raw))
+                raw = 0
+            blocks.append(("rle", k))
+        else:
+            raw += k
+        at += k
+    if raw:
+        blocks.append(("raw", raw))
+    return blocks
+
+
+def multiblock_zframe(content, chunk, checksum=True):
+    """A compressor's frame of `content` made of several zstd blocks: a block
+    ends after every `chunk` bytes (a flush; the frame stays one frame)."""
+    c = zstandard.ZstdCompressor(level=19, write_checksum=checksum, write_content_size=True)
+    o = c.compressobj(size=len(content))
+    out = b""
+    for a in range(0, len(content), chunk):
+        out += o.compress(content[a:a + chunk]) + o.flush(zstandard.COMPRESSOBJ_FLUSH_BLOCK)
+    out += o.flush(zstandard.COMPRESSOBJ_FLUSH_FINISH)
+    assert len(zstd_block_types(out)) >= 3
+    return out
+
+
+def zstd_block_types(fr):
+    """The types of the zstd blocks of the one frame fr (RFC 8878 §3.1.1.2):
+    "raw", "rle" or "compressed", in order."""
+    fhd = fr[4]
+    single = (fhd >> 5) & 1
+    p = 5 + (0 if single else 1) + (0, 1, 2, 4)[fhd & 3] + (1 if single else 0, 2, 4, 8)[fhd >> 6]
+    types = []
+    while True:
+        h = int.from_bytes(fr[p:p + 3], "little")
+        p += 3 + (1 if (h >> 1) & 3 == 1 else h >> 3)
+        types.append(("raw", "rle", "compressed")[(h >> 1) & 3])
+        if h & 1:
+            return types
 
 
 def _check_byte_planes():
@@ -1348,10 +1466,50 @@ def decode_block(data, e, width):
         if e.get("brick") is None or width != 2:
             _fail("malformed", "codec4.where")
         return masked_decode(st, e["count"])
+    if e["codec"] == CODEC_FRAMES:
+        return from_byte_planes(zstd_plane_frames(st, e["count"], width), width)
     out = zstd_content(st, need)
     if e["codec"] == CODEC_PLANES:
         return from_byte_planes(out, width)
     return out
+
+
+def zstd_plane_frames(st, n, w):
+    """§7 codec 5: exactly w zstd frames and nothing else, each under the
+    rules of codec 1 for n content bytes; returns their contents, the byte
+    planes, one after the other.  (The frames' ends are found by the
+    library's decoder, one frame at a time.)"""
+    planes, rest = b"", st
+    for p in range(w):
+        if not rest:
+            _fail("malformed", "codec5.frames", "%d frames, expected %d" % (p, w))
+        if rest[:4] != b"\x28\xb5\x2f\xfd":
+            _fail("malformed", "codec5.skippable" if rest[1:4] == b"\x2a\x4d\x18" and rest[0] >> 4 == 5
+                  else "zstd.frame", "frame %d" % p)
+        try:
+            prm = zstandard.get_frame_parameters(rest)
+        except zstandard.ZstdError:
+            _fail("malformed", "zstd.frame", "frame %d" % p)
+        if prm.content_size != n:
+            _fail("malformed", "zstd.content_size", "frame %d: %d" % (p, prm.content_size))
+        if prm.dict_id != 0:
+            _fail("malformed", "zstd.dict", "frame %d" % p)
+        dobj = zstandard.ZstdDecompressor().decompressobj()
+        try:
+            out = dobj.decompress(rest)
+        except zstandard.ZstdError as ex:
+            if "checksum" in str(ex).lower():
+                _fail("checksum", "zstd.checksum", "frame %d" % p)
+            _fail("malformed", "zstd.data", "frame %d: %s" % (p, ex))
+        if not dobj.eof:
+            _fail("malformed", "codec5.cut", "frame %d does not end within the payload" % p)
+        if len(out) != n:
+            _fail("malformed", "zstd.extra", "frame %d" % p)
+        planes += out
+        rest = dobj.unused_data
+    if rest:
+        _fail("malformed", "codec5.extra", "%d bytes after the %d frames" % (len(rest), w))
+    return planes
 
 
 def zstd_content(st, need):
@@ -1510,10 +1668,14 @@ def read_ivol(data, verify=True):
                     _fail("malformed", "lod.level", "block %d level %d" % (b, level))
             elif flags != 0:
                 _fail("malformed", "block.flags", "block %d" % b)
-            if codec not in (0, 1, 2, 3, 4):
+            if codec not in (0, 1, 2, 3, 4, 5):
                 _fail("unsupported-feature", "codec", "block %d codec %d" % (b, codec))
             if codec in (3, 4) and not (stream in (3, STREAM_LOD) and sk == 5 and ve in (1, 2)):
                 _fail("malformed", "codec%d.where" % codec, "block %d" % b)
+            if codec == 5 and width[stream] < 2:       # §7: codec 5 needs w >= 2
+                _fail("malformed", "codec5.where", "block %d" % b)
+            if codec == 5 and ss > width[stream] * zstd_bound(cnt) + (32 if framed else 0):
+                _fail("malformed", "block.stored_bound", "block %d" % b)
             if codec == 3 and ss > 24 + zstd_bound(2 * cnt) + (32 if framed else 0):
                 _fail("malformed", "block.stored_bound", "block %d" % b)
             if codec == 4 and ss > 4 + zstd_bound((cnt + 7) // 8 + 2 * cnt) + (32 if framed else 0):
@@ -2537,18 +2699,28 @@ def gen():
     inv("block_stored_size_plus_1", pen(vblk, "stored_size", "<I", len(bblocks[vblk].stored_bytes()) + 1),
         "malformed", "block.placement",
         "A block's stored_size one too large: the next block does not start where it ends.")
-    for unknown in (5, 255):
+    for unknown in (6, 255):
         bl = level_blocks(bt, CODEC_ZSTD)
         bl.append(meta_block(DEFAULT_META))
         bl[vblk].codec = unknown
         bl[vblk].stored = bl[vblk].data
         d, _ = assemble(bt, bl)
         inv("codec_%d" % unknown, d, "unsupported-feature", "codec",
-            "A values block with codec %d (unknown: 1.3 defines 0 to 4); its stored bytes are the "
-            "raw values, CRC correct.%s" % (unknown, " (Was codec_4 in the earlier 1.3 drafts, codec_3 up "
-                                           "to 1.2, codec_2 in the 1.0 and 1.1 vectors: 1.2 made codec 2 "
-                                           "zstd over byte planes, 1.3 codec 3 predicted 16-bit and codec 4 "
-                                           "masked 16-bit.)" if unknown == 5 else ""))
+            "A values block with codec %d (unknown: 1.3 defines 0 to 5); its stored bytes are the "
+            "raw values, CRC correct.%s" % (unknown, " (Was codec_5 in the earlier 1.3 drafts, codec_4 "
+                                           "before them, codec_3 up to 1.2, codec_2 in the 1.0 and 1.1 "
+                                           "vectors: 1.2 made codec 2 zstd over byte planes, 1.3 codec 3 "
+                                           "predicted 16-bit, codec 4 masked 16-bit and codec 5 byte "
+                                           "planes a zstd frame each.)" if unknown == 6 else ""))
+    bl = level_blocks(bt, CODEC_ZSTD)
+    bl.append(meta_block(DEFAULT_META))
+    bl[vblk].codec = CODEC_FRAMES
+    bl[vblk].stored = bl[vblk].data
+    d, _ = assemble(bt, bl)
+    inv("codec5_raw_values", d, "malformed", "zstd.frame",
+        "The file that was codec_5 before 1.3 defined codec 5: a values block with codec 5 whose stored "
+        "bytes are the raw values, CRC correct. Codec 5 is now byte planes, a zstd frame each (§7), and "
+        "these bytes are no zstd frame: malformed.")
     bl = level_blocks(bt, CODEC_ZSTD)
     bl.append(meta_block(DEFAULT_META))
     bl[vblk].codec = CODEC_PREDICTED
@@ -2902,6 +3074,7 @@ def gen():
     gen_stored_lods()
     gen_entropy2()
     gen_bricked_float32()
+    gen_codec5()
     return SAMPLE
 
 
@@ -4662,6 +4835,360 @@ def gen_codec2_invalid(bt, vblk, nblk1):
         % (S, S, len(big.stored_bytes())))
 
 
+def gen_codec5():
+    """§7 codec 5 (1.3 draft): byte planes, a zstd frame each, on every stream
+    of width >= 2 (node words, values, borders, cell words, stored levels of
+    detail), then files that break one rule of codec 5 each.  Own generator
+    (seed), after all others, so the vectors before keep their bytes."""
+    framed = dict(framed=True, minor=3)
+    rng = np.random.default_rng(2505)
+    V3 = " Version 1.3 (version_minor 3)."
+
+    def bricked_file(src, enc, b, codec, frames=None, levels=None, lod_frames=None):
+        """A framed bricked grid of `src` (bricks of 2^b): the metadata first,
+        then one values block per brick (codec(q) for brick q); frames(q, blk)
+        may replace a codec 5 brick's stored bytes.  levels {k: codec} store
+        levels of detail k in stream 7 (computed from the source, §12.3), and
+        lod_frames(k, q, blk) may replace their stored bytes."""
+        g = write_bricked(src, enc, b)
+        blocks = bricked_blocks(g, codec)
+        for q, blk in enumerate(blocks):
+            st = frames(q, blk) if frames else None
+            if st is not None:
+                blk.stored = st
+        lods = flat_lods(src, enc, g.D) if levels else {}
+        for k in sorted(levels or {}):
+            lb = lod_level_blocks(lods[k], enc, b, k, levels[k])
+            for q, blk in enumerate(lb):
+                st = lod_frames(k, q, blk) if lod_frames else None
+                if st is not None:
+                    blk.stored = st
+            blocks += lb
+        blocks.insert(0, meta_block(DEFAULT_META))
+        data, _ = assemble(g, blocks, structure_kind=KIND_BRICKED, ireserved=b, **framed)
+        return data, blocks
+
+    def codecs_of(blocks, stream):
+        return [b.codec for b in blocks if b.stream == stream]
+
+    # ---- float32 bricked grid: codec 5 among codecs 0, 1, 2; every kind of frame; stored levels
+    src = smooth_f32(9, 5, 5, rng)
+    put_bits(src, {(0, 0, 0): 0x80000000,          # -0, brick 0 (codec 5, frames of every kind)
+                   (2, 2, 2): 0x7FC01234,          # quiet NaN with a payload, brick 0
+                   (5, 1, 3): 0x00400000,          # subnormal, brick 1 (codec 0)
+                   (8, 1, 1): 0x7F800000,          # +inf, brick 2 (1x4x4, codec 5)
+                   (1, 4, 1): 0x7F812345,          # signalling NaN with a payload, brick 3 (codec 1)
+                   (5, 4, 2): 0xFF800000,          # -inf, brick 4 (4x1x4, codec 5 without checksums)
+                   (1, 1, 4): 0xFFC00001,          # negative quiet NaN, brick 6 (4x4x1, raw frames)
+                   (6, 2, 4): 0x7FA00001,          # signalling NaN, brick 7 (codec 5)
+                   (8, 3, 4): 0x00000001,          # smallest subnormal, brick 8 (1x4x1)
+                   (6, 4, 4): 0x80000000,          # -0, brick 10 (4x1x1)
+                   (8, 4, 4): 0x807FFFFF})         # largest negative subnormal: brick 11, 1x1x1 (n = 1)
+    per_brick = [CODEC_FRAMES, CODEC_STORED, CODEC_FRAMES, CODEC_ZSTD, CODEC_FRAMES, CODEC_PLANES,
+                 CODEC_FRAMES, CODEC_FRAMES, CODEC_FRAMES, CODEC_PLANES, CODEC_FRAMES, CODEC_FRAMES]
+
+    def frames32(q, blk):
+        if q == 0:      # each plane a frame of another kind
+            def one(p, plane):
+                if p == 0:      # a compressor's frame of several zstd blocks (a block every 16 bytes)
+                    return multiblock_zframe(plane, 16, checksum=True)
+                if p == 1:      # a compressor's frame without checksum
+                    return zframe(plane, checksum=False)
+                if p == 2:      # one raw block, a Window_Descriptor, no checksum
+                    return hand_zframe(plane, single_segment=False)
+                blocks = runs_as_blocks(plane)      # raw and RLE blocks, with checksum
+                assert any(k == "rle" for k, _ in blocks) and any(k == "raw" for k, _ in blocks)
+                return hand_zframe(plane, blocks, checksum=True)
+            return plane_frames(blk.data, 4, frame=one)
+        if q == 4:      # no content checksum in any frame
+            return plane_frames(blk.data, 4, checksum=False)
+        if q == 6:      # each plane one raw block, Frame_Content_Size in 1 byte, with checksum
+            return plane_frames(blk.data, 4, frame=lambda p, plane: hand_zframe(plane, fcs_bytes=1,
+                                                                               checksum=True))
+        if q == 8:      # frames with and without checksum alternate
+            return plane_frames(blk.data, 4, frame=lambda p, plane: zframe(plane, checksum=p % 2 == 0))
+        return None
+
+    def lod_frames32(k, q, blk):
+        if k == 3:      # n = 2: frames without checksum
+            return plane_frames(blk.data, 4, checksum=False)
+        return None
+
+    d, bl = bricked_file(src, FLOAT32, 2, lambda q: per_brick[q], frames32,
+                         levels={1: CODEC_FRAMES, 2: CODEC_FRAMES, 3: CODEC_FRAMES, 4: CODEC_FRAMES},
+                         lod_frames=lod_frames32)
+    assert codecs_of(bl, STREAM_VALUES) == per_brick and set(codecs_of(bl, STREAM_LOD)) == {CODEC_FRAMES}
+    assert sorted(b.count for b in bl if b.stream == STREAM_LOD) == [1, 2, 9, 12, 36]
+    add_valid("codec5_bricked_9x5x5_float32_mixed", d, src, FLOAT32,
+              "Bricked grid (structure_kind 5) 9x5x5 float32, bricks of 4: 12 bricks of 64, 16, 4 and 1 "
+              "values (the corner brick 1x1x1, n = 1), one block each, of codecs 5, 0, 5, 1, 5, 2, 5, 5, "
+              "5, 2, 5, 5 (§8A.4: a float32 grid's bricks are of codecs 0, 1, 2 or 5). A codec 5 block is "
+              "4 zstd frames back to back, frame p the byte plane p of the brick's values (§7). Brick 0's "
+              "four frames are each of another kind: a compressor's frame of several zstd blocks (a block "
+              "every 16 bytes, then an empty last block) with checksum, a compressor's frame without "
+              "checksum, one raw block under a Window_Descriptor (no single segment), and a hand-made frame "
+              "of raw and RLE blocks with checksum; brick 4's frames have no checksum, brick 6's are each "
+              "one raw block with a 1-byte Frame_Content_Size and a checksum, brick 8's alternate with and "
+              "without checksum, the others are compressor frames with checksum. Values: a gradient with "
+              "-0, +inf, -inf, NaNs with payloads (quiet, signalling, negative) and subnormals, every bit "
+              "pattern passed through (§9). Stored levels of detail 1 .. 4 (stream 7, §8A.5), every block "
+              "codec 5: level 1 (5x3x3, bricks of 36 and 9), 2 (3x2x2), 3 (2x1x1: n = 2, frames without "
+              "checksum) and 4 (1x1x1: n = 1, four frames of one byte).%s" % V3,
+              kind=KIND_BRICKED, extra={"brick_log2": 2, "stored_levels": [1, 2, 3, 4]})
+
+    # ---- binary16 bricked grid: codec 5 among codecs 2, 3, 4; stored levels all codec 5
+    src = arr_f16(np.round(rng.normal(0.5, 0.2, 10 * 5 * 5), 3), (5, 5, 10))
+    src[0:2, 0:2, 0:2] = 0x8000                      # a level-1 cell of -0: +0 in the levels
+    put_bits(src, {(5, 1, 1): 0x7C01,                # a NaN with a payload: the canonical NaN above it
+                   (9, 2, 0): 0x7C00,                # +inf
+                   (2, 4, 3): 0xFC00,                # -inf, brick 3 (4x1x4)
+                   (6, 3, 4): 0x0001,                # smallest subnormal
+                   (1, 2, 4): 0x83FF,                # largest negative subnormal
+                   (8, 4, 4): 0xFE00})               # negative NaN: brick 11 (2x1x1, n = 2)
+    per_brick = [CODEC_FRAMES, CODEC_PREDICTED, CODEC_FRAMES, CODEC_MASKED, CODEC_FRAMES, CODEC_FRAMES,
+                 CODEC_PLANES, CODEC_FRAMES, CODEC_FRAMES, CODEC_PREDICTED, CODEC_FRAMES, CODEC_FRAMES]
+
+    def frames16(q, blk):
+        if q == 2:      # 1x4x4: no checksum
+            return plane_frames(blk.data, 2, checksum=False)
+        if q == 11:     # n = 2: each plane one raw block, 1-byte Frame_Content_Size
+            return plane_frames(blk.data, 2, frame=lambda p, plane: hand_zframe(plane, fcs_bytes=1,
+                                                                               checksum=p == 1))
+        return None
+
+    def lod_frames16(k, q, blk):
+        if k == 1 and q == 1:
+            return plane_frames(blk.data, 2, checksum=False)
+        if k == 2:
+            return plane_frames(blk.data, 2, frame=lambda p, plane: multiblock_zframe(plane, 4)
+                                if p == 0 else None)
+        return None
+
+    d, bl = bricked_file(src, BINARY16, 2, lambda q: per_brick[q], frames16,
+                         levels={k: CODEC_FRAMES for k in range(1, 5)}, lod_frames=lod_frames16)
+    assert codecs_of(bl, STREAM_VALUES) == per_brick
+    add_valid("codec5_bricked_lods_10x5x5_binary16", d, src, BINARY16,
+              "Bricked grid 10x5x5 binary16, bricks of 4: 12 bricks (the last 2x1x1, n = 2) of codecs 5, 3, "
+              "5, 4, 5, 5, 2, 5, 5, 3, 5, 5: a codec 5 block is 2 zstd frames, the low bytes of the brick's "
+              "values, then their high bytes (§7); brick 2's frames have no checksum, brick 11's are each "
+              "one raw block (Frame_Content_Size in 1 byte), the first without, the second with checksum. "
+              "Stored levels of detail 1 .. 4 (stream 7, §8A.5), every block codec 5: level 1 (5x3x3, "
+              "bricks of 36 and 9 elements, the second without checksums), level 2 (3x2x2, its low plane "
+              "a frame of several zstd blocks), level 3 (2x1x1, n = 2), level 4 (1x1x1, n = 1). -0 (a "
+              "2x2x2 cell of it: +0 in the levels), NaN 0x7C01 and 0xFE00, +inf, -inf, subnormals; the "
+              "levels hold +0 and the canonical NaN 0x7E00 where §12.3 gives them.%s" % V3,
+              kind=KIND_BRICKED, extra={"brick_log2": 2, "stored_levels": [1, 2, 3, 4]})
+
+    # ---- octree (unframed): node words (w = 8) and values (w = 2) codec 5
+    src = vol_object_in_air(24, 20, 18, UINT16, 106, 300, (11.0, 10.0, 9.0), 7.5, 20000, 40000)
+    t = build_tree(src, UINT16)
+    bl = level_blocks(t, CODEC_FRAMES, limit=48)
+    for n, b in enumerate(bl):
+        b.zcheck = n % 3 != 2                    # every third block's frames without checksum
+    bl.insert(0, meta_block(DEFAULT_META))
+    d, _ = assemble(t, bl, scale=2.0 ** -12, offset=-1.0, minor=3)
+    nodes = [b for b in bl if b.stream == STREAM_NODES]
+    assert nodes[0].count == 1 and all(b.codec == CODEC_FRAMES for b in bl[1:])
+    add_valid("codec5_octree_24x20x18_uint16", d, src, UINT16,
+              "The volume of multiblock_24x20x18_uint16 (octree, uint16, scale 2^-12, offset -1) WITHOUT "
+              "framed blocks (§7: codec 5 does not need them; its stored bytes are then the w frames "
+              "alone): every nodes block (node words, w = 8: eight frames, one per byte of the u64) and "
+              "every values block (w = 2) codec 5, the metadata first, codec 1; blocks of at most 48 "
+              "decoded bytes (%d nodes blocks, %d values blocks; the root's node word and value are blocks "
+              "of one element, n = 1), every third block's frames without checksum.%s"
+              % (len(nodes), sum(1 for b in bl if b.stream == STREAM_VALUES), V3))
+
+    rng2 = np.random.default_rng(105)                       # the volume of gradient_12x10x9_float32
+    z, y, x = np.mgrid[0:9, 0:10, 0:12]
+    vals = 0.01 * x + 0.1 * y - 0.05 * z + rng2.normal(0, 1e-4, (9, 10, 12))
+    vals[0:4, 0:8, 0:8] = -7.25
+    vals[4:9, 8:10, 8:12] = 3.0e-41
+    src = arr_f32(vals, (9, 10, 12))
+    t = build_tree(src, FLOAT32)
+    bl = level_blocks(t, CODEC_FRAMES)
+    big = max((b for b in bl if b.stream == STREAM_VALUES), key=lambda b: b.count)
+    multi = []
+
+    def thirds(p, plane):                    # a block ends after every third of the plane
+        fr = multiblock_zframe(plane, -(-len(plane) // 3))
+        multi.append(zstd_block_types(fr).count("compressed"))
+        return fr
+    big.stored = plane_frames(big.data, 4, frame=thirds)
+    assert max(multi) >= 2
+    bl.insert(0, meta_block(DEFAULT_META))
+    d, _ = assemble(t, bl, **framed)
+    assert all(b.codec == CODEC_FRAMES for b in bl[1:]) and any(b.stream == 2 and b.count > 1 for b in bl)
+    add_valid("codec5_octree_framed_12x10x9_float32", d, src, FLOAT32,
+              "The volume of gradient_12x10x9_float32 (octree) with framed blocks, every nodes block (w = 8) "
+              "and values block (w = 4) codec 5, the metadata first (codec 1); one block per stream and "
+              "level. The largest values block (level %d, n = %d) has frames of several zstd blocks (a "
+              "block ends after every third of its plane; %s compressed blocks in its four frames), so "
+              "a decoder carries the frame's history from block to block. The limit of §7 is w·bound(n) "
+              "plus 32 for the block header.%s" % (big.level, big.count, ", ".join(map(str, multi)), V3))
+
+    # ---- grids: borders (w = 4) and cell words (w = 8) codec 5
+    bx, by, bz = [0, 1, 4, 5, 11, 19, 20], [0, 11], [0, 2, 3, 7]
+    rng2 = np.random.default_rng(203)                       # the grid of rectilinear_20x11x7_uint16
+    cv = [int(v) for v in rng2.integers(0, 65536, 18)]
+    src = rect_source(UINT16, bx, by, bz, cv)
+    g = write_rectilinear(src, UINT16, bx, by, bz)
+    d, lay, bl = grid_file(g, codec=CODEC_FRAMES, limit=16, slimit=8, meta_first=True, scale=0.5,
+                           offset=-1000.0, **framed)
+    assert {(b.stream, b.codec) for b in bl} == {(1, 1), (3, 5), (4, 5)}
+    assert any(b.stream == STREAM_BORDERS and b.count == 1 for b in bl)
+    add_valid("codec5_rectilinear_20x11x7_uint16", d, src, UINT16,
+              "The rectilinear grid of rectilinear_20x11x7_uint16 (structure_kind 3) with framed blocks, "
+              "every borders block (u32, w = 4: four frames) and values block (w = 2) codec 5, metadata "
+              "first, codec 1; 13 borders in 7 blocks (the last of one border, n = 1), 18 values in 3 "
+              "blocks.%s" % V3, kind=KIND_RECTILINEAR)
+
+    expo = [[[(i + j + 2 * k) % 4 for i in range(5)] for j in range(3)] for k in range(2)]
+    rng2 = np.random.default_rng(206)                       # the grid of nested_37x21x10_uint16_c8
+    src = nested_source(UINT16, (37, 21, 10), 3, expo, lambda: int(rng2.integers(0, 65536)))
+    g = write_nested(src, UINT16, 3, expo)
+    meta = dict(DEFAULT_META)
+    meta["structure"] = {"kind": "nested", "lossless": True, "source_encoding": "uint16"}
+    d, lay, bl = grid_file(g, meta=meta, codec=CODEC_FRAMES, limit=512, slimit=56, scale=0.25,
+                           offset=-512.0, minor=3)
+    assert {(b.stream, b.codec) for b in bl} == {(1, 1), (3, 5), (5, 5)}
+    add_valid("codec5_nested_37x21x10_uint16_c8", d, src, UINT16,
+              "The nested grid of nested_37x21x10_uint16_c8 (structure_kind 4, cell_log2 3), without "
+              "framing, every cells block (u64 cell words, w = 8: eight frames; blocks of 7, 7, 7, 7 and 2 "
+              "cell words) and values block codec 5, metadata codec 1.%s" % V3,
+              kind=KIND_NESTED, extra={"cell_log2": 3})
+
+    # ---- the limit of §7: w·bound(n), reached exactly (valid) and by one byte more (invalid)
+    assert zstd_bound(1) == 64 and zstd_bound(4) == 67
+    src_b = smooth_f32(5, 5, 5, rng)
+
+    def at_bound(extra):
+        """The 1x1x1 brick (n = 1, w = 4) as 4 legal frames of one byte each,
+        padded with empty raw blocks to 4·bound(1) = 256 bytes (+ extra)."""
+        def f(q, blk):
+            if q != 7:
+                return None
+            planes = planes_of(blk.data, 4)
+            fr = [hand_zframe(planes[0], fcs_bytes=1, empties=16),                      # 10 + 48
+                  hand_zframe(planes[1], fcs_bytes=4, empties=16, single_segment=not extra),  # 13 (14) + 48
+                  hand_zframe(planes[2], fcs_bytes=4, checksum=True, empties=17),      # 17 + 51
+                  hand_zframe(planes[3], fcs_bytes=4, checksum=True, single_segment=False, empties=17)]
+            st = b"".join(fr)
+            assert len(st) == 4 * zstd_bound(1) + extra
+            return st
+        return f
+
+    d, bl = bricked_file(src_b, FLOAT32, 2, CODEC_FRAMES, at_bound(0))
+    assert bl[8].count == 1 and len(bl[8].stored_bytes()) == 256
+    add_valid("codec5_stored_size_at_bound_5x5x5_float32", d, src_b, FLOAT32,
+              "Bricked grid 5x5x5 float32, bricks of 4, every brick codec 5; the last brick (1x1x1: n = 1, "
+              "w = 4) is 4 legal frames of one byte each, padded with empty raw zstd blocks to exactly "
+              "w·bound(n) = 4 x 64 = 256 bytes of payload (stored_size 288 with the block header), the "
+              "largest §7 allows for codec 5. A reader that applied codec 2's limit, bound(w·n) = "
+              "bound(4) = 67 (+ 32), would refuse it.%s" % V3,
+              kind=KIND_BRICKED, extra={"brick_log2": 2})
+    d, bl = bricked_file(src_b, FLOAT32, 2, CODEC_FRAMES, at_bound(1))
+    add_invalid("codec5_stored_size_over_bound", d, "malformed", "block.stored_bound",
+                "codec5_stored_size_at_bound_5x5x5_float32 with one byte more in the codec 5 block of its "
+                "1x1x1 brick (its second frame has a Window_Descriptor): 257 bytes of payload, stored_size "
+                "289 > w·bound(n) + 32 = 288 (§7). Every frame is legal and the block's CRCs hold; a reader "
+                "refuses it with the block table, before it reads any block.")
+
+    # ---- invalid: one defect in the codec 5 block of brick 1 of a float32 grid
+    src_i = smooth_f32(6, 5, 4, rng)
+    what = ("Bricked grid 6x5x4 float32, bricks of 4, every brick codec 5 (4 frames with checksum, "
+            "framed, version 1.3): the block of brick 1 (2x4x4, n = 32)")
+
+    def inv(name, expect, tag, desc, stored_of):
+        def f(q, blk):
+            return stored_of(blk.data, planes_of(blk.data, 4)) if q == 1 else None
+        d, bl = bricked_file(src_i, FLOAT32, 2, CODEC_FRAMES, f)
+        assert bl[2].count == 32
+        add_invalid(name, d, expect, tag, "%s %s" % (what, desc))
+
+    def zf(planes, p):
+        return zframe(planes[p])
+
+    def frames(planes, order=range(4)):
+        return b"".join(zframe(planes[p]) for p in order)
+
+    inv("codec5_three_frames", "malformed", "codec5.frames",
+        "is 3 frames (planes 0, 1 and 2) instead of w = 4: fewer than w frames (§7).",
+        lambda data, planes: frames(planes, range(3)))
+    inv("codec5_five_frames", "malformed", "codec5.extra",
+        "is 5 frames, the frame of plane 3 twice: more than w = 4 frames (§7).",
+        lambda data, planes: frames(planes, (0, 1, 2, 3, 3)))
+    inv("codec5_trailing_byte", "malformed", "codec5.extra",
+        "is its 4 frames and one byte 0x00 after them (stored_size and CRCs include it): nothing may "
+        "follow the last frame (§7).",
+        lambda data, planes: frames(planes) + b"\x00")
+    inv("codec5_skippable_frame_between", "malformed", "codec5.skippable",
+        "has a skippable frame (magic 0x184D2A50, 4 bytes of content) between the frames of planes 1 and "
+        "2: codec 5 allows no skippable frames (§7).",
+        lambda data, planes: frames(planes, (0, 1)) + struct.pack("<II", 0x184D2A50, 4) + b"skip"
+        + frames(planes, (2, 3)))
+    inv("codec5_frame_content_size_n_plus_1", "malformed", "zstd.content_size",
+        "has as its last frame a frame of plane 3 and one byte more: its Frame_Content_Size is n + 1 = "
+        "33, not n (§7: each frame holds n bytes).",
+        lambda data, planes: frames(planes, range(3)) + zframe(planes[3] + b"\x00"))
+    inv("codec5_planes_split_one_byte_off", "malformed", "zstd.content_size",
+        "has a first frame of plane 0 and the first byte of plane 1 (33 bytes) and a second of the rest "
+        "of plane 1 (31 bytes): the frames' contents add up to w·n, but each frame must hold n bytes (§7).",
+        lambda data, planes: zframe(planes[0] + planes[1][:1]) + zframe(planes[1][1:])
+        + frames(planes, (2, 3)))
+    inv("codec5_frame_without_content_size", "malformed", "zstd.content_size",
+        "has as its frame of plane 1 a frame without Frame_Content_Size (§7: present and equal to n, as "
+        "for codec 1).",
+        lambda data, planes: frames(planes, (0,)) + zframe(planes[1], content_size=False)
+        + frames(planes, (2, 3)))
+
+    def with_dict_id(fr):
+        fr = bytearray(fr)
+        fhd = fr[4]
+        assert fhd & 3 == 0
+        at = 5 + (0 if (fhd >> 5) & 1 else 1)           # after the Window_Descriptor, if any
+        fr[4] = fhd | 1                                  # Dictionary_ID_Flag 1: one byte
+        fr[at:at] = b"\x2a"
+        assert zstandard.get_frame_parameters(bytes(fr)).dict_id == 42
+        return bytes(fr)
+
+    inv("codec5_frame_dictionary_id", "malformed", "zstd.dict",
+        "has as its frame of plane 2 a frame whose header names Dictionary_ID 42 (one byte inserted into "
+        "its header): no frame may need a dictionary (§7).",
+        lambda data, planes: frames(planes, (0, 1)) + with_dict_id(zframe(planes[2])) + zframe(planes[3]))
+
+    def bad_checksum(fr):
+        fr = bytearray(fr)
+        assert zstandard.get_frame_parameters(bytes(fr)).has_checksum
+        fr[-1] ^= 0xFF
+        return bytes(fr)
+
+    inv("codec5_content_checksum_bad", "checksum", "zstd.checksum",
+        "has a wrong content checksum in its frame of plane 2 (the frame's last byte changed, the block's "
+        "CRCs recomputed): class checksum, as for codec 1 (§7, §13). Each frame's checksum is XXH64 of its "
+        "own plane.",
+        lambda data, planes: frames(planes, (0, 1)) + bad_checksum(zframe(planes[2])) + zframe(planes[3]))
+
+    def cut(data, planes):
+        last = zframe(planes[3])
+        return frames(planes, range(3)) + last[:-5]
+    inv("codec5_last_frame_cut_short", "malformed", "codec5.cut",
+        "ends 5 bytes before the end of its last frame (the frame of plane 3 without its checksum and the "
+        "last byte of its block): a frame that does not end within the stored bytes is malformed (§7).",
+        cut)
+
+    g = write_bricked(src_i, FLOAT32, 2)
+    blocks = bricked_blocks(g, CODEC_FRAMES)
+    mb = meta_block(DEFAULT_META)
+    mb.codec = CODEC_FRAMES                               # w = 1: one frame of the one plane
+    blocks.insert(0, mb)
+    d, _ = assemble(g, blocks, structure_kind=KIND_BRICKED, ireserved=2, **framed)
+    assert zstandard.ZstdDecompressor().decompress(mb.stored_bytes()) == mb.data
+    add_invalid("codec5_metadata", d, "malformed", "codec5.where",
+                "Bricked grid 6x5x4 float32, every brick codec 5, whose metadata block is codec 5 too: its "
+                "payload is the one frame of its one byte plane (w = 1), which would decode, but codec 5 on "
+                "the metadata stream is malformed, checked with the block table (§7).")
+
+
 README_HEAD = """# .ivol 1.3 (draft) conformance vectors
 
 Generated by `make_vectors.py` from the specification `format-spec/ivol.md`
@@ -4756,6 +5283,35 @@ structure_kind 5 stream 7 is an unknown stream: `octree_ignorable_stream_7`
 and `regular_ignorable_stream_7` are valid (the block is skipped, whatever it
 holds), `octree_not_ignorable_stream_7` is `unsupported-feature`.
 
+Codec 5, byte planes a zstd frame each (1.3 draft, §7): the stored bytes
+(the payload, in a framed file) are exactly w zstd frames back to back and
+nothing else, frame p holding byte plane p of the block (decoded byte
+i*w + p for i = 0 .. n-1), each under every rule of codec 1 for n bytes
+(Frame_Content_Size present and equal to n, no dictionary, its content
+checksum verified when present); codec 5 is valid on every stream of width
+w >= 2 and `malformed` on the metadata, and its `stored_size` is at most
+w * bound(n) (+ 32 framed), checked with the block table. The `codec5_*`
+files cover it. Valid: a float32 bricked grid whose bricks mix codec 5 with
+codecs 0, 1 and 2 and whose stored levels of detail are codec 5 (NaN
+payloads, infinities, -0, subnormals; bricks and levels of n = 1 and
+n = 2), a binary16 bricked grid mixing codec 5 with codecs 2, 3 and 4 with
+every stored level in codec 5, octrees with node words (w = 8) and values
+(w = 2 and 4) in codec 5, framed and not, a rectilinear grid's borders
+(w = 4) and a nested grid's cell words (w = 8) in codec 5, and a block
+exactly at its limit w * bound(n), far above codec 2's bound(w * n). The
+frames vary: with and without content checksum (also within one block), a
+compressor's frame of several zstd blocks, hand-made frames of one raw
+block, of raw and RLE blocks, with a 1-, 2- or 4-byte Frame_Content_Size,
+with a Window_Descriptor instead of the single-segment flag. Every valid
+codec 5 file of an earlier volume has that volume's dense export and levels
+of detail (named in its description). The invalid `codec5_*` files break
+one rule of codec 5 each (w - 1 or w + 1 frames, a byte after the last
+frame, a skippable frame between two, a frame of n + 1 bytes, planes split
+one byte off, a frame without Frame_Content_Size, one that needs a
+dictionary, a wrong content checksum (`checksum`), the last frame cut
+short, `stored_size` one byte over w * bound(n), codec 5 on the metadata,
+stored bytes that are no frame); every other is `malformed`.
+
 ### Changes to the 1.0 vectors for 1.1
 
 * `invalid/structure_kind_2.ivol` is now `invalid/structure_kind_9.ivol`:
@@ -4812,6 +5368,13 @@ holds), `octree_not_ignorable_stream_7` is `unsupported-feature`.
   grid, `malformed`; with `bricked_float32_codec3`, `bricked_float32_codec4`
   and `bricked_lods_float32_codec3` every place of §7's "value_encoding 1 or
   2" rule is covered). The older vectors are unchanged byte for byte.
+* Codec 5 (§7: byte planes, a zstd frame each): `invalid/codec_5.ivol` is
+  now `invalid/codec_6.ivol` (same construction, a values block whose
+  stored bytes are the raw values; same class, `unsupported-feature`: 1.3
+  defines codecs 0 to 5), and the same block labelled codec 5 is
+  `invalid/codec5_raw_values.ivol` (its bytes are no zstd frame:
+  `malformed`). New: 7 valid and 13 invalid `codec5_*` files (above). The
+  other vectors are unchanged byte for byte.
 
 ### Changes to the 1.1 vectors for 1.2
 
@@ -4864,6 +5427,13 @@ def write_readme(zver):
   one codec-2 values block decodes to 64 MiB + 2 bytes (element_count
   2^25 + 1 of width 2); a reader must refuse it from the index, by
   element_count x width, before it allocates or decodes.
+* `valid/codec5_stored_size_at_bound_5x5x5_float32.ivol` has a codec 5
+  block of one float32 value whose 4 frames are padded with empty raw zstd
+  blocks (legal in RFC 8878) to exactly w x bound(1) = 256 bytes, the limit
+  of §7 for codec 5; `invalid/codec5_stored_size_over_bound.ivol` is one
+  byte longer. A reader that uses codec 2's limit bound(w x n) for codec 5
+  refuses valid files (also the octrees and the nested grid of `codec5_*`,
+  whose blocks of few elements have frames that together exceed it).
 * `invalid/borders_count_huge.ivol` declares a borders block of 2^24
   elements (64 MiB decoded, within the block limit of §7); a reader must
   refuse it by the limit of §8A.2 (at most size_x + size_y + size_z + 3

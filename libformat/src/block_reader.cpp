@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cstring>
+#include <memory>
+#include <string>
 
 #include "framing.hpp"
 #include "ivol/crc32c.hpp"
@@ -37,6 +39,45 @@ template <std::size_t Width>
 void unshuffle(const std::uint8_t* planes, std::size_t n, std::uint8_t* elements) {
   for (std::size_t i = 0; i < n; ++i)
     for (std::size_t p = 0; p < Width; ++p) elements[i * Width + p] = planes[p * n + i];
+}
+
+// The length of the zstd frame that starts at `frame` (of at most
+// `available` bytes), checked under codec 1's rules (spec §7):
+// Frame_Content_Size present and equal to content_size, no dictionary.
+std::size_t zstd_frame_size(const std::string& part, const std::string& which, const std::uint8_t* frame,
+                            std::size_t available, std::size_t content_size) {
+  if (available < 4 || std::memcmp(frame, kZstdMagic, 4) != 0)
+    throw Error(ErrorClass::Malformed, part + which + " does not start with zstd's magic number");
+  const unsigned long long content = ZSTD_getFrameContentSize(frame, available);
+  if (content == ZSTD_CONTENTSIZE_UNKNOWN)
+    throw Error(ErrorClass::Malformed, part + which + " does not carry Frame_Content_Size");
+  if (content == ZSTD_CONTENTSIZE_ERROR) throw Error(ErrorClass::Malformed, part + which + ": its header is invalid");
+  if (content != content_size)
+    throw Error(ErrorClass::Malformed, part + which + " holds " + std::to_string(content) + " bytes, the index says " +
+                                           std::to_string(content_size));
+  if (ZSTD_getDictID_fromFrame(frame, available) != 0)
+    throw Error(ErrorClass::Malformed, part + which + " needs a dictionary");
+  const std::size_t frame_size = ZSTD_findFrameCompressedSize(frame, available);
+  if (ZSTD_isError(frame_size))
+    throw Error(ErrorClass::Malformed, part + which + " does not end within the stored bytes");
+  return frame_size;
+}
+
+// Decodes a frame of `frame_size` bytes that zstd_frame_size() checked into
+// its `content_size` bytes at `out`, the content checksum verified when
+// present.
+void decode_zstd_frame(const std::string& part, const std::string& which, const std::uint8_t* frame,
+                       std::size_t frame_size, std::size_t content_size, std::uint8_t* out) {
+  thread_local std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> context(ZSTD_createDCtx(), ZSTD_freeDCtx);
+  const std::size_t got = ZSTD_decompressDCtx(context.get(), out, content_size, frame, frame_size);
+  if (ZSTD_isError(got)) {
+    if (ZSTD_getErrorCode(got) == ZSTD_error_checksum_wrong)
+      throw Error(ErrorClass::Checksum, part + which + ": the zstd content checksum does not match");
+    throw Error(ErrorClass::Malformed, part + "zstd cannot decode " + which + ": " + ZSTD_getErrorName(got));
+  }
+  if (got != content_size)
+    throw Error(ErrorClass::Malformed, part + which + " decoded to " + std::to_string(got) + " bytes, expected " +
+                                           std::to_string(content_size));
 }
 
 }  // namespace
@@ -137,26 +178,10 @@ void decode_stored_into(const std::string& path, const BlockInfo& block, std::si
     for (std::size_t i = 0; i < values.size(); ++i) layout::store<std::uint16_t>(out + 2 * i, values[i]);
     return;
   }
-  if (block.codec != 1 && block.codec != 2)
+  if (block.codec != 1 && block.codec != 2 && block.codec != 5)
     throw Error(ErrorClass::UnsupportedFeature, part + "codec " + std::to_string(block.codec) + " is not known");
 
-  if (stored_size < 4 || std::memcmp(stored, kZstdMagic, 4) != 0)
-    throw Error(ErrorClass::Malformed, part + "the stored bytes are not a zstd frame");
-  const unsigned long long content = ZSTD_getFrameContentSize(stored, stored_size);
-  if (content == ZSTD_CONTENTSIZE_UNKNOWN)
-    throw Error(ErrorClass::Malformed, part + "the zstd frame does not carry Frame_Content_Size");
-  if (content == ZSTD_CONTENTSIZE_ERROR) throw Error(ErrorClass::Malformed, part + "the zstd frame header is invalid");
-  if (content != decoded_size)
-    throw Error(ErrorClass::Malformed, part + "the zstd frame holds " + std::to_string(content) +
-                                           " bytes, the index says " + std::to_string(decoded_size));
-  if (ZSTD_getDictID_fromFrame(stored, stored_size) != 0)
-    throw Error(ErrorClass::Malformed, part + "the zstd frame needs a dictionary");
-  const std::size_t frame_size = ZSTD_findFrameCompressedSize(stored, stored_size);
-  if (ZSTD_isError(frame_size) || frame_size != stored_size)
-    throw Error(ErrorClass::Malformed, part + "the stored bytes are not exactly one complete zstd frame");
-
-  thread_local std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> context(ZSTD_createDCtx(), ZSTD_freeDCtx);
-  const bool planes = block.codec == 2 && width > 1;
+  const bool planes = (block.codec == 2 || block.codec == 5) && width > 1;
   // Byte planes are decompressed into a buffer this thread keeps (up to a
   // few MiB, the size of a typical block), then regrouped into `out`: a
   // buffer allocated per block costs its page faults every time.
@@ -169,15 +194,37 @@ void decode_stored_into(const std::string& path, const BlockInfo& block, std::si
     if (buffer.size() < decoded_size) buffer.resize(decoded_size);
     target = buffer.data();
   }
-  const std::size_t got = ZSTD_decompressDCtx(context.get(), target, decoded_size, stored, stored_size);
-  if (ZSTD_isError(got)) {
-    if (ZSTD_getErrorCode(got) == ZSTD_error_checksum_wrong)
-      throw Error(ErrorClass::Checksum, part + "the zstd content checksum does not match");
-    throw Error(ErrorClass::Malformed, part + "zstd cannot decode it: " + ZSTD_getErrorName(got));
+  if (block.codec == 5) {
+    // Spec §7, codec 5: `width` frames back to back, frame p plane p of n
+    // bytes, nothing before, between or after them. (The index refused
+    // codec 5 on the metadata, whose width is 1.)
+    // Every frame's header and extent first, then the frames decoded: a
+    // block with both kinds of defect is malformed, as the spec orders it.
+    const std::size_t n = block.element_count;
+    auto which = [&](std::size_t p) {
+      return "zstd frame " + std::to_string(p) + " of " + std::to_string(width) + " (byte plane " + std::to_string(p) +
+             ")";
+    };
+    std::vector<std::size_t> starts(width + 1, 0);
+    for (std::size_t p = 0; p < width; ++p) {
+      const std::size_t at = starts[p];
+      if (at == stored_size)
+        throw Error(ErrorClass::Malformed, part + "the stored bytes end before " + which(p) + ": codec 5 holds " +
+                                               std::to_string(width) + " frames, one a byte plane");
+      starts[p + 1] = at + zstd_frame_size(part, which(p), stored + at, stored_size - at, n);
+    }
+    if (starts[width] != stored_size)
+      throw Error(ErrorClass::Malformed, part + std::to_string(stored_size - starts[width]) +
+                                             " bytes follow the last of the " + std::to_string(width) +
+                                             " zstd frames of codec 5");
+    for (std::size_t p = 0; p < width; ++p)
+      decode_zstd_frame(part, which(p), stored + starts[p], starts[p + 1] - starts[p], n, target + p * n);
+  } else {
+    const std::string which = "the stored bytes' zstd frame";
+    if (zstd_frame_size(part, which, stored, stored_size, decoded_size) != stored_size)
+      throw Error(ErrorClass::Malformed, part + "the stored bytes are not exactly one complete zstd frame");
+    decode_zstd_frame(part, which, stored, stored_size, decoded_size, target);
   }
-  if (got != decoded_size)
-    throw Error(ErrorClass::Malformed,
-                part + "decoded to " + std::to_string(got) + " bytes, expected " + std::to_string(decoded_size));
   if (!planes) return;
   const std::size_t n = block.element_count;
   // Element by element, the width known to the compiler, which then

@@ -337,7 +337,7 @@ class StructureReader {
       if (stored_level && blk.flags != layout::kFlagIgnorable)
         bad(ErrorClass::Malformed, "blocks of stream 7 (stored levels of detail) must have the ignorable flag");
       if (!stored_level && blk.flags != 0) bad(ErrorClass::Malformed, "blocks of known streams must have flags 0");
-      if (blk.codec > 4) bad(ErrorClass::UnsupportedFeature, "codec " + std::to_string(blk.codec) + " is not known");
+      if (blk.codec > 5) bad(ErrorClass::UnsupportedFeature, "codec " + std::to_string(blk.codec) + " is not known");
       // Codecs 3 and 4 hold a brick of 16-bit values (spec §7.2, §7.3).
       if ((blk.codec == 3 || blk.codec == 4) &&
           ((blk.stream != 3 && blk.stream != 7) || v.kind != StructureKind::Bricked ||
@@ -345,6 +345,10 @@ class StructureReader {
         bad(ErrorClass::Malformed,
             "codec " + std::to_string(blk.codec) + " is only for values blocks of a bricked grid of 16-bit values");
       const std::uint64_t width = stream_width(blk.stream, v.encoding);
+      // Codec 5 is a frame a byte plane: for elements of more than one byte.
+      if (blk.codec == 5 && width < 2)
+        bad(ErrorClass::Malformed, "codec 5 (a zstd frame a byte plane) on the " +
+                                       std::string(stream_name(blk.stream)) + ", whose elements are single bytes");
       const std::uint64_t decoded = blk.element_count * width;
       if (decoded > layout::kMaxBlockDecodedBytes)
         bad(ErrorClass::Malformed, "decoded size " + std::to_string(decoded) + " exceeds 64 MiB");
@@ -370,6 +374,12 @@ class StructureReader {
         bad(ErrorClass::Malformed, "stored_size " + std::to_string(blk.stored_size) + " exceeds " +
                                        std::to_string(ZSTD_compressBound(decoded) + frame) +
                                        ", the largest zstd frame of its " + std::to_string(decoded) + " decoded bytes" +
+                                       (frame ? " and the block header" : ""));
+      if (blk.codec == 5 && blk.stored_size > width * ZSTD_compressBound(blk.element_count) + frame)
+        bad(ErrorClass::Malformed, "stored_size " + std::to_string(blk.stored_size) + " exceeds " +
+                                       std::to_string(width * ZSTD_compressBound(blk.element_count) + frame) +
+                                       ", the largest " + std::to_string(width) + " zstd frames of " +
+                                       std::to_string(blk.element_count) + " bytes each" +
                                        (frame ? " and the block header" : ""));
       if (blk.level > v.depth) bad(ErrorClass::Malformed, "level " + std::to_string(blk.level) + " is deeper than D");
       std::uint64_t lo = 0;

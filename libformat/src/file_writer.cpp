@@ -75,7 +75,22 @@ EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_ele
     ZSTD_CCtx_setParameter(cctx, ZSTD_c_checksumFlag, 1);
     ZSTD_CCtx_setParameter(cctx, ZSTD_c_contentSizeFlag, 1);
     std::size_t size;
-    if (planes && (width == 2 || width == 4)) {  // each plane ends a zstd block: entropy tables of its own
+    const bool plane_frames = planes && options.framed_blocks && options.zstd_level >= kPlaneFramesFromLevel &&
+                              width <= 4 && element_count >= kPlaneFramesFromElements;
+    if (plane_frames) {  // codec 5: a frame each, every plane starting afresh
+      const std::uint8_t* r = regrouped.data();
+      const std::size_t n = element_count;
+      block.bytes.resize(width * ZSTD_compressBound(n));
+      size = 0;
+      for (std::size_t p = 0; p < width; ++p) {
+        ZSTD_CCtx_reset(cctx, ZSTD_reset_session_only);
+        const std::size_t frame =
+            ZSTD_compress2(cctx, block.bytes.data() + size, block.bytes.size() - size, r + p * n, n);
+        if (ZSTD_isError(frame))
+          throw Error(ErrorClass::Io, std::string("zstd compression failed: ") + ZSTD_getErrorName(frame));
+        size += frame;
+      }
+    } else if (planes && (width == 2 || width == 4)) {  // each plane ends a zstd block: entropy tables of its own
       const std::uint8_t* r = regrouped.data();
       const std::size_t n = element_count;
       size = width == 2
@@ -88,7 +103,7 @@ EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_ele
     }
     if (size < raw_size) {
       block.bytes.resize(size);
-      block.codec = planes ? Codec::ZstdBytePlanes : Codec::Zstd;
+      block.codec = plane_frames ? Codec::ZstdPlaneFrames : planes ? Codec::ZstdBytePlanes : Codec::Zstd;
     }
   }
   if (block.codec == Codec::Stored) {

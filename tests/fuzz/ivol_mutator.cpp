@@ -140,7 +140,7 @@ std::size_t mutate_decoded_block(std::uint8_t* f, std::size_t size, std::size_t 
   const std::uint32_t stored = get<std::uint32_t>(e + 20);
   const std::uint32_t elements = get<std::uint32_t>(e + 16);
   const std::uint8_t stream = e[28], codec = e[29];
-  if (at < header_size || at > v.offset || stored > v.offset - at || stored <= frame || codec > 4) return 0;
+  if (at < header_size || at > v.offset || stored > v.offset - at || stored <= frame || codec > 5) return 0;
   const std::size_t width = stream_width(stream, index[9]);
   std::uint64_t decoded_size = std::uint64_t{elements} * width;
   if (decoded_size == 0 || decoded_size > (1u << 20)) return 0;
@@ -160,7 +160,7 @@ std::size_t mutate_decoded_block(std::uint8_t* f, std::size_t size, std::size_t 
     reseal(f, size);
     return size;
   }
-  if (codec >= 3) {
+  if (codec == 3 || codec == 4) {
     const unsigned long long content_size =
         ZSTD_getFrameContentSize(payload + codec_header, payload_size - codec_header);
     if (content_size == ZSTD_CONTENTSIZE_ERROR || content_size == ZSTD_CONTENTSIZE_UNKNOWN || content_size == 0 ||
@@ -174,6 +174,18 @@ std::size_t mutate_decoded_block(std::uint8_t* f, std::size_t size, std::size_t 
   if (codec == 0) {
     if (payload_size != decoded_size) return 0;
     std::memcpy(content.data(), payload, payload_size);
+  } else if (codec == 5) {
+    // A frame a byte plane (spec §7): the planes, one after the other, are
+    // codec 2's content, mutated alike and encoded back a frame each.
+    if (width < 2) return 0;
+    std::size_t at_frame = 0;
+    for (std::size_t p = 0; p < width; ++p) {
+      const std::size_t frame_size = ZSTD_findFrameCompressedSize(payload + at_frame, payload_size - at_frame);
+      if (ZSTD_isError(frame_size)) return 0;
+      const std::size_t got = ZSTD_decompress(content.data() + p * elements, elements, payload + at_frame, frame_size);
+      if (ZSTD_isError(got) || got != elements) return 0;
+      at_frame += frame_size;
+    }
   } else {
     const std::size_t got =
         ZSTD_decompress(content.data(), decoded_size, payload + codec_header, payload_size - codec_header);
@@ -182,12 +194,22 @@ std::size_t mutate_decoded_block(std::uint8_t* f, std::size_t size, std::size_t 
   // Elements stay whole: the mutated size is a multiple of the width (the
   // metadata, of width 1, may grow or shrink).
   std::size_t n = LLVMFuzzerMutate(content.data(), decoded_size, content.size());
-  if (codec < 3) n -= n % width;
+  if (codec < 3 || codec == 5) n -= n % width;
   if (n == 0) return 0;
   std::vector<std::uint8_t> encoded(frame);
   encoded.insert(encoded.end(), payload, payload + codec_header);
   if (codec == 0) {
     encoded.insert(encoded.end(), content.begin(), content.begin() + static_cast<std::ptrdiff_t>(n));
+  } else if (codec == 5) {
+    const std::size_t plane = n / width;
+    for (std::size_t p = 0; p < width; ++p) {
+      const std::size_t before = encoded.size();
+      encoded.resize(before + ZSTD_compressBound(plane));
+      const std::size_t z =
+          ZSTD_compress(encoded.data() + before, encoded.size() - before, content.data() + p * plane, plane, 1);
+      if (ZSTD_isError(z)) return 0;
+      encoded.resize(before + z);
+    }
   } else {
     const std::size_t before = encoded.size();
     encoded.resize(before + ZSTD_compressBound(n));
@@ -205,7 +227,7 @@ std::size_t mutate_decoded_block(std::uint8_t* f, std::size_t size, std::size_t 
   for (std::uint32_t k = 0; k < v.count; ++k) {
     std::uint8_t* ek = new_index + v.table + std::uint64_t{k} * v.entry;
     if (k == b) {
-      if (codec < 3) put<std::uint32_t>(ek + 16, static_cast<std::uint32_t>(n / width));
+      if (codec < 3 || codec == 5) put<std::uint32_t>(ek + 16, static_cast<std::uint32_t>(n / width));
       put<std::uint32_t>(ek + 20, static_cast<std::uint32_t>(encoded.size()));
     } else if (get<std::uint64_t>(ek) > at) {
       put<std::uint64_t>(ek, get<std::uint64_t>(ek) + delta);

@@ -178,8 +178,10 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
           ->capture_default_str();
   into->add_option("--zstd-level", s->zstd_level,
                    "zstd level of every block, 1 to 19: higher is smaller and slower to write, never slower to read "
-                   "(19: 0.5 % smaller for a bricked grid, 3 % for an octree, at a twentieth of the speed); a bricked "
-                   "grid's predicted bricks (codec 3) use level 1 up to level 3, where it is as small and twice as fast")
+                   "(19: 0.5 % smaller for a bricked grid of 16-bit values, 2 % for one of float32, 3 % for an "
+                   "octree, at a fifth to a twentieth of the speed; from 13 on, blocks of byte planes are a zstd "
+                   "frame a plane, codec 5); a bricked grid's predicted bricks (codec 3) use level 1 up to level 3, "
+                   "where it is as small and twice as fast")
       ->check(CLI::Range(1, 19))
       ->capture_default_str();
   into->add_option("--memory", s->memory_mib, "About how many MiB the conversion may hold (default 2048)")

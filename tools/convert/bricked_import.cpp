@@ -151,7 +151,8 @@ bool choose_bricked(const DenseVolume& shape, const ImportOptions& options, Valu
   report.structure = "bricked";
   report.structure_reason =
       encoding == ValueEncoding::Float32
-          ? "every voxel kept, as float32 values: bricks of their byte planes (codec 2) are smaller than an octree "
+          ? "every voxel kept, as float32 values: bricks of their byte planes (codec 2, or 5 from --zstd-level 13) "
+            "are smaller than an octree "
             "of one-voxel leaves, which stores averages and node words besides them (--structure octree overrides)"
           : "every voxel kept, as 16-bit values: bricks predicted in 3-D (codec 3) or masked around their background "
             "(codec 4) are smaller than an octree of one-voxel leaves (--structure octree overrides)";

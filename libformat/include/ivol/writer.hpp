@@ -30,8 +30,28 @@ enum class Stream : std::uint8_t {
 };
 // Spec §7. ZstdBytePlanes: zstd over the elements' bytes regrouped by byte
 // position (since format 1.2). Predicted: a brick of 16-bit values, predicted
-// (ivol/predicted_codec.hpp; format 1.3).
-enum class Codec : std::uint8_t { Stored = 0, Zstd = 1, ZstdBytePlanes = 2, Predicted = 3, Masked = 4 };
+// (ivol/predicted_codec.hpp; format 1.3). ZstdPlaneFrames: the same byte
+// planes, a zstd frame each (format 1.3).
+enum class Codec : std::uint8_t {
+  Stored = 0,
+  Zstd = 1,
+  ZstdBytePlanes = 2,
+  Predicted = 3,
+  Masked = 4,
+  ZstdPlaneFrames = 5
+};
+
+// From this zstd level on, framed (format 1.3) files hold byte planes of
+// at least kPlaneFramesFromElements elements of 2 or 4 bytes as codec 5, a
+// frame each, instead of codec 2: zstd's optimal parser, which these levels
+// use, prices matches by the statistics of the frame's earlier blocks, and
+// the noisy low planes of CT values mislead it on the smooth high ones
+// (float32 bricks 0.6-1.1 % smaller at levels 13-19; at level 9 and below
+// codec 2 is as small). Smaller planes, and the eight planes of 16 KiB of
+// node words, pay more in frame headers and checksums than they gain
+// (bench/RESULTS.md, issue 22, "Codec 5").
+inline constexpr int kPlaneFramesFromLevel = 13;
+inline constexpr std::uint32_t kPlaneFramesFromElements = 4096;
 
 struct WriteOptions {
   // Decoded bytes per block, at most. Small blocks make slices and regions
