@@ -83,29 +83,6 @@ std::uint32_t next_refresh(std::uint32_t seen) {
   return seen < 4 ? 4 : seen < kRefreshEvery ? 2 * seen : seen + kRefreshEvery;
 }
 
-// floor(x / f) for the encoder's states (x < 2^31) and frequencies f in
-// 1 .. 2^12 as a multiply and a shift, without a division: with s =
-// ceil(log2 f) and m = ceil(2^(31+s) / f), floor(x / f) = (x·m) >> (31 + s)
-// exactly, since m·f exceeds 2^(31+s) by less than f and x < 2^31 ≤
-// 2^(31+s) / f · 2^s. The divisions took a fifth of the encoder's time.
-struct Reciprocal {
-  std::uint32_t multiplier;
-  std::uint8_t shift;  // 31 + s
-};
-const std::array<Reciprocal, kTotal + 1>& reciprocals() {
-  static const std::array<Reciprocal, kTotal + 1> table = [] {
-    std::array<Reciprocal, kTotal + 1> r{};
-    for (std::uint32_t f = 1; f <= kTotal; ++f) {
-      unsigned s = 0;
-      while ((1u << s) < f) ++s;
-      const std::uint64_t power = std::uint64_t{1} << (31 + s);
-      r[f] = {static_cast<std::uint32_t>((power + f - 1) / f), static_cast<std::uint8_t>(31 + s)};
-    }
-    return r;
-  }();
-  return table;
-}
-
 // One context's adaptive counts and the table made from them. Their sum is
 // not kept: it follows from how many tokens the context has seen.
 struct ContextModel {
@@ -149,20 +126,6 @@ struct ContextModel {
     refresh_at = next_refresh(seen);
     make_table();
     return true;
-  }
-};
-
-// An encoder's model: the same, and for each token what the rANS step
-// needs, in one word: the reciprocal's multiplier (bits 0-31) and shift
-// (32-37), the frequency (38-50) and the cumulative frequency (51-62).
-struct EncoderModel : ContextModel {
-  std::array<std::uint64_t, kTokens> step;
-  EncoderModel() { fill(); }
-  void fill() {
-    const auto& r = reciprocals();
-    for (unsigned t = 0; t < kTokens; ++t)
-      step[t] = r[freq[t]].multiplier | std::uint64_t{r[freq[t]].shift} << 32 | std::uint64_t{freq[t]} << 38 |
-                std::uint64_t{start[t]} << 51;
   }
 };
 
@@ -253,12 +216,12 @@ void walk_rows(const BrickDims& d, std::uint8_t* lengths, Visit&& visit) {
 bool encode_residual_tokens(const std::uint16_t* residuals, const BrickDims& dims, std::size_t limit,
                             std::vector<std::uint8_t>& out) {
   const std::size_t n = std::size_t{dims[0]} * dims[1] * dims[2];
-  std::array<EncoderModel, kContexts> models;
+  std::array<ContextModel, kContexts> models;
   // Kept per thread: every element is written before it is read, and a
   // brick's buffers, made anew and zeroed for every brick, cost more than
   // the work on small ones.
   thread_local std::vector<std::uint8_t> tokens, lengths, below, stream;
-  thread_local std::vector<std::uint64_t> coded;  // EncoderModel::step of each voxel's token
+  thread_local std::vector<std::uint32_t> coded;  // freq << 16 | start, per voxel
   tokens.resize(n);
   lengths.resize(n);
   coded.resize(n);
@@ -277,9 +240,9 @@ bool encode_residual_tokens(const std::uint16_t* residuals, const BrickDims& dim
     for (std::uint32_t x = 0; x < dims[0]; ++x) {
       const unsigned z = residuals[row + x], t = tokens[row + x];
       const TokenBits tb = kTokenBits[t];
-      EncoderModel& m = models[contexts[x]];
-      coded[row + x] = m.step[t];
-      if (m.note(t)) m.fill();
+      ContextModel& m = models[contexts[x]];
+      coded[row + x] = std::uint32_t{m.freq[t]} << 16 | m.start[t];
+      m.note(t);
       bits |= std::uint64_t{z & ((1u << tb.below) - 1)} << bit_count;
       bit_count += tb.below;
       if (bit_count >= 32) {
@@ -305,8 +268,7 @@ bool encode_residual_tokens(const std::uint16_t* residuals, const BrickDims& dim
   std::uint32_t state[2] = {kStateLow, kStateLow};
   for (std::size_t i = n; i-- > 0;) {
     std::uint32_t x = state[i & 1];
-    const std::uint64_t step = coded[i];
-    const std::uint32_t f = (step >> 38) & 0x1FFF, s = static_cast<std::uint32_t>(step >> 51);
+    const std::uint32_t f = coded[i] >> 16, s = coded[i] & 0xFFFF;
     const std::uint32_t x_max = ((kStateLow >> kPrecision) << 8) * f;
     // At most two bytes: a state is below 2^31 and x_max at least 2^19.
     if (p - begin >= 8 + 2) {
@@ -327,10 +289,7 @@ bool encode_residual_tokens(const std::uint16_t* residuals, const BrickDims& dim
         x >>= 8;
       }
     }
-    // x·2^12 / f's quotient and remainder: q·2^12 + (x − q·f) + s.
-    const auto q =
-        static_cast<std::uint32_t>((std::uint64_t{x} * static_cast<std::uint32_t>(step)) >> ((step >> 32) & 0x3F));
-    state[i & 1] = x + s + q * (kTotal - f);
+    state[i & 1] = ((x / f) << kPrecision) + x % f + s;
   }
   p -= 8;
   put_u32(p, state[0]);
