@@ -34,6 +34,7 @@ std::vector<std::uint8_t> pack_batch(const RawBlock* blocks, std::size_t count, 
   p.put<std::int32_t>(options.zstd_level);
   p.put<std::uint8_t>(options.compress ? 1 : 0);
   p.put<std::uint8_t>(options.byte_planes ? 1 : 0);
+  p.put<std::uint8_t>(options.framed_blocks ? 1 : 0);  // format 1.3: codec 5 from level 13
   for (std::size_t i = 0; i < count; ++i) {
     const RawBlock& b = blocks[i];
     p.put<std::uint8_t>(static_cast<std::uint8_t>(b.stream));
@@ -52,6 +53,7 @@ std::vector<RawBlock> unpack_batch(std::vector<std::uint8_t> bytes, WriteOptions
   options.zstd_level = u.get<std::int32_t>();
   options.compress = u.get<std::uint8_t>() != 0;
   options.byte_planes = u.get<std::uint8_t>() != 0;
+  options.framed_blocks = u.get<std::uint8_t>() != 0;
   for (RawBlock& b : blocks) {
     b.stream = static_cast<Stream>(u.get<std::uint8_t>());
     b.level = u.get<std::uint8_t>();
