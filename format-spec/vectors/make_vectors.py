@@ -3127,6 +3127,31 @@ def nested_source(enc, size, cell_log2, expo, gen_value):
     return src
 
 
+
+def rectilinear_20x11x7_uint16():
+    """The rectilinear grid of rectilinear_20x11x7_uint16 (and of the codec 2
+    and codec 5 vectors that store it again): its borders, source and grid."""
+    bx, by, bz = [0, 1, 4, 5, 11, 19, 20], [0, 11], [0, 2, 3, 7]
+    rng = np.random.default_rng(203)
+    cv = [int(v) for v in rng.integers(0, 65536, 18)]
+    src = rect_source(UINT16, bx, by, bz, cv)
+    g = write_rectilinear(src, UINT16, bx, by, bz)
+    assert g.values == cv
+    return src, g
+
+
+def nested_37x21x10_uint16_c8():
+    """The nested grid of nested_37x21x10_uint16_c8 (and of the codec 2 and
+    codec 5 vectors that store it again): source, grid and metadata."""
+    expo = [[[(i + j + 2 * k) % 4 for i in range(5)] for j in range(3)] for k in range(2)]
+    rng = np.random.default_rng(206)
+    src = nested_source(UINT16, (37, 21, 10), 3, expo, lambda: int(rng.integers(0, 65536)))
+    g = write_nested(src, UINT16, 3, expo)
+    meta = dict(DEFAULT_META)
+    meta["structure"] = {"kind": "nested", "lossless": True, "source_encoding": "uint16"}
+    return src, g, meta
+
+
 def _order_sensitive_cells_f32(src):
     """Put LoD-1 cells whose flat sum depends on the order (§12.3): in z, y, x
     order (x fastest) the voxels are v[n], n = (dz*2 + dy)*2 + dx."""
@@ -4300,12 +4325,7 @@ def gen_grids_valid():
               kind=KIND_REGULAR)
 
     # ---- rectilinear grid (§8A.2)
-    bx, by, bz = [0, 1, 4, 5, 11, 19, 20], [0, 11], [0, 2, 3, 7]
-    rng = np.random.default_rng(203)
-    cv = [int(v) for v in rng.integers(0, 65536, 18)]
-    src = rect_source(UINT16, bx, by, bz, cv)
-    g = write_rectilinear(src, UINT16, bx, by, bz)
-    assert g.values == cv
+    src, g = rectilinear_20x11x7_uint16()
     d, lay, bl = grid_file(g, codec="alt", limit=16, slimit=8, meta_first=True, scale=0.5, offset=-1000.0)
     assert [len(b.data) // 4 for b in bl if b.stream == STREAM_BORDERS] == [2] * 6 + [1]
     add_valid("rectilinear_20x11x7_uint16", d, src, UINT16,
@@ -4361,13 +4381,8 @@ def gen_grids_valid():
               "here it is an unknown ignorable stream that a 1.0 and a 1.1 reader skip.")
 
     # ---- nested grid (§8A.3)
-    expo = [[[(i + j + 2 * k) % 4 for i in range(5)] for j in range(3)] for k in range(2)]
-    rng = np.random.default_rng(206)
-    src = nested_source(UINT16, (37, 21, 10), 3, expo, lambda: int(rng.integers(0, 65536)))
-    g = write_nested(src, UINT16, 3, expo)
+    src, g, meta = nested_37x21x10_uint16_c8()
     assert len(g.cells) == 30
-    meta = dict(DEFAULT_META)
-    meta["structure"] = {"kind": "nested", "lossless": True, "source_encoding": "uint16"}
     d, lay, bl = grid_file(g, meta=meta, limit=512, slimit=64, scale=0.25, offset=-512.0)
     assert sum(1 for b in bl if b.stream == STREAM_CELLS) == 4 and sum(1 for b in bl if b.stream == 3) >= 3
     add_valid("nested_37x21x10_uint16_c8", d, src, UINT16,
@@ -4699,11 +4714,7 @@ def gen_codec2_valid(base_src):
               "The volume of odd_3x5x7_uint16 with its values blocks codec 2 and every zstd frame (codec 1 "
               "and 2) without the optional content checksum.%s" % V2)
 
-    bx, by, bz = [0, 1, 4, 5, 11, 19, 20], [0, 11], [0, 2, 3, 7]
-    rng = np.random.default_rng(203)                       # the grid of rectilinear_20x11x7_uint16
-    cv = [int(v) for v in rng.integers(0, 65536, 18)]
-    src = rect_source(UINT16, bx, by, bz, cv)
-    g = write_rectilinear(src, UINT16, bx, by, bz)
+    src, g = rectilinear_20x11x7_uint16()
     d, lay, bl = grid_file(g, codec=CODEC_PLANES, limit=16, slimit=8, meta_first=True, scale=0.5,
                            offset=-1000.0, minor=2)
     assert {(b.stream, b.codec) for b in bl} == {(1, 1), (3, 2), (4, 2)}
@@ -4712,12 +4723,7 @@ def gen_codec2_valid(base_src):
               "block (u32, width 4) and values block (width 2) codec 2, metadata codec 1; 13 borders in 7 "
               "blocks, 18 values in 3 blocks.%s" % V2, kind=KIND_RECTILINEAR)
 
-    expo = [[[(i + j + 2 * k) % 4 for i in range(5)] for j in range(3)] for k in range(2)]
-    rng = np.random.default_rng(206)                       # the grid of nested_37x21x10_uint16_c8
-    src = nested_source(UINT16, (37, 21, 10), 3, expo, lambda: int(rng.integers(0, 65536)))
-    g = write_nested(src, UINT16, 3, expo)
-    meta = dict(DEFAULT_META)
-    meta["structure"] = {"kind": "nested", "lossless": True, "source_encoding": "uint16"}
+    src, g, meta = nested_37x21x10_uint16_c8()
     d, lay, bl = grid_file(g, meta=meta, codec=CODEC_PLANES, limit=512, slimit=64, scale=0.25,
                            offset=-512.0, minor=2)
     assert {(b.stream, b.codec) for b in bl} == {(1, 1), (3, 2), (5, 2)}
@@ -5027,11 +5033,7 @@ def gen_codec5():
               "plus 32 for the block header.%s" % (big.level, big.count, ", ".join(map(str, multi)), V3))
 
     # ---- grids: borders (w = 4) and cell words (w = 8) codec 5
-    bx, by, bz = [0, 1, 4, 5, 11, 19, 20], [0, 11], [0, 2, 3, 7]
-    rng2 = np.random.default_rng(203)                       # the grid of rectilinear_20x11x7_uint16
-    cv = [int(v) for v in rng2.integers(0, 65536, 18)]
-    src = rect_source(UINT16, bx, by, bz, cv)
-    g = write_rectilinear(src, UINT16, bx, by, bz)
+    src, g = rectilinear_20x11x7_uint16()
     d, lay, bl = grid_file(g, codec=CODEC_FRAMES, limit=16, slimit=8, meta_first=True, scale=0.5,
                            offset=-1000.0, **framed)
     assert {(b.stream, b.codec) for b in bl} == {(1, 1), (3, 5), (4, 5)}
@@ -5042,12 +5044,7 @@ def gen_codec5():
               "first, codec 1; 13 borders in 7 blocks (the last of one border, n = 1), 18 values in 3 "
               "blocks.%s" % V3, kind=KIND_RECTILINEAR)
 
-    expo = [[[(i + j + 2 * k) % 4 for i in range(5)] for j in range(3)] for k in range(2)]
-    rng2 = np.random.default_rng(206)                       # the grid of nested_37x21x10_uint16_c8
-    src = nested_source(UINT16, (37, 21, 10), 3, expo, lambda: int(rng2.integers(0, 65536)))
-    g = write_nested(src, UINT16, 3, expo)
-    meta = dict(DEFAULT_META)
-    meta["structure"] = {"kind": "nested", "lossless": True, "source_encoding": "uint16"}
+    src, g, meta = nested_37x21x10_uint16_c8()
     d, lay, bl = grid_file(g, meta=meta, codec=CODEC_FRAMES, limit=512, slimit=56, scale=0.25,
                            offset=-512.0, minor=3)
     assert {(b.stream, b.codec) for b in bl} == {(1, 1), (3, 5), (5, 5)}
