@@ -108,23 +108,27 @@ std::uint32_t bit_lengths(const std::uint16_t* z, std::uint32_t len) {
   return sum;
 }
 
-// Zigzag residuals of the interior voxels under `taps` into z[]; returns
-// the sum of their bit lengths (what the candidate taps are judged by: the
-// faces' residuals do not depend on the taps).
+// Zigzag residuals of the interior voxels of the sample's rows under
+// `taps` into z[] (the other rows' are left as they are); returns the sum
+// of their bit lengths (what the candidate taps are judged by: the faces'
+// residuals do not depend on the taps).
 std::uint64_t interior_residuals(const BrickDims& d, const PredictorTaps& taps, const std::uint16_t* u,
-                                 std::uint16_t* z) {
+                                 std::uint16_t* z, detail::RowSample sample = {}) {
   const RowPredictor p(taps);
   std::uint64_t cost = 0;
-  walk_rows(
-      d, const_cast<std::uint16_t*>(u), [](std::size_t, std::uint32_t, std::uint32_t, std::uint32_t) {},
-      [&](std::uint16_t* c, const RowNeighbours& n) {
-        std::uint16_t* row = z + (c - u);
-        if (p.narrow)
-          detail::residual_row<std::int32_t>(p, c, n, detail::first_x(u, n), d[0], row);
-        else
-          detail::residual_row<std::int64_t>(p, c, n, detail::first_x(u, n), d[0], row);
-        cost += bit_lengths(row + 1, d[0] - 1);
-      });
+  const std::ptrdiff_t sy = d[0], sz = std::ptrdiff_t{d[0]} * d[1];
+  if (d[0] < 2) return 0;  // every voxel is on a face
+  for (std::uint32_t layer = 1; layer < d[2]; layer += sample.z_step)
+    for (std::uint32_t y = 1; y < d[1]; y += sample.y_step) {
+      const std::uint16_t* c = u + layer * sz + y * sy;
+      const RowNeighbours n{c - sy, c - sz, c - sy - sz};
+      std::uint16_t* row = z + (c - u);
+      if (p.narrow)
+        detail::residual_row<std::int32_t>(p, c, n, detail::first_x(u, n), d[0], row);
+      else
+        detail::residual_row<std::int64_t>(p, c, n, detail::first_x(u, n), d[0], row);
+      cost += bit_lengths(row + 1, d[0] - 1);
+    }
   return cost;
 }
 
@@ -180,26 +184,29 @@ std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const Br
 
   // Candidates judged by the sum of their residuals' bit lengths (about what
   // either coder spends on them; bench/RESULTS.md: 0-0.3 % smaller files
-  // than the sum of magnitudes, which outliers sway); the
-  // residuals of the best so far are kept (no second pass for the winner).
+  // than the sum of magnitudes, which outliers sway). The fits and the
+  // judging see the rows of detail::row_sample (a quarter of a large brick's):
+  // the winner's residuals are then made for every row; with every row
+  // sampled, the best candidate's are kept instead (no second pass).
+  const detail::RowSample sample = detail::row_sample(dims);
   std::vector<std::uint16_t> best_z(n), candidate_z(n);
   PredictorTaps taps = detail::kLorenzoTaps;
   std::uint64_t best = ~std::uint64_t{0};
   bool have = false;
   auto consider = [&](const PredictorTaps& candidate) {
-    const std::uint64_t cost = interior_residuals(dims, candidate, u.data(), candidate_z.data());
+    const std::uint64_t cost = interior_residuals(dims, candidate, u.data(), candidate_z.data(), sample);
     if (!have || cost < best) best = cost, taps = candidate, have = true, best_z.swap(candidate_z);
   };
   if (options.taps != PredictedOptions::Taps::LeastSquares) consider(detail::kLorenzoTaps);
   if (options.taps != PredictedOptions::Taps::Lorenzo) {
     detail::BrickMoments moments;
     PredictorTaps fitted;
-    if (detail::brick_moments(dims, u.data(), moments)) {
+    if (detail::brick_moments(dims, u.data(), moments, sample)) {
       if (detail::fit_least_squares(moments, fitted)) consider(fitted);
-      if (detail::fit_least_squares_with_level(dims, u.data(), moments, fitted)) consider(fitted);
+      if (detail::fit_least_squares_with_level(dims, u.data(), moments, fitted, sample)) consider(fitted);
     }
   }
-  if (!have) interior_residuals(dims, taps, u.data(), best_z.data());
+  if (!have || !sample.all()) interior_residuals(dims, taps, u.data(), best_z.data());
   face_residuals(dims, u.data(), best_z.data());
 
   std::vector<std::uint8_t> out(kPredictedHeaderSize);

@@ -41,8 +41,12 @@ bool solve(double* a, double* b, int k) {
   return true;
 }
 
-bool enough_interior(const BrickDims& d) {
-  return d[0] >= 2 && d[1] >= 2 && d[2] >= 2 && (d[0] - 1) * std::uint64_t{d[1] - 1} * (d[2] - 1) >= 64;
+// Interior rows (y, z > 0) the sample takes, times their interior voxels.
+std::uint64_t sampled_voxels(const BrickDims& d, RowSample sample) {
+  if (d[0] < 2 || d[1] < 2 || d[2] < 2) return 0;
+  const std::uint64_t rows = std::uint64_t{sample.y_step == 1 ? d[1] - 1 : d[1] / 2} *
+                             (sample.z_step == 1 ? d[2] - 1 : d[2] / 2);  // step 2: odd y or z
+  return rows * (d[0] - 1);
 }
 
 // Σ a[x]·b[x] (or Σ a[x]) over x < len, in four independent sums (which
@@ -68,14 +72,23 @@ struct RowPair {
 
 }  // namespace
 
-// The moments of all interior rows from a few sums per brick row: the eight
+RowSample row_sample(const BrickDims& d) {
+  // 4096 sampled voxels: a 32^3 brick's quarter holds 7936, a 16^3 brick's
+  // 960 (all of its 3375 are taken).
+  constexpr std::uint64_t kEnough = 4096;
+  RowSample sparse;
+  sparse.y_step = sparse.z_step = 2;
+  return sampled_voxels(d, sparse) >= kEnough ? sparse : RowSample{};
+}
+
+// The moments of the sample's interior rows from a few sums per brick row: the eight
 // features of a voxel are four rows (its own, the one before along y, along
 // z, along both) at x and at x − 1, so Σ f_i·f_j over a row is a product of
 // two whole rows (less one end voxel) or a product at a lag of one voxel; and
 // each pair of rows recurs for several interior rows. 14 products per voxel
 // instead of 36.
-bool brick_moments(const BrickDims& d, const std::uint16_t* u, BrickMoments& out) {
-  if (!enough_interior(d)) return false;
+bool brick_moments(const BrickDims& d, const std::uint16_t* u, BrickMoments& out, RowSample sample) {
+  if (sampled_voxels(d, sample) < 64) return false;
   out = BrickMoments{};
   const std::uint32_t e = d[0], ey = d[1], ez = d[2];
   const std::size_t sy = e, sz = std::size_t{e} * ey, rows = std::size_t{ey} * ez;
@@ -97,25 +110,27 @@ bool brick_moments(const BrickDims& d, const std::uint16_t* u, BrickMoments& out
   };
   // Per brick row (index z * ey + y): its sum and ends, its product with
   // itself, with the row before it along y, along z, along both, and of the
-  // rows (y − 1, z) and (y, z − 1).
+  // rows (y − 1, z) and (y, z − 1); each only where a sampled row needs it
+  // (a sampled row (y, z) needs the rows (y − 1, z) and (y, z − 1) too).
   std::vector<std::int64_t> sum(rows);
   std::vector<RowPair> self(rows), along_y(rows), along_z(rows), diagonal(rows), antidiagonal(rows);
   for (std::uint32_t z = 0; z < ez; ++z)
     for (std::uint32_t y = 0; y < ey; ++y) {
       const std::size_t r = std::size_t{z} * ey + y;
       const double* c = row(y, z);
+      const bool odd_y = sample.y_step == 1 || (y & 1), odd_z = sample.z_step == 1 || (z & 1);
       sum[r] = static_cast<std::int64_t>(exact_sum(c, c, e, false));
       self[r] = pair(c, c);
-      if (y > 0) along_y[r] = pair(c, row(y - 1, z));
-      if (z > 0) along_z[r] = pair(c, row(y, z - 1));
-      if (y > 0 && z > 0)
+      if (y > 0 && odd_y) along_y[r] = pair(c, row(y - 1, z));
+      if (z > 0 && odd_z) along_z[r] = pair(c, row(y, z - 1));
+      if (y > 0 && z > 0 && odd_y && odd_z)
         diagonal[r] = pair(c, row(y - 1, z - 1)), antidiagonal[r] = pair(row(y - 1, z), row(y, z - 1));
     }
   // Feature i is row kRow[i] of (own, y − 1, z − 1, both) at x (kNow) or x − 1.
   static constexpr int kRow[8] = {0, 0, 1, 2, 1, 2, 3, 3};
   static constexpr bool kNow[8] = {true, false, true, true, false, false, true, false};
-  for (std::uint32_t z = 1; z < ez; ++z)
-    for (std::uint32_t y = 1; y < ey; ++y) {
+  for (std::uint32_t z = 1; z < ez; z += sample.z_step)
+    for (std::uint32_t y = 1; y < ey; y += sample.y_step) {
       const std::size_t r[4] = {std::size_t{z} * ey + y, std::size_t{z} * ey + y - 1, std::size_t{z - 1} * ey + y,
                                 std::size_t{z - 1} * ey + y - 1};
       // full[a][b] = Σ_x R_a·R_b, lag[a][b] = Σ_{x ≥ 1} R_a(x)·R_b(x − 1).
@@ -178,8 +193,8 @@ bool fit_least_squares(const BrickMoments& m, PredictorTaps& out) {
   return out.t[0] >= -32768 && out.t[0] <= 32767;
 }
 
-bool fit_least_squares_with_level(const BrickDims& d, const std::uint16_t* u, const BrickMoments& m,
-                                  PredictorTaps& out) {
+bool fit_least_squares_with_level(const BrickDims& d, const std::uint16_t* u, const BrickMoments& m, PredictorTaps& out,
+                                  RowSample sample) {
   // The covariance of the neighbours (f_1 .. f_7) and with the value (f_0).
   const double count = static_cast<double>(m.count), sum_v = static_cast<double>(m.sum[0]);
   double cov[49], rhs[7];
@@ -198,12 +213,12 @@ bool fit_least_squares_with_level(const BrickDims& d, const std::uint16_t* u, co
     if (!(std::fabs(scaled) <= 32767)) return false;
     out.t[r] = static_cast<std::int32_t>(scaled);
   }
-  // The level: the mean of what the rounded taps leave, over the interior.
+  // The level: the mean of what the rounded taps leave, over the sample.
   const RowPredictor p(out);
   const std::ptrdiff_t sy = d[0], sz = std::ptrdiff_t{d[0]} * d[1];
   std::int64_t left = 0;
-  for (std::uint32_t z = 1; z < d[2]; ++z)
-    for (std::uint32_t y = 1; y < d[1]; ++y) {
+  for (std::uint32_t z = 1; z < d[2]; z += sample.z_step)
+    for (std::uint32_t y = 1; y < d[1]; y += sample.y_step) {
       const std::uint16_t* c = u + z * sz + y * sy;
       const RowNeighbours n{c - sy, c - sz, c - sy - sz};
       left += p.narrow ? level_row<std::int32_t>(p, c, n, d[0]) : level_row<std::int64_t>(p, c, n, d[0]);
