@@ -26,12 +26,26 @@ std::size_t mask_bytes(std::size_t count) { return (count + 7) / 8; }
 CommonValue most_common_value(const std::uint16_t* values, std::size_t count) {
   // A counter per pattern, kept per thread and reset only where it was used,
   // so a brick costs one pass over its values, not over 65536 counters.
+  // Runs of one value are counted first and added at once: a counter
+  // incremented voxel after voxel waits on its own last store, and a brick
+  // of air is one long run.
   thread_local std::vector<std::uint32_t> counts(65536, 0);
   CommonValue best{values[0], 0};
+  auto add = [&](std::uint16_t value, std::uint32_t run) {
+    const std::uint32_t c = counts[value] += run;
+    if (c > best.count || (c == best.count && value < best.value)) best = {value, c};
+  };
+  std::uint16_t run_value = values[0];
+  std::uint32_t run = 0;
   for (std::size_t i = 0; i < count; ++i) {
-    const std::uint32_t c = ++counts[values[i]];
-    if (c > best.count || (c == best.count && values[i] < best.value)) best = {values[i], c};
+    if (values[i] == run_value) {
+      ++run;
+      continue;
+    }
+    add(run_value, run);
+    run_value = values[i], run = 1;
   }
+  add(run_value, run);
   for (std::size_t i = 0; i < count; ++i) counts[values[i]] = 0;
   return best;
 }
