@@ -232,7 +232,15 @@ void StoredLevels::add_slices(const T* values, std::uint32_t z0, std::uint32_t c
         Level& level = levels_[finest_exact_];
         const unsigned k = level.k;
         std::int64_t* sums = level.exact_sums.data() + (y >> k) * level.dims[0];
-        for (std::uint64_t x = 0; x < dims_[0]; ++x) sums[x >> k] += units_[row[x]];
+        // A cell's 2^k voxels of the row summed in a register, then added:
+        // adding each to memory waited on the store before it.
+        const std::uint64_t run = std::uint64_t{1} << k, whole = dims_[0] >> k;
+        for (std::uint64_t c = 0; c < whole; ++c) {
+          std::int64_t cell = 0;
+          for (std::uint64_t x = c << k; x < (c + 1) << k; ++x) cell += units_[row[x]];
+          sums[c] += cell;
+        }
+        for (std::uint64_t x = whole * run; x < dims_[0]; ++x) sums[x >> k] += units_[row[x]];
         if (!level.specials.empty()) {
           std::uint8_t* flags = level.specials.data() + (y >> k) * level.dims[0];
           for (std::uint64_t x = 0; x < dims_[0]; ++x) flags[x >> k] |= special_[row[x]];
