@@ -272,6 +272,9 @@ TEST(Converters, BrickedFileDoesNotDependOnHowItsSamplesAreRead) {
     ImportOptions options;
     options.memory_bytes = bricked_layer_bytes(v, options, ValueEncoding::UInt16, slices);
     ASSERT_EQ(bricked_read_slices(v, options, ValueEncoding::UInt16), slices);
+    // A source whose thicker reads do not pay (a raw file, TIFF pages) is
+    // read a layer of 32 slices at a time whatever the budget.
+    EXPECT_EQ(bricked_read_slices(v, options, ValueEncoding::UInt16, false), std::min(slices, 32U));
     const std::string path = test::temp_path("read_" + std::to_string(slices) + ".ivol");
     EXPECT_EQ(import_to_ivol(v, path, options).structure, "bricked") << slices;
     const std::vector<std::uint8_t> bytes = test::read_bytes(path);

@@ -87,7 +87,8 @@ std::uint64_t bricked_layer_budget(const ImportOptions& options) {
   return options.layer_budget_bytes ? options.layer_budget_bytes : memory_budget(options.memory_bytes);
 }
 
-std::uint32_t bricked_read_slices(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding) {
+std::uint32_t bricked_read_slices(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding,
+                                  bool thick_reads_pay) {
   const std::uint64_t budget = bricked_layer_budget(options);
   const auto fits = [&](std::uint32_t slices) {
     return bricked_layer_bytes(shape, options, encoding, slices) <= budget;
@@ -98,6 +99,10 @@ std::uint32_t bricked_read_slices(const DenseVolume& shape, const ImportOptions&
   if (fits(layer)) {
     // Whole layers, twice as many while they fit, up to the volume: a
     // reconstruction's slabs cost less per voxel the thicker they are.
+    // Other sources read a layer at a time: a whole 512^3 volume read at
+    // once cost a tenth more time, in page faults, than its layers read
+    // into one buffer (bench/RESULTS.md, issue 22).
+    if (!thick_reads_pay) return layer;
     const std::uint32_t all = static_cast<std::uint32_t>(
         std::min<std::uint64_t>((std::uint64_t{shape.dims[2]} + layer - 1) / layer * layer, UINT32_MAX / 2));
     while (slices < all && fits(std::min(2 * slices, all))) slices = std::min(2 * slices, all);

@@ -27,9 +27,11 @@ std::uint64_t bricked_layer_bytes(const DenseVolume& shape, const ImportOptions&
 // What a layer may hold: options.layer_budget_bytes, else all of --memory.
 std::uint64_t bricked_layer_budget(const ImportOptions& options);
 // The slices read at once within the budget: whole layers, as many as fit
-// (powers of two of them, up to the volume), else a layer's slices halved
-// until they fit; 0 when not even one slice fits.
-std::uint32_t bricked_read_slices(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding);
+// (powers of two of them, up to the volume) where thicker reads pay
+// (SlabReader::thick_reads_pay), else one layer; a layer's slices halved
+// until they fit when it does not; 0 when not even one slice fits.
+std::uint32_t bricked_read_slices(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding,
+                                  bool thick_reads_pay = true);
 
 // StructureChoice::Auto's rule (or the flag): whether `shape` becomes a
 // bricked grid. Sets report.structure and, for Auto, report.structure_reason

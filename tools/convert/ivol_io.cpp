@@ -238,7 +238,7 @@ void import_bricked(SlabReader& source, const std::string& path, const ImportOpt
   const BuildOptions& build = streaming.build;
   BrickedImport writer(shape, path, options, streaming);
   const std::uint32_t layer = writer.layer_slices();
-  const std::uint32_t read = bricked_read_slices(shape, options, build.encoding);
+  const std::uint32_t read = bricked_read_slices(shape, options, build.encoding, source.thick_reads_pay());
   const std::string what = path + ": a layer of " + std::to_string(layer) + " slices of " +
                            std::to_string(shape.dims[0]) + "x" + std::to_string(shape.dims[1]) + " " +
                            sample_type_name(shape.type);

@@ -58,6 +58,7 @@ class RawSlabReader final : public SlabReader {
   }
 
   bool reads_rows() const override { return true; }
+  bool thick_reads_pay() const override { return false; }  // a read is a pread of whole slices
   void read_rows(std::uint32_t z, std::uint32_t y0, std::uint32_t rows, void* out) override {
     // The sizes were checked against the file's in the constructor.
     const std::uint64_t row = slab_bytes(Dims{layout_.dims[0], 1, 1}, 1, layout_.type, path_);

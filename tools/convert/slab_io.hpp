@@ -26,6 +26,11 @@ class SlabReader {
   // Reads rows y0 .. y0 + rows of slice z into `out` ([y][x]); y0 + rows is
   // at most the slice's height.
   virtual void read_rows(std::uint32_t /*z*/, std::uint32_t /*y0*/, std::uint32_t /*rows*/, void* /*out*/) {}
+  // Whether a read of more slices costs less per slice (a reconstruction's
+  // slabs, HDF5 chunks spanning slices): the bricked importer then reads as
+  // many as its memory budget holds; else (raw files, TIFF pages) a layer of
+  // bricks at a time, into buffers that stay mapped and in cache.
+  virtual bool thick_reads_pay() const { return true; }
 
  protected:
   DenseVolume shape_;

@@ -277,6 +277,7 @@ class TiffSlabReader final : public SlabReader {
   }
 
   bool reads_rows() const override { return true; }
+  bool thick_reads_pay() const override { return false; }  // pages are read one by one
   void read_rows(std::uint32_t z, std::uint32_t y0, std::uint32_t rows, void* out) override {
     if (y0 > format_.height || rows > format_.height - y0)
       fail(files_.front(), "rows " + std::to_string(y0) + " .. " + std::to_string(std::uint64_t{y0} + rows) +

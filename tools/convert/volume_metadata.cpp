@@ -60,6 +60,7 @@ class ReshapedSlabReader final : public SlabReader {
     shape_ = shape_of(shape);
   }
   void read(std::uint32_t z0, std::uint32_t count, void* out) override { inner_->read(z0, count, out); }
+  bool thick_reads_pay() const override { return inner_->thick_reads_pay(); }
 
  private:
   std::unique_ptr<SlabReader> inner_;
