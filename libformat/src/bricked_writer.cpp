@@ -79,7 +79,18 @@ struct BrickedGridWriter::Impl {
       block.codec = Codec::Predicted;
       // Where noise dominates, no predictor beats the values' own byte planes:
       // the smaller of codec 3 and codec 2 is kept (and stored below either).
-      EncodedBlock planes = encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), w);
+      // Up to level 3 codec 2 is tried at zstd level 1, and made again at the
+      // asked level only where it wins (a brick in four with noise, fewer
+      // without): the trial was a tenth of a binary16 conversion's time, and
+      // the files are the same to 0.002 % (bench/RESULTS.md, issue 22).
+      WriteOptions trial = w;
+      if (w.zstd_level <= 3) trial.zstd_level = 1;
+      EncodedBlock planes =
+          encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), trial);
+      if (trial.zstd_level != w.zstd_level && planes.bytes.size() < block.bytes.size()) {
+        EncodedBlock asked = encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), w);
+        if (asked.bytes.size() <= planes.bytes.size()) planes = std::move(asked);
+      }
       if (planes.bytes.size() < block.bytes.size()) block = std::move(planes);
       // Where one value (an object-fidelity file's background) fills an eighth
       // of the brick or more, codec 4 stores only the others, behind a mask;
