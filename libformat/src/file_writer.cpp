@@ -59,9 +59,20 @@ EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_ele
   std::vector<std::uint8_t> regrouped;
   if (planes) {
     regrouped.resize(raw_size);
-    const auto* in = static_cast<const std::uint8_t*>(data);
-    for (std::size_t i = 0; i < element_count; ++i)
-      for (std::size_t p = 0; p < width; ++p) regrouped[p * element_count + i] = in[i * width + p];
+    const std::uint8_t* __restrict in = static_cast<const std::uint8_t*>(data);
+    std::uint8_t* __restrict out = regrouped.data();
+    const std::size_t n = element_count;
+    // The usual widths with the width known to the compiler, which then
+    // vectorises the loop (the generic one was 4 % of a conversion).
+    if (width == 2) {
+      for (std::size_t i = 0; i < n; ++i) out[i] = in[2 * i], out[n + i] = in[2 * i + 1];
+    } else if (width == 4) {
+      for (std::size_t i = 0; i < n; ++i)
+        out[i] = in[4 * i], out[n + i] = in[4 * i + 1], out[2 * n + i] = in[4 * i + 2], out[3 * n + i] = in[4 * i + 3];
+    } else {
+      for (std::size_t i = 0; i < n; ++i)
+        for (std::size_t p = 0; p < width; ++p) out[p * n + i] = in[i * width + p];
+    }
   }
   if (options.compress) {
     const void* content = planes ? regrouped.data() : data;

@@ -243,7 +243,12 @@ void StoredLevels::add_slices(const T* values, std::uint32_t z0, std::uint32_t c
         for (std::uint64_t x = whole * run; x < dims_[0]; ++x) sums[x >> k] += units_[row[x]];
         if (!level.specials.empty()) {
           std::uint8_t* flags = level.specials.data() + (y >> k) * level.dims[0];
-          for (std::uint64_t x = 0; x < dims_[0]; ++x) flags[x >> k] |= special_[row[x]];
+          for (std::uint64_t c = 0; c < whole; ++c) {
+            std::uint8_t cell = 0;
+            for (std::uint64_t x = c << k; x < (c + 1) << k; ++x) cell |= special_[row[x]];
+            flags[c] |= cell;
+          }
+          for (std::uint64_t x = whole * run; x < dims_[0]; ++x) flags[x >> k] |= special_[row[x]];
         }
       }
       if (inexact.empty()) continue;
