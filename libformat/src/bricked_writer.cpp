@@ -80,9 +80,10 @@ struct BrickedGridWriter::Impl {
       // Where noise dominates, no predictor beats the values' own byte planes:
       // the smaller of codec 3 and codec 2 is kept (and stored below either).
       // Up to level 3 codec 2 is tried at zstd level 1, and made again at the
-      // asked level only where it wins (a brick in four with noise, fewer
-      // without): the trial was a tenth of a binary16 conversion's time, and
-      // the files are the same to 0.002 % (bench/RESULTS.md, issue 22).
+      // asked level only where it wins (2-6 % of a noise-free CT volume's
+      // bricks, 25-70 % with Poisson noise): the trial was a tenth of a
+      // binary16 conversion's time, and the files are the same to 0.002 %
+      // (bench/RESULTS.md, issue 22).
       WriteOptions trial = w;
       if (w.zstd_level <= 3) trial.zstd_level = 1;
       EncodedBlock planes =
