@@ -22,7 +22,7 @@ struct BrickMoments {
 // Which interior rows (y, z > 0) the encoder's fits and its judging of
 // candidate taps look at: every one, or (steps of 2) those of odd y and odd
 // z, a quarter. A quarter of a brick's rows fits and judges taps about as
-// well as all of them (files the same to 0.01 % without noise, 0.01-0.09 %
+// well as all of them (files the same to 0.02 % without noise, 0.01-0.09 %
 // larger with Poisson noise), and the fits and judging were more than a
 // third of the encoder's time (bench/RESULTS.md, issue 22).
 struct RowSample {
