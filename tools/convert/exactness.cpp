@@ -191,6 +191,12 @@ void stored_to_samples(const VolumeLayout& layout, const std::uint8_t* stored, s
   const bool same = identity && ((encoding == ValueEncoding::Binary16 && type == SampleType::Float16) ||
                                  (encoding == ValueEncoding::Float32 && type == SampleType::Float32) ||
                                  (encoding == ValueEncoding::UInt16 && type == SampleType::UInt16));
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+  if (same) {  // the stored bits are the samples' (both little-endian here): one copy, not a call a sample
+    std::memcpy(out, stored, count * size);
+    return;
+  }
+#endif
   for (std::uint64_t i = 0; i < count; ++i) {
     const std::uint32_t bits = load_le(stored + i * width, width);
     std::uint8_t* o = out + i * size;
