@@ -118,8 +118,8 @@ std::uint64_t interior_residuals(const BrickDims& d, const PredictorTaps& taps, 
   std::uint64_t cost = 0;
   const std::ptrdiff_t sy = d[0], sz = std::ptrdiff_t{d[0]} * d[1];
   if (d[0] < 2) return 0;  // every voxel is on a face
-  for (std::uint32_t layer = 1; layer < d[2]; layer += sample.z_step)
-    for (std::uint32_t y = 1; y < d[1]; y += sample.y_step) {
+  for (std::uint32_t layer = 1; layer < d[2]; layer += sample.step)
+    for (std::uint32_t y = 1; y < d[1]; y += sample.step) {
       const std::uint16_t* c = u + layer * sz + y * sy;
       const RowNeighbours n{c - sy, c - sz, c - sy - sz};
       std::uint16_t* row = z + (c - u);

@@ -44,8 +44,8 @@ bool solve(double* a, double* b, int k) {
 // Interior rows (y, z > 0) the sample takes, times their interior voxels.
 std::uint64_t sampled_voxels(const BrickDims& d, RowSample sample) {
   if (d[0] < 2 || d[1] < 2 || d[2] < 2) return 0;
-  const std::uint64_t rows = std::uint64_t{sample.y_step == 1 ? d[1] - 1 : d[1] / 2} *
-                             (sample.z_step == 1 ? d[2] - 1 : d[2] / 2);  // step 2: odd y or z
+  const std::uint64_t rows =
+      sample.all() ? std::uint64_t{d[1] - 1} * (d[2] - 1) : std::uint64_t{d[1] / 2} * (d[2] / 2);  // odd y and odd z
   return rows * (d[0] - 1);
 }
 
@@ -76,8 +76,7 @@ RowSample row_sample(const BrickDims& d) {
   // 4096 sampled voxels: a 32^3 brick's quarter holds 7936, a 16^3 brick's
   // 960 (all of its 3375 are taken).
   constexpr std::uint64_t kEnough = 4096;
-  RowSample sparse;
-  sparse.y_step = sparse.z_step = 2;
+  const RowSample sparse{2};
   return sampled_voxels(d, sparse) >= kEnough ? sparse : RowSample{};
 }
 
@@ -118,7 +117,7 @@ bool brick_moments(const BrickDims& d, const std::uint16_t* u, BrickMoments& out
     for (std::uint32_t y = 0; y < ey; ++y) {
       const std::size_t r = std::size_t{z} * ey + y;
       const double* c = row(y, z);
-      const bool odd_y = sample.y_step == 1 || (y & 1), odd_z = sample.z_step == 1 || (z & 1);
+      const bool odd_y = sample.all() || (y & 1), odd_z = sample.all() || (z & 1);
       sum[r] = static_cast<std::int64_t>(exact_sum(c, c, e, false));
       self[r] = pair(c, c);
       if (y > 0 && odd_y) along_y[r] = pair(c, row(y - 1, z));
@@ -129,8 +128,8 @@ bool brick_moments(const BrickDims& d, const std::uint16_t* u, BrickMoments& out
   // Feature i is row kRow[i] of (own, y − 1, z − 1, both) at x (kNow) or x − 1.
   static constexpr int kRow[8] = {0, 0, 1, 2, 1, 2, 3, 3};
   static constexpr bool kNow[8] = {true, false, true, true, false, false, true, false};
-  for (std::uint32_t z = 1; z < ez; z += sample.z_step)
-    for (std::uint32_t y = 1; y < ey; y += sample.y_step) {
+  for (std::uint32_t z = 1; z < ez; z += sample.step)
+    for (std::uint32_t y = 1; y < ey; y += sample.step) {
       const std::size_t r[4] = {std::size_t{z} * ey + y, std::size_t{z} * ey + y - 1, std::size_t{z - 1} * ey + y,
                                 std::size_t{z - 1} * ey + y - 1};
       // full[a][b] = Σ_x R_a·R_b, lag[a][b] = Σ_{x ≥ 1} R_a(x)·R_b(x − 1).
@@ -217,8 +216,8 @@ bool fit_least_squares_with_level(const BrickDims& d, const std::uint16_t* u, co
   const RowPredictor p(out);
   const std::ptrdiff_t sy = d[0], sz = std::ptrdiff_t{d[0]} * d[1];
   std::int64_t left = 0;
-  for (std::uint32_t z = 1; z < d[2]; z += sample.z_step)
-    for (std::uint32_t y = 1; y < d[1]; y += sample.y_step) {
+  for (std::uint32_t z = 1; z < d[2]; z += sample.step)
+    for (std::uint32_t y = 1; y < d[1]; y += sample.step) {
       const std::uint16_t* c = u + z * sz + y * sy;
       const RowNeighbours n{c - sy, c - sz, c - sy - sz};
       left += p.narrow ? level_row<std::int32_t>(p, c, n, d[0]) : level_row<std::int64_t>(p, c, n, d[0]);

@@ -20,14 +20,14 @@ struct BrickMoments {
 };
 
 // Which interior rows (y, z > 0) the encoder's fits and its judging of
-// candidate taps look at: every one, or (steps of 2) those of odd y and odd
-// z, a quarter. A quarter of a brick's rows fits and judges taps about as
+// candidate taps look at: every one (step 1), or (step 2) those of odd y and
+// odd z, a quarter. A quarter of a brick's rows fits and judges taps about as
 // well as all of them (files the same to 0.02 % without noise, 0.01-0.09 %
 // larger with Poisson noise), and the fits and judging were more than a
 // third of the encoder's time (bench/RESULTS.md, issue 22).
 struct RowSample {
-  std::uint32_t y_step = 1, z_step = 1;
-  bool all() const { return y_step == 1 && z_step == 1; }
+  std::uint32_t step = 1;  // along y and along z
+  bool all() const { return step == 1; }
 };
 
 // A quarter of the rows where that still leaves enough voxels to judge by.
