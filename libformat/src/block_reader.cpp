@@ -14,6 +14,7 @@
 #include "ivol/masked_codec.hpp"
 #include "ivol/predicted_codec.hpp"
 #include "layout.hpp"
+#include "zstd_parts.hpp"
 
 namespace ivol::detail {
 namespace {
@@ -68,8 +69,8 @@ std::size_t zstd_frame_size(const std::string& part, const std::string& which, c
 // present.
 void decode_zstd_frame(const std::string& part, const std::string& which, const std::uint8_t* frame,
                        std::size_t frame_size, std::size_t content_size, std::uint8_t* out) {
-  thread_local std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> context(ZSTD_createDCtx(), ZSTD_freeDCtx);
-  const std::size_t got = ZSTD_decompressDCtx(context.get(), out, content_size, frame, frame_size);
+  ZSTD_DCtx* const context = detail::thread_decompression_context();
+  const std::size_t got = ZSTD_decompressDCtx(context, out, content_size, frame, frame_size);
   if (ZSTD_isError(got)) {
     if (ZSTD_getErrorCode(got) == ZSTD_error_checksum_wrong)
       throw Error(ErrorClass::Checksum, part + which + ": the zstd content checksum does not match");

@@ -121,8 +121,8 @@ void decode_masked(const std::uint8_t* payload, std::size_t size, std::size_t co
     bad("the bytes after the codec header are not exactly one complete zstd frame");
 
   std::vector<std::uint8_t> content(static_cast<std::size_t>(content_size));
-  thread_local std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> context(ZSTD_createDCtx(), ZSTD_freeDCtx);
-  const std::size_t got = ZSTD_decompressDCtx(context.get(), content.data(), content.size(), frame, frame_size);
+  ZSTD_DCtx* const context = detail::thread_decompression_context();
+  const std::size_t got = ZSTD_decompressDCtx(context, content.data(), content.size(), frame, frame_size);
   if (ZSTD_isError(got)) {
     if (ZSTD_getErrorCode(got) == ZSTD_error_checksum_wrong)
       throw Error(ErrorClass::Checksum, "codec 4: the zstd content checksum does not match");

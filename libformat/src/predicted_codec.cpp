@@ -153,8 +153,8 @@ void decode_zstd_planes(const std::uint8_t* frame, std::size_t frame_size, std::
   thread_local std::vector<std::uint8_t> planes;  // every byte written before it is read
   planes.resize(2 * n);
   check_frame(frame, frame_size, planes.size());
-  thread_local std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> context(ZSTD_createDCtx(), ZSTD_freeDCtx);
-  const std::size_t got = ZSTD_decompressDCtx(context.get(), planes.data(), planes.size(), frame, frame_size);
+  ZSTD_DCtx* const context = detail::thread_decompression_context();
+  const std::size_t got = ZSTD_decompressDCtx(context, planes.data(), planes.size(), frame, frame_size);
   if (ZSTD_isError(got)) {
     if (ZSTD_getErrorCode(got) == ZSTD_error_checksum_wrong)
       bad(ErrorClass::Checksum, "the zstd content checksum does not match");

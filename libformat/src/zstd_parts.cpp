@@ -1,5 +1,6 @@
 #include "zstd_parts.hpp"
 
+#include <memory>
 #include <string>
 
 #include "ivol/error.hpp"
@@ -49,6 +50,13 @@ std::size_t compress_parts(ZSTD_CCtx* cctx, std::initializer_list<ZstdPart> part
   check(size);
   out.resize(offset + size);
   return size;
+}
+
+ZSTD_DCtx* thread_decompression_context() {
+  thread_local std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> context(nullptr, ZSTD_freeDCtx);
+  if (!context) context.reset(ZSTD_createDCtx());  // again, where an earlier try failed
+  if (!context) throw Error(ErrorClass::LimitExceeded, "zstd cannot allocate a decompression context: out of memory");
+  return context.get();
 }
 
 }  // namespace ivol::detail

@@ -28,4 +28,9 @@ struct ZstdPart {
 std::size_t compress_parts(ZSTD_CCtx* cctx, std::initializer_list<ZstdPart> parts, std::vector<std::uint8_t>& out,
                            std::size_t offset);
 
+// The calling thread's zstd decompression context, made on first use and
+// kept; throws Error(LimitExceeded) where zstd cannot allocate one (under an
+// address-space cap), rather than hand zstd a null context, which crashed.
+ZSTD_DCtx* thread_decompression_context();
+
 }  // namespace ivol::detail
