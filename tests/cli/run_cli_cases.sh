@@ -106,6 +106,24 @@ case_ info-bricked-no-nodes 1 "" -- bash -c "'$IVOL' info '$work/b8.ivol' | grep
 /usr/bin/python3 -c "import struct; open('$work/f.raw','wb').write(struct.pack('<4096f', *[i * 0.001 for i in range(4096)]))"
 case_ convert-lossy      0 "lossy: f32 rounded to binary16" -- "$IVOL" convert "$work/f.raw" "$work/h.ivol" --dims 16,16,16 --encoding binary16 --allow-lossy
 case_ convert-keep       0 "coarsened"               -- "$IVOL" convert "$work/v.raw" "$work/k.ivol" --dims 32,32,32 --keep threshold=otsu,margin=1
+# ivol -> ivol re-encodes (a migration): an object-fidelity octree stays an
+# octree with the same leaves, a lossless octree becomes a bricked grid;
+# every stored value as it was, checked against the input by verify
+# --against; a level or an export type is refused before anything is written.
+case_ reencode-object    0 "every stored value as it was" -- "$IVOL" convert "$work/k.ivol" "$work/k-again.ivol"
+case_ reencode-object-why 0 "may hold coarse leaves" -- "$IVOL" info "$work/k-again.ivol"
+case_ reencode-same-leaves 0 "" -- bash -c "diff <('$IVOL' info '$work/k.ivol' | sed -n '/levels/,/metadata/p' | head -n -1) <('$IVOL' info '$work/k-again.ivol' | sed -n '/levels/,/metadata/p' | head -n -1)"
+case_ reencode-verify    0 "voxels equal, source digests match" -- "$IVOL" verify "$work/k-again.ivol" --against "$work/k.ivol"
+case_ reencode-keeps-keep 0 '"threshold_method": "otsu"' -- "$IVOL" info --json "$work/k-again.ivol"
+case_ reencode-to-grid   0 "ivol bricked float32"    -- "$IVOL" convert "$work/v-octree.ivol" "$work/v-again.ivol"
+"$IVOL" -q convert "$work/v-again.ivol" "$work/v-again.raw" -f
+case_ reencode-grid-exact 0 ""                       -- cmp "$work/v.raw" "$work/v-again.raw"
+case_ reencode-no-level  1 "--level"                 -- "$IVOL" convert "$work/v.ivol" "$work/v-l1.ivol" --level 1
+case_ reencode-no-out-type 1 "--out-type"            -- "$IVOL" convert "$work/v.ivol" "$work/v-l1.ivol" --out-type f16
+/usr/bin/python3 -c "import struct; open('$work/thirds.raw','wb').write(struct.pack('<512f', *[i / 3 for i in range(512)]))"
+"$IVOL" -q convert "$work/thirds.raw" "$work/thirds.ivol" --dims 8,8,8
+case_ reencode-lossy-refused 2 "--allow-lossy"       -- "$IVOL" convert "$work/thirds.ivol" "$work/v-l1.ivol" --encoding binary16
+test ! -e "$work/v-l1.ivol" && case_ reencode-no-partial 0 "" -- true
 case_ convert-bad-keep   1 "--keep"                  -- "$IVOL" convert "$work/v.raw" "$work/k2.ivol" --dims 32,32,32 --keep margin=1
 case_ convert-to-tiff    0 "tiff f32"                -- "$IVOL" convert "$work/v.ivol" "$work/v.tif"
 case_ convert-tiff-ivol  0 "lossless"                -- "$IVOL" convert "$work/v.tif" "$work/t.ivol"

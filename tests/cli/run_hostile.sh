@@ -83,6 +83,7 @@ while read -r name verdict _; do
   # The whole volume, except for the two valid grids of 2 GiB and 2^87 voxels.
   if [ "$name" != regular_grid_2gib ] && [ "$name" != rectilinear_2p29 ]; then
     run "$name: convert" "$read_want" "$text" -- "$IVOL" -q convert "$f" "$out/c.raw"
+    run "$name: re-encode" "$read_want" "$text" -- "$IVOL" -q convert "$f" "$out/c.ivol"
   fi
 done < <("$MAKE_HOSTILE" --list)
 

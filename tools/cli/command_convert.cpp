@@ -3,12 +3,15 @@
 #include <chrono>
 #include <filesystem>
 #include <iostream>
+#include <sstream>
 
 #include "commands.hpp"
 #include "fixity.hpp"
 #include "formats.hpp"
 #include "ivol/error.hpp"
+#include "ivol/structures.hpp"
 #include "ivol_io.hpp"
+#include "ivol_source.hpp"
 #include "option_parsing.hpp"
 #include "output_rules.hpp"
 #include "report.hpp"
@@ -206,7 +209,15 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     const Format from = detect_format(s->input, s->from, "--from");
     const Format to = output_format(s->output, s->to, "OUT");
     remove_temporaries_on_signal(s->output);
-    if (from == Format::Ivol && to == Format::Ivol) throw UsageError("OUT", "ivol to ivol: nothing to convert");
+    if (from == Format::Ivol && to == Format::Ivol) {
+      // A re-encoding keeps every voxel; a level of detail or another sample
+      // type belongs to an export.
+      if (s->level != 0)
+        throw UsageError("--level",
+                         "ivol to ivol re-encodes the full resolution; extract a level to raw, TIFF or HDF5");
+      if (!s->out_type.empty())
+        throw UsageError("--out-type", "ivol to ivol keeps the stored values (--encoding changes their encoding)");
+    }
     if (is_stdio(s->input) && from != Format::Raw) throw UsageError("IN", "'-' (standard input) takes raw input only");
     check_output(s->output, "OUT", {s->input}, s->force, /*stdout_allowed=*/true);
     // The summary must not mix with samples on standard output.
@@ -246,7 +257,9 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
           throw UsageError("--brick", "bricks belong to a bricked grid, which format 1.2 (--format-version) lacks");
       }
       bool rounded = false;  // by the reader (HDF5 float64), already said
-      auto opened = open_source(s->input, from, foreign, &rounded);
+      convert::IvolSourceInfo ivol_input;
+      auto opened = from == Format::Ivol ? convert::open_ivol_stored_slabs(s->input, foreign.memory_bytes, &ivol_input)
+                                         : open_source(s->input, from, foreign, &rounded);
       convert::DenseVolume shape = convert::shape_of(opened->shape());
       settle_metadata(shape, *s, from, global.command_line);
       // finish_import takes the geometry from the source's shape: give it ours.
@@ -269,6 +282,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       options.slab_budget_bytes = foreign.memory_bytes / 4;
       options.memory_bytes = foreign.memory_bytes;
       options.metadata.provenance = nlohmann::json::parse(shape.provenance);
+      if (from == Format::Ivol) convert::set_reencoding(options, ivol_input);
       // Hashed on a thread of its own while the conversion reads the same files.
       // With what reads the source again (ivol verify --against).
       nlohmann::json how = {{"format", format_name(from)}, {"sample_type", convert::sample_type_name(shape.type)}};
@@ -307,6 +321,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
                                  {"temp_bytes", r.temp_bytes},
                                  {"seconds", seconds}};
         if (!r.temp_directory.empty()) report["temp_directory"] = r.temp_directory;
+        if (from == Format::Ivol) report["input_file_bytes"] = ivol_input.file_bytes;
         std::cout << report.dump(2) << "\n";
         return kExitOk;
       }
@@ -331,6 +346,19 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
         }
         // A bricked grid is far smaller for such input: say why it is not one.
         if (r.octree_for_memory) std::cerr << "ivol convert: note: an octree, because " << r.structure_reason << "\n";
+        if (from == Format::Ivol) {
+          // A re-encoding: the sizes of the two files, not of the samples.
+          const double change = 100.0 * (static_cast<double>(r.file_bytes) / ivol_input.file_bytes - 1.0);
+          std::ostringstream percent;
+          percent.precision(1);
+          percent << std::fixed << std::abs(change) << " % " << (change <= 0 ? "smaller" : "larger");
+          say << s->input << " (ivol " << structure_name(ivol_input.kind) << " " << encoding_name(ivol_input.encoding)
+              << ", " << human_bytes(ivol_input.file_bytes) << ") -> " << s->output << " (ivol " << r.structure << " "
+              << encoding_name(r.encoding) << ", " << human_bytes(r.file_bytes) << ", " << percent.str()
+              << (r.lossless ? ", every stored value as it was" : "") << ") in " << seconds << " s\n";
+          print_geometry(shape, *s, to, say, global.quiet);
+          return kExitOk;
+        }
         say << s->input << " (" << format_name(from) << " " << describe(shape) << ", " << human_bytes(bytes) << ") -> "
             << s->output << " (ivol " << r.structure << " " << encoding_name(r.encoding) << ", "
             << human_bytes(r.file_bytes) << ", " << static_cast<double>(bytes) / r.file_bytes << "x smaller"

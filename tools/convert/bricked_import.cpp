@@ -9,6 +9,7 @@
 #include "ivol/binary16.hpp"
 #include "ivol/error.hpp"
 #include "ivol/geometry.hpp"
+#include "ivol_source.hpp"
 #include "sample_values.hpp"
 #include "sizes.hpp"
 
@@ -139,6 +140,11 @@ bool choose_bricked(const DenseVolume& shape, const ImportOptions& options, Valu
     report.structure = "octree";
     return false;
   }
+  if (against.empty() && options.input_coarse_leaves)
+    against =
+        "the .ivol input may hold coarse leaves (its metadata names a keep rule, a reconstruction into a structure "
+        "or a loss): an octree keeps each as one leaf, a bricked grid would store every voxel of it "
+        "(--structure bricked overrides)";
   if (against.empty() && bricked_read_slices(shape, options, encoding) == 0) {
     const std::uint64_t layer = bricked_layer_bytes(shape, options, encoding, 1);
     against = "a layer of bricks (" + mib_text(layer) +
@@ -218,6 +224,7 @@ BrickedImport::BrickedImport(const DenseVolume& shape, const std::string& path, 
   early.structure["kind"] = "bricked";
   early.structure["brick"] = 1u << options.brick_log2;
   early.structure["source_encoding"] = sample_type_name(shape.type);
+  inherit_structure(early.structure, options.input_structure);
   writer_.write_early_metadata(early);
 }
 
@@ -233,6 +240,7 @@ void BrickedImport::finish(const LossTally& loss, ImportReport& report) {
   metadata.structure["source_encoding"] = sample_type_name(shape_.type);
   metadata.structure["lossless"] = report.lossless;
   metadata.structure["max_abs_error"] = report.max_abs_error;
+  inherit_structure(metadata.structure, options_.input_structure);
   report.file_bytes = writer_.finish(metadata).file_bytes;
   report.kept_voxels = shape_.voxel_count();
 }

@@ -16,6 +16,7 @@
 #include "ivol/keep_mask.hpp"
 #include "ivol/streaming_writer.hpp"
 #include "ivol/writer.hpp"
+#include "ivol_source.hpp"
 #include "sample_values.hpp"
 #include "sizes.hpp"
 
@@ -135,6 +136,34 @@ StreamingOptions import_streaming_options(const DenseVolume& shape, const Import
                 std::string("--encoding uint16 needs integer samples; this volume holds ") +
                     sample_type_name(shape.type) + " (use binary16 or float32)");
   if (build.encoding == ValueEncoding::UInt16 && shape.type == SampleType::Int16) build.value_offset = -32768.0;
+  if (options.stored_values) {
+    // An .ivol input's values: the same encoding keeps them as they are,
+    // with the input's scale and offset. Another encoding or a keep rule
+    // works on the samples' own numbers, which are the physical values only
+    // where the scale is 1 and the offset 0.
+    const bool same_encoding = build.encoding == lossless_encoding(shape.type);
+    const bool identity = options.stored_values->scale == 1.0 && options.stored_values->offset == 0.0;
+    if (!identity && !same_encoding)
+      throw Error(ErrorClass::InvalidArgument,
+                  std::string("--encoding ") + encoding_name(build.encoding) +
+                      ": an .ivol input whose values have a scale or offset (physical = offset + scale x stored) is "
+                      "re-encoded as it is stored (" +
+                      encoding_name(lossless_encoding(shape.type)) + "); export it first to change the encoding");
+    if (!identity && options.keep)
+      throw Error(ErrorClass::InvalidArgument,
+                  "--keep: an .ivol input whose values have a scale or offset (physical = offset + scale x stored) "
+                  "takes no keep rule here; export it first to coarsen it");
+    // The octree and grid writers take float samples as physical values:
+    // stored values of binary16 or float32 under a scale would be scaled again.
+    if (!identity && build.encoding != ValueEncoding::UInt16)
+      throw Error(ErrorClass::InvalidArgument,
+                  std::string("an .ivol input of ") + encoding_name(build.encoding) +
+                      " values with a scale or offset cannot be re-encoded as it is stored; export it first");
+    if (same_encoding) {
+      build.value_scale = options.stored_values->scale;
+      build.value_offset = options.stored_values->offset;
+    }
+  }
   report.value_scale = build.value_scale;
   report.value_offset = build.value_offset;
   if (options.block_bytes) streaming.write.block_bytes = options.block_bytes;
@@ -176,6 +205,10 @@ Metadata import_metadata(const DenseVolume& shape, const ImportOptions& options)
   return metadata;
 }
 
+double sample_code_offset(const ImportOptions& options, const BuildOptions& build) {
+  return options.stored_values ? 0.0 : build.value_offset;
+}
+
 void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, const ImportOptions& options,
                    ImportReport& report) {
   Metadata metadata = import_metadata(shape, options);
@@ -192,6 +225,7 @@ void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, cons
   const StreamingResult result = writer.finish(metadata, [&](Metadata& m, const StreamingResult& r) {
     m.structure["lossless"] = r.lossless;
     m.structure["max_abs_error"] = r.max_abs_error;
+    inherit_structure(m.structure, options.input_structure);
   });
   report.lossless = result.lossless;
   report.max_abs_error = result.max_abs_error;
@@ -235,8 +269,9 @@ template <class T>
 void import_bricked(SlabReader& source, const std::string& path, const ImportOptions& options,
                     const StreamingOptions& streaming, ImportReport& report) {
   const DenseVolume& shape = source.shape();
-  const BuildOptions& build = streaming.build;
+  BuildOptions build = streaming.build;
   BrickedImport writer(shape, path, options, streaming);
+  build.value_offset = sample_code_offset(options, streaming.build);  // what samples_to_stored subtracts
   const std::uint32_t layer = writer.layer_slices();
   const std::uint32_t read = bricked_read_slices(shape, options, build.encoding, source.thick_reads_pay());
   const std::string what = path + ": a layer of " + std::to_string(layer) + " slices of " +
@@ -356,8 +391,8 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
     std::vector<std::uint8_t> keep;
     if (options.keep) keep = slab_keep_mask(value_data, shape.dims, lo, hi, z0, n, report.threshold, margin);
     if (codes) {
-      to_codes(shape.type, samples.data() + centre * sample_size(shape.type), n * slice, build.value_offset,
-               code_values.data());
+      to_codes(shape.type, samples.data() + centre * sample_size(shape.type), n * slice,
+               sample_code_offset(options, build), code_values.data());
       writer.add_slab(code_values.data(), options.keep ? keep.data() : nullptr);
     } else {
       tally_encoding(build.encoding, value_data + centre, n * slice, report.encoding_loss);

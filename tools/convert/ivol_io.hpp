@@ -67,6 +67,18 @@ struct ImportOptions {
   // own request and is not counted.
   bool allow_lossy = true;
   std::string what;  // names the conversion in that refusal (default: the output path)
+  // An .ivol input (ivol_source.hpp): the samples are its stored values, kept
+  // as they are with its scale and offset (uint16 codes are not shifted by
+  // the offset again); its structure object, of which inherit_structure
+  // carries what still holds; and whether it may hold coarse leaves, which
+  // StructureChoice::Auto then keeps in an octree.
+  struct StoredValues {
+    double scale = 1.0;
+    double offset = 0.0;
+  };
+  std::optional<StoredValues> stored_values;
+  nlohmann::json input_structure;
+  bool input_coarse_leaves = false;
 };
 
 struct ImportReport {
@@ -103,6 +115,9 @@ StreamingOptions import_streaming_options(const DenseVolume& shape, const Import
 // which the mask's growth needs).
 std::vector<std::uint8_t> slab_keep_mask(const float* values, const Dims& dims, std::uint32_t lo, std::uint32_t hi,
                                          std::uint32_t z0, std::uint32_t count, float threshold, unsigned margin);
+// The offset integer samples are shifted by to become uint16 codes: the
+// encoding's, except for an .ivol input's stored values (already codes).
+double sample_code_offset(const ImportOptions& options, const BuildOptions& build);
 // Unless options.allow_lossy: throws (refuse_loss) when `loss`, what storing
 // the samples as `encoding` changed, is not exact.
 void refuse_encoding_loss(const LossTally& loss, const DenseVolume& shape, const ImportOptions& options,

@@ -1,0 +1,63 @@
+// An .ivol file as the source of a conversion into .ivol (`ivol convert
+// IN.ivol OUT.ivol`): the migration of an archive to another structure,
+// codec, brick size or zstd level. Its stored values at full resolution are
+// read slab by slab as they are (binary16 or uint16 codes, float32 bits), so
+// that the new file holds every voxel bit for bit with the same value
+// encoding, scale and offset, whatever it was written from.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "ivol/encoding.hpp"
+#include "ivol/geometry.hpp"
+#include "ivol/metadata.hpp"
+#include "ivol_io.hpp"
+#include "slab_io.hpp"
+
+namespace ivol::convert {
+
+struct IvolSourceInfo {
+  StructureKind kind = StructureKind::Octree;
+  std::uint64_t file_bytes = 0;
+  ValueEncoding encoding = ValueEncoding::Binary16;
+  double value_scale = 1.0;
+  double value_offset = 0.0;
+  Metadata metadata;  // the input's, whole
+  // The input may hold coarse leaves: not a bricked grid, and its metadata
+  // names a keep rule, a reconstruction into a structure, or a loss. Its
+  // full-resolution voxels then repeat each coarse leaf's value, which an
+  // octree keeps as one leaf again (equal leaves merge) and a bricked grid
+  // would store voxel by voxel.
+  bool coarse_leaves = false;
+};
+
+// The sample type the stored values are read as: f16 for binary16, u16 for
+// uint16 (the codes, before scale and offset), f32 for float32.
+SampleType stored_sample_type(ValueEncoding encoding);
+
+// Opens `path` with a block cache of export_cache_bytes(memory_bytes). The
+// shape carries the input's geometry, quantity, value unit and provenance
+// (which the output keeps under provenance.derived_from).
+std::unique_ptr<SlabReader> open_ivol_stored_slabs(const std::string& path, std::uint64_t memory_bytes,
+                                                   IvolSourceInfo* info = nullptr);
+
+// Sets what an import of that source needs: its stored values kept as they
+// are (ImportOptions::stored_values), its structure for inherit_structure,
+// whether it may hold coarse leaves; the metadata the new file keeps (its
+// quantity and value unit, `user` and unknown keys, and its provenance
+// under provenance.derived_from where the options' provenance lacks one).
+// Geometry comes from the source's shape.
+void set_reencoding(ImportOptions& options, const IvolSourceInfo& input);
+
+// What still holds of the input's structure object in a file re-encoded
+// from it, set in the new file's `structure`: the input's source_encoding
+// (the new file's source is the input, whose values came from that type),
+// its keep rule where the new file records none (its coarse leaves come
+// from that rule), and any loss it records (the new file holds the same
+// values, so it is as far from the original source: lossless false, the
+// larger max_abs_error).
+void inherit_structure(nlohmann::json& structure, const nlohmann::json& input_structure);
+
+}  // namespace ivol::convert
