@@ -66,7 +66,7 @@ std::vector<float> make_binary16_values(std::vector<std::uint16_t>& bits) {
 template <class Source>
 std::string write_octree_file(const std::string& name, const Source* data, const BuildOptions& build,
                               const Metadata& metadata) {
-  const std::string path = test::temp_path(name);
+  std::string path = test::temp_path(name);
   write_octree(build_octree(data, kDims, build).octree, metadata, path);
   return path;
 }
