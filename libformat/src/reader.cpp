@@ -92,6 +92,8 @@ std::vector<std::uint32_t> grid_bits(Reader::Impl& impl, const Box& box, unsigne
       std::uint32_t value = 0;
       if (!salvage) {
         value = impl.value_bits(index);
+      } else if (const Error* known = impl.known_failure(3, index)) {
+        salvage->add(region, 0, known->what());
       } else {
         try {
           value = impl.value_bits(index);
