@@ -59,6 +59,24 @@ case_ extract-salvage    3 "salvaged"                -- "$IVOL" extract "$work/d
 case_ salvage-output     0 "131072"                  -- stat -c %s "$work/d2.raw"
 head -c $((size - 7)) "$work/demo/demo-octree.ivol" > "$work/truncated.ivol"
 case_ verify-truncated   2 "truncated"               -- "$IVOL" verify "$work/truncated.ivol"
+# A damaged or cut archive into a sound one: refused without --salvage
+# (nothing written), with it exit 3, the regions listed and recorded, the
+# file marked not lossless, the same voxels as extract --salvage gives.
+case_ reencode-damaged   2 "checksum"                -- "$IVOL" convert "$work/damaged.ivol" "$work/d3.ivol"
+test ! -e "$work/d3.ivol" && case_ reencode-damaged-nothing 0 "" -- true
+case_ reencode-salvage   3 "salvaged"                -- "$IVOL" convert "$work/damaged.ivol" "$work/d3.ivol" --salvage
+case_ reencode-salvage-says 3 "damaged regions filled from coarser levels" -- "$IVOL" convert "$work/damaged.ivol" "$work/d3.ivol" --salvage -f
+case_ reencode-salvage-sound 0 "OK"                  -- "$IVOL" verify "$work/d3.ivol"
+case_ reencode-salvage-recorded 0 '"regions_filled"' -- "$IVOL" info --json "$work/d3.ivol"
+case_ reencode-salvage-not-lossless 0 '"lossless": false' -- "$IVOL" info --json "$work/d3.ivol"
+"$IVOL" -q convert "$work/d3.ivol" "$work/d3.raw" --out-type f32 -f
+case_ reencode-salvage-same 0 ""                     -- cmp "$work/d2.raw" "$work/d3.raw"
+# Only the footer cut: every block is found, the copy is whole (exit 0);
+# cut in half, the rest comes from coarser levels (exit 3).
+case_ reencode-cut-footer 0 "every stored value as it was" -- "$IVOL" convert "$work/truncated.ivol" "$work/t3.ivol" --salvage
+head -c $((size / 2)) "$work/demo/demo-octree.ivol" > "$work/half.ivol"
+case_ reencode-cut-half  3 "were not found"          -- "$IVOL" convert "$work/half.ivol" "$work/t4.ivol" --salvage
+case_ salvage-ivol-only  1 "--salvage"               -- "$IVOL" convert "$work/d2.raw" "$work/t5.ivol" --dims 32,32,32 --salvage
 echo "hello" > "$work/text.ivol"
 case_ verify-not-ivol    2 "not-ivol"                -- "$IVOL" verify "$work/text.ivol"
 case_ info-not-ivol      2 "signature"               -- "$IVOL" info "$work/text.ivol"

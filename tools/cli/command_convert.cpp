@@ -15,6 +15,7 @@
 #include "option_parsing.hpp"
 #include "output_rules.hpp"
 #include "report.hpp"
+#include "salvage_report.hpp"
 #include "signal_cleanup.hpp"
 #include "sizes.hpp"
 #include "volume_metadata.hpp"
@@ -42,6 +43,7 @@ struct ConvertSettings {
   bool force = false;
   bool allow_lossy = false;
   bool allow_gaps = false;
+  bool salvage = false;
   std::string temp_dir;
   bool no_disk_check = false;
   bool json = false;
@@ -140,6 +142,10 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       ->check(checked([](const std::string& v) { parse_triple(v, "--origin", false); }));
   geometry->add_option("--unit", s->unit, "Length unit, e.g. mm");
   cmd->add_flag("--allow-gaps", s->allow_gaps, "TIFF folder: convert although slice numbers are missing");
+  cmd->add_flag("--salvage", s->salvage,
+                ".ivol to .ivol: read past damaged blocks and (format 1.3) a cut or damaged index, filling their "
+                "regions from the nearest readable coarser level; the regions are listed, recorded in "
+                "provenance.salvage, the file marked not lossless, and the exit code is 3");
   cmd->add_option("--dataset", s->dataset, "HDF5 dataset")->capture_default_str();
   cmd->add_option("--grid", s->grid, "OpenVDB grid (default: the first float grid)");
   cmd->add_option("--background", s->background, "OpenVDB output: background value")->check(number_in(-3.4e38, 3.4e38));
@@ -209,6 +215,8 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
     const Format from = detect_format(s->input, s->from, "--from");
     const Format to = output_format(s->output, s->to, "OUT");
     remove_temporaries_on_signal(s->output);
+    if (s->salvage && !(from == Format::Ivol && to == Format::Ivol))
+      throw UsageError("--salvage", "salvages .ivol into .ivol (ivol extract --salvage writes other formats)");
     if (from == Format::Ivol && to == Format::Ivol) {
       // A re-encoding keeps every voxel; a level of detail or another sample
       // type belongs to an export.
@@ -258,8 +266,19 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       }
       bool rounded = false;  // by the reader (HDF5 float64), already said
       convert::IvolSourceInfo ivol_input;
-      auto opened = from == Format::Ivol ? convert::open_ivol_stored_slabs(s->input, foreign.memory_bytes, &ivol_input)
-                                         : open_source(s->input, from, foreign, &rounded);
+      convert::IvolStoredSlabs* ivol_source = nullptr;
+      std::unique_ptr<convert::SlabReader> opened;
+      if (from == Format::Ivol) {
+        auto input = convert::open_ivol_stored_slabs(s->input, foreign.memory_bytes, &ivol_input, s->salvage);
+        ivol_source = input.get();
+        if (input->salvage() && !global.quiet) {
+          std::cerr << "ivol convert: " << input->salvage()->reason << "\n";
+          print_salvage(std::cerr, "  ", *input->salvage(), input->layout());
+        }
+        opened = std::move(input);
+      } else {
+        opened = open_source(s->input, from, foreign, &rounded);
+      }
       convert::DenseVolume shape = convert::shape_of(opened->shape());
       settle_metadata(shape, *s, from, global.command_line);
       // finish_import takes the geometry from the source's shape: give it ours.
@@ -292,6 +311,11 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       auto digests =
           std::make_shared<SourceDigests>(std::vector<std::string>{s->input}, std::vector<nlohmann::json>{how});
       options.complete_metadata = SourceDigests::filler(digests);
+      if (ivol_source)  // read past damage: say what was filled (the reads are done when this runs)
+        options.complete_metadata = [fill = options.complete_metadata, ivol_source](Metadata& m) {
+          fill(m);
+          if (ivol_source->damaged_count() > 0) m.provenance["salvage"] = convert::salvage_record(*ivol_source);
+        };
       if (!shape.quantity.empty()) options.metadata.quantity = shape.quantity;
       options.metadata.value_unit = shape.value_unit;
       if (shape.has_geometry) {
@@ -309,6 +333,18 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       options.temp_directory = s->temp_dir;
       options.check_disk_space = !s->no_disk_check;
       const convert::ImportReport r = convert::import_to_ivol(*source, s->output, options);
+      const int done = ivol_source && ivol_source->damaged_count() > 0 ? kExitSalvaged : kExitOk;
+      if (done == kExitSalvaged) {
+        const auto& damaged = ivol_source->damaged();
+        std::cerr << "ivol convert: salvaged " << ivol_source->damaged_count()
+                  << " region(s) from coarser levels because blocks are damaged or missing (recorded in "
+                     "provenance.salvage; the file is marked not lossless):\n";
+        for (std::size_t n = 0; n < damaged.size() && n < 10; ++n)
+          std::cerr << "  " << damaged[n].region.to_string() << " (level " << damaged[n].level
+                    << "): " << damaged[n].message << "\n";
+        if (ivol_source->damaged_count() > 10)
+          std::cerr << "  ... and " << ivol_source->damaged_count() - 10 << " more\n";
+      }
       if (s->json) {
         const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         nlohmann::json report = {{"output", s->output},
@@ -323,7 +359,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
         if (!r.temp_directory.empty()) report["temp_directory"] = r.temp_directory;
         if (from == Format::Ivol) report["input_file_bytes"] = ivol_input.file_bytes;
         std::cout << report.dump(2) << "\n";
-        return kExitOk;
+        return done;
       }
       if (global.verbose)
         std::cerr << "ivol convert: " << encoding_name(r.encoding) << " (physical = " << r.value_offset << " + "
@@ -355,9 +391,12 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
           say << s->input << " (ivol " << structure_name(ivol_input.kind) << " " << encoding_name(ivol_input.encoding)
               << ", " << human_bytes(ivol_input.file_bytes) << ") -> " << s->output << " (ivol " << r.structure << " "
               << encoding_name(r.encoding) << ", " << human_bytes(r.file_bytes) << ", " << percent.str()
-              << (r.lossless ? ", every stored value as it was" : "") << ") in " << seconds << " s\n";
+              << (done == kExitSalvaged ? ", damaged regions filled from coarser levels"
+                  : r.lossless          ? ", every stored value as it was"
+                                        : "")
+              << ") in " << seconds << " s\n";
           print_geometry(shape, *s, to, say, global.quiet);
-          return kExitOk;
+          return done;
         }
         say << s->input << " (" << format_name(from) << " " << describe(shape) << ", " << human_bytes(bytes) << ") -> "
             << s->output << " (ivol " << r.structure << " " << encoding_name(r.encoding) << ", "
@@ -365,7 +404,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
             << (r.lossless && !rounded ? ", lossless" : "") << ") in " << seconds << " s\n";
       }
       print_geometry(shape, *s, to, say, global.quiet);
-      return kExitOk;
+      return done;
     }
 
     if (from != Format::Ivol) {

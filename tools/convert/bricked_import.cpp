@@ -224,7 +224,7 @@ BrickedImport::BrickedImport(const DenseVolume& shape, const std::string& path, 
   early.structure["kind"] = "bricked";
   early.structure["brick"] = 1u << options.brick_log2;
   early.structure["source_encoding"] = sample_type_name(shape.type);
-  inherit_structure(early.structure, options.input_structure);
+  inherit_structure(early, options.input_structure);
   writer_.write_early_metadata(early);
 }
 
@@ -240,7 +240,7 @@ void BrickedImport::finish(const LossTally& loss, ImportReport& report) {
   metadata.structure["source_encoding"] = sample_type_name(shape_.type);
   metadata.structure["lossless"] = report.lossless;
   metadata.structure["max_abs_error"] = report.max_abs_error;
-  inherit_structure(metadata.structure, options_.input_structure);
+  inherit_structure(metadata, options_.input_structure);
   report.file_bytes = writer_.finish(metadata).file_bytes;
   report.kept_voxels = shape_.voxel_count();
 }

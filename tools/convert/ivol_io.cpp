@@ -225,7 +225,7 @@ void finish_import(StreamingOctreeWriter& writer, const DenseVolume& shape, cons
   const StreamingResult result = writer.finish(metadata, [&](Metadata& m, const StreamingResult& r) {
     m.structure["lossless"] = r.lossless;
     m.structure["max_abs_error"] = r.max_abs_error;
-    inherit_structure(m.structure, options.input_structure);
+    inherit_structure(m, options.input_structure);
   });
   report.lossless = result.lossless;
   report.max_abs_error = result.max_abs_error;

@@ -11,14 +11,17 @@
 namespace ivol::convert {
 namespace {
 
-class IvolStoredSlabReader final : public SlabReader {
+class IvolStoredSlabReader final : public IvolStoredSlabs {
  public:
-  IvolStoredSlabReader(const std::string& path, std::uint64_t memory_bytes)
-      : reader_(path, [&] {
-          ReaderOptions options;
-          options.cache_bytes = export_cache_bytes(memory_bytes);
-          return options;
-        }()) {
+  IvolStoredSlabReader(const std::string& path, std::uint64_t memory_bytes, bool salvage)
+      : reader_(path,
+                [&] {
+                  ReaderOptions options;
+                  options.cache_bytes = export_cache_bytes(memory_bytes);
+                  options.salvage = salvage;
+                  return options;
+                }()),
+        salvage_(salvage) {
     const Dims& dims = reader_.layout().dims;
     const Box all{{0, 0, 0}, {dims[0], dims[1], dims[2]}};
     shape_ = export_shape(reader_, all, 0, stored_sample_type(reader_.layout().encoding));
@@ -29,7 +32,11 @@ class IvolStoredSlabReader final : public SlabReader {
 
   void read(std::uint32_t z0, std::uint32_t count, void* out) override {
     const Dims& dims = reader_.layout().dims;
-    reader_.read_box_bits_into(Box{{0, 0, z0}, {dims[0], dims[1], z0 + count}}, out);
+    std::vector<DamagedRegion> damaged;
+    reader_.read_box_bits_into(Box{{0, 0, z0}, {dims[0], dims[1], z0 + count}}, out, 0, salvage_ ? &damaged : nullptr);
+    damaged_count_ += damaged.size();
+    for (DamagedRegion& d : damaged)
+      if (damaged_.size() < kMaxListed) damaged_.push_back(std::move(d));
 #if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
     // read_box_bits gives little-endian bits; samples are native.
     const std::size_t width = sample_size(shape_.type);
@@ -43,10 +50,18 @@ class IvolStoredSlabReader final : public SlabReader {
   // an octree's Morton-ordered blocks would decode them again and again.
   bool thick_reads_pay() const override { return true; }
 
+  const std::vector<DamagedRegion>& damaged() const override { return damaged_; }
+  std::uint64_t damaged_count() const override { return damaged_count_; }
+  const SalvageInfo* salvage() const override { return reader_.info().salvage.get(); }
+  const VolumeLayout& layout() const override { return reader_.layout(); }
+
   const Reader& reader() const { return reader_; }
 
  private:
   Reader reader_;
+  bool salvage_;
+  std::vector<DamagedRegion> damaged_;
+  std::uint64_t damaged_count_ = 0;
 };
 
 }  // namespace
@@ -63,9 +78,9 @@ SampleType stored_sample_type(ValueEncoding encoding) {
   return SampleType::Float32;
 }
 
-std::unique_ptr<SlabReader> open_ivol_stored_slabs(const std::string& path, std::uint64_t memory_bytes,
-                                                   IvolSourceInfo* info) {
-  auto source = std::make_unique<IvolStoredSlabReader>(path, memory_bytes);
+std::unique_ptr<IvolStoredSlabs> open_ivol_stored_slabs(const std::string& path, std::uint64_t memory_bytes,
+                                                        IvolSourceInfo* info, bool salvage) {
+  auto source = std::make_unique<IvolStoredSlabReader>(path, memory_bytes, salvage);
   if (info) {
     const Reader& reader = source->reader();
     const VolumeLayout& layout = reader.layout();
@@ -91,6 +106,26 @@ std::unique_ptr<SlabReader> open_ivol_stored_slabs(const std::string& path, std:
   return source;
 }
 
+nlohmann::json salvage_record(const IvolStoredSlabs& source) {
+  nlohmann::json record = nlohmann::json::object();
+  if (source.salvage()) {
+    record["index"] = source.salvage()->reason;
+    record["metadata"] = source.salvage()->metadata;
+  }
+  record["regions_filled"] = source.damaged_count();
+  nlohmann::json regions = nlohmann::json::array();
+  for (std::size_t n = 0; n < source.damaged().size() && n < 100; ++n) {
+    const DamagedRegion& d = source.damaged()[n];
+    regions.push_back(
+        {{"box", {d.region.lo[0], d.region.lo[1], d.region.lo[2], d.region.hi[0], d.region.hi[1], d.region.hi[2]}},
+         {"level", d.level},
+         {"damage", d.message}});
+  }
+  record["regions"] = std::move(regions);
+  record["filled_from"] = "the nearest readable coarser level (octree), else stored code 0 (grids of spec 8A)";
+  return record;
+}
+
 void set_reencoding(ImportOptions& options, const IvolSourceInfo& input) {
   options.stored_values = ImportOptions::StoredValues{input.value_scale, input.value_offset};
   options.input_structure = input.metadata.structure;
@@ -106,7 +141,9 @@ void set_reencoding(ImportOptions& options, const IvolSourceInfo& input) {
     provenance["derived_from"] = input.metadata.provenance;
 }
 
-void inherit_structure(nlohmann::json& structure, const nlohmann::json& input_structure) {
+void inherit_structure(Metadata& metadata, const nlohmann::json& input_structure) {
+  nlohmann::json& structure = metadata.structure;
+  if (metadata.provenance.is_object() && metadata.provenance.contains("salvage")) structure["lossless"] = false;
   if (!input_structure.is_object()) return;
   const auto source_encoding = input_structure.find("source_encoding");
   if (source_encoding != input_structure.end() && source_encoding->is_string())

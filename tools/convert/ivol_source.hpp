@@ -9,10 +9,12 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "ivol/encoding.hpp"
 #include "ivol/geometry.hpp"
 #include "ivol/metadata.hpp"
+#include "ivol/reader.hpp"
 #include "ivol_io.hpp"
 #include "slab_io.hpp"
 
@@ -37,11 +39,33 @@ struct IvolSourceInfo {
 // uint16 (the codes, before scale and offset), f32 for float32.
 SampleType stored_sample_type(ValueEncoding encoding);
 
+// The reader of an .ivol input's stored values. With `salvage`
+// (ReaderOptions::salvage) it reads past damaged blocks and, in format 1.3
+// files, past a cut or damaged index: their regions take the nearest
+// readable coarser level's value (the grids of spec §8A: stored code 0), and
+// damaged() lists them.
+class IvolStoredSlabs : public SlabReader {
+ public:
+  // The regions filled so far, at most kMaxListed of them; damaged_count()
+  // counts them all.
+  static constexpr std::size_t kMaxListed = 1000;
+  virtual const std::vector<DamagedRegion>& damaged() const = 0;
+  virtual std::uint64_t damaged_count() const = 0;
+  // What the salvaging open found (the index rebuilt from the blocks), or null.
+  virtual const SalvageInfo* salvage() const = 0;
+  virtual const VolumeLayout& layout() const = 0;
+};
+
 // Opens `path` with a block cache of export_cache_bytes(memory_bytes). The
 // shape carries the input's geometry, quantity, value unit and provenance
 // (which the output keeps under provenance.derived_from).
-std::unique_ptr<SlabReader> open_ivol_stored_slabs(const std::string& path, std::uint64_t memory_bytes,
-                                                   IvolSourceInfo* info = nullptr);
+std::unique_ptr<IvolStoredSlabs> open_ivol_stored_slabs(const std::string& path, std::uint64_t memory_bytes,
+                                                        IvolSourceInfo* info = nullptr, bool salvage = false);
+
+// provenance.salvage of a file written from a salvaged input: why the input
+// was salvaged, how many regions were filled and the first 100 of them
+// (box, level, what was damaged).
+nlohmann::json salvage_record(const IvolStoredSlabs& source);
 
 // Sets what an import of that source needs: its stored values kept as they
 // are (ImportOptions::stored_values), its structure for inherit_structure,
@@ -57,7 +81,8 @@ void set_reencoding(ImportOptions& options, const IvolSourceInfo& input);
 // its keep rule where the new file records none (its coarse leaves come
 // from that rule), and any loss it records (the new file holds the same
 // values, so it is as far from the original source: lossless false, the
-// larger max_abs_error).
-void inherit_structure(nlohmann::json& structure, const nlohmann::json& input_structure);
+// larger max_abs_error). A file whose provenance records a salvage
+// (salvage_record) is not lossless either.
+void inherit_structure(Metadata& metadata, const nlohmann::json& input_structure);
 
 }  // namespace ivol::convert
