@@ -145,6 +145,19 @@ check "nginx-log-bricked16-x-slice-several-ranges" within x bricked16.ivol 8 35 
 check "nginx-log-octree-z-slice" within x octree.ivol 10 60 extract "$url/octree.ivol" --box 0,0,48,96,96,49 -o s.raw -f
 check "nginx-log-octree-box" within x octree.ivol 10 65 extract "$url/octree.ivol" --box 30,30,30,62,62,62 -o b.raw -f
 check "nginx-log-octree-preview" within x octree.ivol 8 25 convert "$url/octree.ivol" p.raw --level 2 -f
+# An archive re-encoded from where it lies (ivol convert URL OUT.ivol): the
+# same file as from the local copy but for the provenance (the source's
+# address and size, no SHA-256: the file is read by ranges, not downloaded);
+# the whole file read once, in a few requests.
+reencoded_over_http() {
+  "$IVOL" -q convert "$url/octree.ivol" remote-again.ivol -f && "$IVOL" -q convert www/octree.ivol local-again.ivol -f &&
+    "$IVOL" -q convert remote-again.ivol remote-again.raw -f && "$IVOL" -q convert local-again.ivol local-again.raw -f &&
+    cmp remote-again.raw local-again.raw &&
+    "$IVOL" info --json remote-again.ivol | grep -q '"sha256_omitted"' &&
+    "$IVOL" info --json remote-again.ivol | grep -q "\"path\": \"$url/octree.ivol\""
+}
+check "nginx-reencode-as-locally" reencoded_over_http
+check "nginx-log-reencode" within x octree.ivol 12 110 convert "$url/octree.ivol" again.ivol -f
 
 refused() {  # refused NAME TEXT COMMAND...: exit 2, TEXT in the error, no output file
   local text=$2

@@ -49,6 +49,12 @@ struct ConvertSettings {
   bool json = false;
 };
 
+// An input read over HTTP(S) or from S3 (the Reader opens such paths by
+// byte ranges).
+bool is_url(const std::string& path) {
+  return path.rfind("http://", 0) == 0 || path.rfind("https://", 0) == 0 || path.rfind("s3://", 0) == 0;
+}
+
 std::string describe(const convert::DenseVolume& v) {
   return std::string(convert::sample_type_name(v.type)) + " " + std::to_string(v.dims[0]) + "x" +
          std::to_string(v.dims[1]) + "x" + std::to_string(v.dims[2]);
@@ -308,9 +314,19 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       if (from == Format::Raw) how.update({{"endian", s->endian}, {"header_bytes", s->header_bytes}});
       if (from == Format::Hdf5) how["dataset"] = s->dataset;
       if (from == Format::Vdb && !s->grid.empty()) how["grid"] = s->grid;
-      auto digests =
-          std::make_shared<SourceDigests>(std::vector<std::string>{s->input}, std::vector<nlohmann::json>{how});
-      options.complete_metadata = SourceDigests::filler(digests);
+      if (from == Format::Ivol && is_url(s->input)) {
+        // Read by byte ranges, never downloaded whole: hashing it would fetch
+        // every byte again. Recorded by its address and size.
+        nlohmann::json entry = how;
+        entry.update({{"path", s->input},
+                      {"bytes", ivol_input.file_bytes},
+                      {"sha256_omitted", "read over HTTP by byte ranges, not downloaded whole"}});
+        options.complete_metadata = [entry](Metadata& m) { m.provenance["sources"] = nlohmann::json::array({entry}); };
+      } else {
+        auto digests =
+            std::make_shared<SourceDigests>(std::vector<std::string>{s->input}, std::vector<nlohmann::json>{how});
+        options.complete_metadata = SourceDigests::filler(digests);
+      }
       if (ivol_source)  // read past damage: say what was filled (the reads are done when this runs)
         options.complete_metadata = [fill = options.complete_metadata, ivol_source](Metadata& m) {
           fill(m);
