@@ -23,6 +23,7 @@ struct Reader::Impl {
   std::string salvaged_metadata;  // the metadata text a salvaging open found; before `info`, which fills it
   FileInfo info;
   Metadata metadata;
+  std::string metadata_problem;  // Reader::metadata_problem
   detail::LevelRanges ranges;
   detail::BlockCache cache;
   IoStats stats;
@@ -92,6 +93,7 @@ struct Reader::Impl {
       } catch (const Error& e) {
         if (!options.salvage) throw Error(e.error_class(), file.path() + ": " + e.what());
         // A salvaging reader reads the values without it; the defaults stand in.
+        metadata_problem = e.what();
       }
     }
     if (info.layout.kind != StructureKind::Octree) load_grid();

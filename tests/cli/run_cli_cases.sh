@@ -65,7 +65,7 @@ case_ verify-truncated   2 "truncated"               -- "$IVOL" verify "$work/tr
 case_ reencode-damaged   2 "checksum"                -- "$IVOL" convert "$work/damaged.ivol" "$work/d3.ivol"
 test ! -e "$work/d3.ivol" && case_ reencode-damaged-nothing 0 "" -- true
 case_ reencode-salvage   3 "salvaged"                -- "$IVOL" convert "$work/damaged.ivol" "$work/d3.ivol" --salvage
-case_ reencode-salvage-says 3 "damaged regions filled from coarser levels" -- "$IVOL" convert "$work/damaged.ivol" "$work/d3.ivol" --salvage -f
+case_ reencode-salvage-says 3 "salvaged: see provenance.salvage" -- "$IVOL" convert "$work/damaged.ivol" "$work/d3.ivol" --salvage -f
 case_ reencode-salvage-sound 0 "OK"                  -- "$IVOL" verify "$work/d3.ivol"
 case_ reencode-salvage-recorded 0 '"regions_filled"' -- "$IVOL" info --json "$work/d3.ivol"
 case_ reencode-salvage-not-lossless 0 '"lossless": false' -- "$IVOL" info --json "$work/d3.ivol"

@@ -330,7 +330,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       if (ivol_source)  // read past damage: say what was filled (the reads are done when this runs)
         options.complete_metadata = [fill = options.complete_metadata, ivol_source](Metadata& m) {
           fill(m);
-          if (ivol_source->damaged_count() > 0) m.provenance["salvage"] = convert::salvage_record(*ivol_source);
+          if (ivol_source->lost_something()) m.provenance["salvage"] = convert::salvage_record(*ivol_source);
         };
       if (!shape.quantity.empty()) options.metadata.quantity = shape.quantity;
       options.metadata.value_unit = shape.value_unit;
@@ -349,8 +349,14 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       options.temp_directory = s->temp_dir;
       options.check_disk_space = !s->no_disk_check;
       const convert::ImportReport r = convert::import_to_ivol(*source, s->output, options);
-      const int done = ivol_source && ivol_source->damaged_count() > 0 ? kExitSalvaged : kExitOk;
-      if (done == kExitSalvaged) {
+      const int done = ivol_source && ivol_source->lost_something() ? kExitSalvaged : kExitOk;
+      if (done == kExitSalvaged && ivol_source->salvage() && ivol_source->salvage()->metadata != "complete")
+        std::cerr << "ivol convert: salvaged without the input's full metadata (" << ivol_source->salvage()->metadata
+                  << "; recorded in provenance.salvage): keys it held may be missing from the output\n";
+      if (done == kExitSalvaged && !ivol_source->metadata_problem().empty())
+        std::cerr << "ivol convert: salvaged without the input's metadata, which cannot be read ("
+                  << ivol_source->metadata_problem() << "; recorded in provenance.salvage)\n";
+      if (done == kExitSalvaged && ivol_source->damaged_count() > 0) {
         const auto& damaged = ivol_source->damaged();
         std::cerr << "ivol convert: salvaged " << ivol_source->damaged_count()
                   << " region(s) from coarser levels because blocks are damaged or missing (recorded in "
@@ -407,7 +413,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
           say << s->input << " (ivol " << structure_name(ivol_input.kind) << " " << encoding_name(ivol_input.encoding)
               << ", " << human_bytes(ivol_input.file_bytes) << ") -> " << s->output << " (ivol " << r.structure << " "
               << encoding_name(r.encoding) << ", " << human_bytes(r.file_bytes) << ", " << percent.str()
-              << (done == kExitSalvaged ? ", damaged regions filled from coarser levels"
+              << (done == kExitSalvaged ? ", salvaged: see provenance.salvage"
                   : r.lossless          ? ", every stored value as it was"
                                         : "")
               << ") in " << seconds << " s\n";

@@ -70,6 +70,9 @@ Runner add_extract_command(CLI::App& app, const GlobalOptions& global) {
       std::cerr << "ivol extract: " << reader.info().salvage->reason << "\n";
       print_salvage(std::cerr, "  ", *reader.info().salvage, reader.layout());
     }
+    if (!reader.metadata_problem().empty())
+      std::cerr << "ivol extract: the metadata cannot be read (" << reader.metadata_problem()
+                << "): the output gets no voxel size, origin or quantity from it\n";
     const convert::SampleType natural = natural_export_type(to, reader);
     const convert::SampleType type = s->type.empty() ? natural : parse_sample_type(s->type, "--type");
     check_export_type(to, type, "--type");

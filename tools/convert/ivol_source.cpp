@@ -28,6 +28,11 @@ class IvolStoredSlabReader final : public IvolStoredSlabs {
     // export_shape names the geometry's origin for an export; here it is
     // where the output's geometry comes from.
     shape_.voxel_size_from = shape_.origin_from = shape_.unit_from = shape_.quantity_from = "the input's metadata";
+    if (!reader_.metadata_problem().empty() ||
+        (reader_.info().salvage && reader_.info().salvage->metadata == "missing")) {
+      shape_.quantity.clear();  // the defaults', not the input's
+      shape_.quantity_from.clear();
+    }
   }
 
   void read(std::uint32_t z0, std::uint32_t count, void* out) override {
@@ -54,6 +59,7 @@ class IvolStoredSlabReader final : public IvolStoredSlabs {
   std::uint64_t damaged_count() const override { return damaged_count_; }
   const SalvageInfo* salvage() const override { return reader_.info().salvage.get(); }
   const VolumeLayout& layout() const override { return reader_.layout(); }
+  const std::string& metadata_problem() const override { return reader_.metadata_problem(); }
 
   const Reader& reader() const { return reader_; }
 
@@ -112,6 +118,7 @@ nlohmann::json salvage_record(const IvolStoredSlabs& source) {
     record["index"] = source.salvage()->reason;
     record["metadata"] = source.salvage()->metadata;
   }
+  if (!source.metadata_problem().empty()) record["metadata"] = "unreadable: " + source.metadata_problem();
   record["regions_filled"] = source.damaged_count();
   nlohmann::json regions = nlohmann::json::array();
   for (std::size_t n = 0; n < source.damaged().size() && n < 100; ++n) {

@@ -54,6 +54,13 @@ class IvolStoredSlabs : public SlabReader {
   // What the salvaging open found (the index rebuilt from the blocks), or null.
   virtual const SalvageInfo* salvage() const = 0;
   virtual const VolumeLayout& layout() const = 0;
+  // Whether the output lacks something of the input: regions filled, or
+  // metadata the salvaging open could not read whole.
+  bool lost_something() const {
+    return damaged_count() > 0 || (salvage() && salvage()->metadata != "complete") || !metadata_problem().empty();
+  }
+  // Why the input's metadata block could not be read (Reader::metadata_problem).
+  virtual const std::string& metadata_problem() const = 0;
 };
 
 // Opens `path` with a block cache of export_cache_bytes(memory_bytes). The
@@ -63,8 +70,8 @@ std::unique_ptr<IvolStoredSlabs> open_ivol_stored_slabs(const std::string& path,
                                                         IvolSourceInfo* info = nullptr, bool salvage = false);
 
 // provenance.salvage of a file written from a salvaged input: why the input
-// was salvaged, how many regions were filled and the first 100 of them
-// (box, level, what was damaged).
+// was salvaged and how much of its metadata was read, how many regions were
+// filled and the first 100 of them (box, level, what was damaged).
 nlohmann::json salvage_record(const IvolStoredSlabs& source);
 
 // Sets what an import of that source needs: its stored values kept as they

@@ -165,6 +165,10 @@ class Reader {
   const FileInfo& info() const;
   const VolumeLayout& layout() const;
   const Metadata& metadata() const;
+  // Why the metadata block could not be read, where a salvaging reader
+  // (ReaderOptions::salvage) opened the file with the defaults standing in;
+  // empty when it was read (or, after a rebuilt index, see info().salvage).
+  const std::string& metadata_problem() const;
 
   std::uint32_t voxel_bits(std::uint32_t x, std::uint32_t y, std::uint32_t z, unsigned lod = 0);
   double voxel_value(std::uint32_t x, std::uint32_t y, std::uint32_t z, unsigned lod = 0);
