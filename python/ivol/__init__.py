@@ -156,11 +156,16 @@ class File(Level):
         # What a salvaging open found when the index could not be used
         # (None when the file opened as it is).
         self.salvage = info["salvage"]
+        # Why a salvaging open read the file without its metadata block (the
+        # defaults stand in for it); None when it was read.
+        self.metadata_problem = info["metadata_problem"] or None
         m = self.metadata
         # None where the file says nobody knew it (ivol convert of a raw file
-        # without --voxel-size): the stored 1s are no measurement.
+        # without --voxel-size): the stored 1s are no measurement; nor are
+        # the defaults a salvaging open puts in place of lost metadata.
         provenance = m.get("provenance")
-        known = not (isinstance(provenance, dict) and provenance.get("voxel_size_known") is False)
+        lost = self.metadata_problem is not None or (self.salvage is not None and self.salvage.get("metadata") == "missing")
+        known = not lost and not (isinstance(provenance, dict) and provenance.get("voxel_size_known") is False)
         self.voxel_size = tuple(float(v) for v in m["voxel_size"][::-1]) if known else None
         self.origin = tuple(float(v) for v in m["origin"][::-1])
         self.unit = m["unit"]

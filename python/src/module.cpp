@@ -232,6 +232,7 @@ class PyReader {
     d["block_count"] = f.blocks.size();
     d["metadata_json"] = reader_->metadata().to_json().dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
     d["salvage"] = f.salvage ? py::object(salvage_dict(*f.salvage)) : py::object(py::none());
+    d["metadata_problem"] = reader_->metadata_problem();
     return d;
   }
 

@@ -156,6 +156,31 @@ class Salvage(unittest.TestCase):
                 ivol.open(cut_path, salvage=True)
 
 
+    def test_unreadable_metadata_is_named_not_defaulted(self):
+        """A damaged metadata block: refused as it is; salvaged, the values
+        are read but the voxel size is unknown (not the defaults' 1s) and
+        f.metadata_problem says why."""
+        a = smooth_noisy((20, 24, 28), 5)
+        with tempfile.TemporaryDirectory() as tmp:
+            path = os.path.join(tmp, "v.ivol")
+            ivol.write(path, a, voxel_size=(0.5, 0.25, 0.125))
+            self.assertEqual(ivol.open(path).voxel_size, (0.5, 0.25, 0.125))
+            self.assertIsNone(ivol.open(path, salvage=True).metadata_problem)
+            blocks = json.loads(reference("info", path))["blocks"]
+            meta = next(b for b in blocks if b["stream_name"] == "metadata")
+            with open(path, "r+b") as f:
+                f.seek(meta["file_offset"] + meta["stored_size"] // 2)
+                byte = f.read(1)
+                f.seek(-1, os.SEEK_CUR)
+                f.write(bytes([byte[0] ^ 0x5A]))
+            with self.assertRaises(ivol.IvolError):
+                ivol.open(path)
+            f = ivol.open(path, salvage=True)
+            self.assertIn("metadata", f.metadata_problem)
+            self.assertIsNone(f.voxel_size)
+            self.assertTrue(same_bits(f[...], a))
+
+
 class WriteStructure(unittest.TestCase):
     def test_four_kinds(self):
         shape = (40, 48, 56)
