@@ -20,9 +20,13 @@ namespace {
 
 // Enough decoded bytes to be worth more threads than one.
 constexpr std::uint64_t kParallelBytes = 1u << 20;
-// An octree plan follows at most this many nodes a level; a read that
-// meets more (most of a large volume) is walked block by block instead.
+// An octree plan follows at most this many nodes a level, and no more than
+// the two levels it holds at once fit in the block cache's capacity (the
+// cache could not hold the blocks of more anyway; at 2^21 the lists took
+// 100 MB, beyond a small --memory); a read that meets more (most of a large
+// volume) is walked block by block instead.
 constexpr std::size_t kMaxPlannedNodes = std::size_t{1} << 21;
+constexpr std::size_t kMinPlannedNodes = std::size_t{1} << 12;
 // Stored bytes fetched and decoded at a time.
 constexpr std::uint64_t kChunkBytes = 16u << 20;
 
@@ -191,6 +195,8 @@ void Reader::Impl::plan_box(const Box& box, unsigned lod) {
     std::uint64_t inner;
     std::uint32_t i, j, k;
   };
+  const std::size_t max_nodes = std::clamp<std::size_t>(static_cast<std::size_t>(cache.capacity() / (2 * sizeof(Node))),
+                                                        kMinPlannedNodes, kMaxPlannedNodes);
   std::vector<Node> level{{0, 0, 0, 0}};
   try {
     load_blocks({block_of(2, 0)});
@@ -229,7 +235,7 @@ void Reader::Impl::plan_box(const Box& box, unsigned lod) {
             const std::uint64_t index = first + detail::popcount8(mask & ((1u << c) - 1u));
             // More nodes than a plan follows: the walk reads the blocks
             // as it meets them (and the plan holds no list of millions).
-            if (next.size() == kMaxPlannedNodes) return;
+            if (next.size() == max_nodes) return;
             next.push_back({index, ci, cj, ck});
             const std::size_t b = block_holding(2, index);
             if (blocks.empty() || blocks.back() != b) blocks.push_back(b);
