@@ -68,6 +68,7 @@ case_ reencode-salvage   3 "salvaged"                -- "$IVOL" convert "$work/d
 case_ reencode-salvage-says 3 "salvaged: see provenance.salvage" -- "$IVOL" convert "$work/damaged.ivol" "$work/d3.ivol" --salvage -f
 case_ reencode-salvage-sound 0 "OK"                  -- "$IVOL" verify "$work/d3.ivol"
 case_ reencode-salvage-recorded 0 '"regions_filled"' -- "$IVOL" info --json "$work/d3.ivol"
+case_ reencode-salvage-info 0 "salvaged       from a damaged input" -- "$IVOL" info "$work/d3.ivol"
 case_ reencode-salvage-not-lossless 0 '"lossless": false' -- "$IVOL" info --json "$work/d3.ivol"
 "$IVOL" -q convert "$work/d3.ivol" "$work/d3.raw" --out-type f32 -f
 case_ reencode-salvage-same 0 ""                     -- cmp "$work/d2.raw" "$work/d3.raw"

@@ -15,6 +15,20 @@ namespace ivol::cli {
 
 namespace {
 
+// A file made from a damaged input (convert --salvage) says so where it is
+// looked at, not only in its metadata.
+std::string salvaged_line(const Metadata& m) {
+  const auto salvage = m.provenance.find("salvage");
+  if (!m.provenance.is_object() || salvage == m.provenance.end() || !salvage->is_object()) return {};
+  std::string line = "  salvaged       from a damaged input: ";
+  line += std::to_string(salvage->value("regions_filled", std::uint64_t{0})) +
+          " region(s) filled from coarser levels or stored code 0";
+  const auto metadata = salvage->find("metadata");
+  if (metadata != salvage->end() && metadata->is_string() && metadata->get<std::string>() != "complete")
+    line += "; input metadata " + metadata->get<std::string>();
+  return line + " (provenance.salvage)\n";
+}
+
 // A bricked grid's stored levels of detail (spec §8A.5), a line of `info`.
 std::string stored_levels_line(const nlohmann::json& d) {
   if (d["structure"].get<std::string>() != "bricked") return {};
@@ -117,7 +131,8 @@ Runner add_info_command(CLI::App& app, const GlobalOptions& /*global*/) {
               << human_bytes(d["dense_float32_bytes"].get<double>()) << ", ratio "
               << d["ratio_vs_float32"].get<double>() << ")\n"
               << in_memory_line(d) << "  blocks         " << d["blocks"] << " (index "
-              << human_bytes(d["index_bytes"].get<std::uint64_t>()) << ")\n";
+              << human_bytes(d["index_bytes"].get<std::uint64_t>()) << ")\n"
+              << salvaged_line(reader.metadata());
     if (d["structure"].get<std::string>() == "bricked") {
       print_bricked_levels(d);
       std::cout << "  metadata       " << d["metadata"].dump() << "\n";
