@@ -117,7 +117,9 @@ void convert_in_bands(convert::SlabReader& source, const convert::DenseVolume& s
 }  // namespace
 
 Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
-  auto* cmd = app.add_subcommand("convert", "Convert between .ivol and raw, TIFF stacks, HDF5 and OpenVDB; .ivol to .ivol re-encodes an archive (every stored value kept)");
+  auto* cmd = app.add_subcommand("convert",
+                                 "Convert between .ivol and raw, TIFF stacks, HDF5 and OpenVDB; .ivol to .ivol "
+                                 "re-encodes an archive (every stored value kept)");
   auto s = std::make_shared<ConvertSettings>();
   cmd->add_option("IN", s->input, "Input file (or folder of TIFF slices); - : raw samples on standard input")
       ->required();
