@@ -242,6 +242,8 @@ const FileInfo& Reader::info() const { return impl_->info; }
 const VolumeLayout& Reader::layout() const { return impl_->info.layout; }
 const Metadata& Reader::metadata() const { return impl_->metadata; }
 const std::string& Reader::metadata_problem() const { return impl_->metadata_problem; }
+
+bool is_remote_path(const std::string& path) { return detail::is_remote(path); }
 const IoStats& Reader::io_stats() const {
   impl_->stats.bytes_read = impl_->file.bytes_read - impl_->bytes_baseline;
   impl_->stats.requests = impl_->file.requests() - impl_->requests_baseline;

@@ -82,6 +82,7 @@ struct Reader::Impl {
     if (info.salvage) {
       // Checked when salvaged; none survived: the defaults (info.salvage says so).
       if (!salvaged_metadata.empty()) metadata = Metadata::parse(salvaged_metadata);
+      if (info.salvage->metadata == "missing") metadata_problem = "no metadata block survived";
     } else {
       try {
         // Exactly its bytes over HTTP, not the pages around it (a writer

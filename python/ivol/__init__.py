@@ -164,8 +164,8 @@ class File(Level):
         # without --voxel-size): the stored 1s are no measurement; nor are
         # the defaults a salvaging open puts in place of lost metadata.
         provenance = m.get("provenance")
-        lost = self.metadata_problem is not None or (self.salvage is not None and self.salvage.get("metadata") == "missing")
-        known = not lost and not (isinstance(provenance, dict) and provenance.get("voxel_size_known") is False)
+        marked_unknown = isinstance(provenance, dict) and provenance.get("voxel_size_known") is False
+        known = self.metadata_problem is None and not marked_unknown
         self.voxel_size = tuple(float(v) for v in m["voxel_size"][::-1]) if known else None
         self.origin = tuple(float(v) for v in m["origin"][::-1])
         self.unit = m["unit"]

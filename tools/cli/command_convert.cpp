@@ -49,12 +49,6 @@ struct ConvertSettings {
   bool json = false;
 };
 
-// An input read over HTTP(S) or from S3 (the Reader opens such paths by
-// byte ranges).
-bool is_url(const std::string& path) {
-  return path.rfind("http://", 0) == 0 || path.rfind("https://", 0) == 0 || path.rfind("s3://", 0) == 0;
-}
-
 std::string describe(const convert::DenseVolume& v) {
   return std::string(convert::sample_type_name(v.type)) + " " + std::to_string(v.dims[0]) + "x" +
          std::to_string(v.dims[1]) + "x" + std::to_string(v.dims[2]);
@@ -316,7 +310,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       if (from == Format::Raw) how.update({{"endian", s->endian}, {"header_bytes", s->header_bytes}});
       if (from == Format::Hdf5) how["dataset"] = s->dataset;
       if (from == Format::Vdb && !s->grid.empty()) how["grid"] = s->grid;
-      if (from == Format::Ivol && is_url(s->input)) {
+      if (from == Format::Ivol && is_remote_path(s->input)) {
         // Read by byte ranges, never downloaded whole: hashing it would fetch
         // every byte again. Recorded by its address and size.
         nlohmann::json entry = how;
@@ -352,7 +346,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       options.check_disk_space = !s->no_disk_check;
       const convert::ImportReport r = convert::import_to_ivol(*source, s->output, options);
       const int done = ivol_source && ivol_source->lost_something() ? kExitSalvaged : kExitOk;
-      if (done == kExitSalvaged && ivol_source->salvage() && ivol_source->salvage()->metadata != "complete")
+      if (done == kExitSalvaged && ivol_source->salvage() && ivol_source->salvage()->metadata == "early")
         std::cerr << "ivol convert: salvaged without the input's full metadata (" << ivol_source->salvage()->metadata
                   << "; recorded in provenance.salvage): keys it held may be missing from the output\n";
       if (done == kExitSalvaged && !ivol_source->metadata_problem().empty())

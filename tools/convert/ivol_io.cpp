@@ -443,8 +443,7 @@ DenseVolume export_shape(const Reader& reader, const Box& box, unsigned lod, Sam
   const double scale = std::ldexp(1.0, static_cast<int>(lod));
   // A salvaged file whose metadata was lost has the defaults' voxel size,
   // not its own: the export says nothing rather than 1 a voxel.
-  const bool metadata_lost =
-      (reader.info().salvage && reader.info().salvage->metadata == "missing") || !reader.metadata_problem().empty();
+  const bool metadata_lost = !reader.metadata_problem().empty();
   out.has_geometry =
       !metadata_lost && !(m.provenance.contains("voxel_size_known") && m.provenance["voxel_size_known"] == false);
   out.unit = m.unit;

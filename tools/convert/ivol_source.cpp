@@ -28,8 +28,7 @@ class IvolStoredSlabReader final : public IvolStoredSlabs {
     // export_shape names the geometry's origin for an export; here it is
     // where the output's geometry comes from.
     shape_.voxel_size_from = shape_.origin_from = shape_.unit_from = shape_.quantity_from = "the input's metadata";
-    if (!reader_.metadata_problem().empty() ||
-        (reader_.info().salvage && reader_.info().salvage->metadata == "missing")) {
+    if (!reader_.metadata_problem().empty()) {
       shape_.quantity.clear();  // the defaults', not the input's
       shape_.quantity_from.clear();
     }

@@ -153,6 +153,10 @@ struct IoStats {
 
 struct CheckReport;
 
+// Whether a Reader opens `path` remotely, by byte ranges: an http://,
+// https:// or s3:// address.
+bool is_remote_path(const std::string& path);
+
 class Reader {
  public:
   // Reads and checks the header, footer, index and metadata.
@@ -166,8 +170,10 @@ class Reader {
   const VolumeLayout& layout() const;
   const Metadata& metadata() const;
   // Why the metadata block could not be read, where a salvaging reader
-  // (ReaderOptions::salvage) opened the file with the defaults standing in;
-  // empty when it was read (or, after a rebuilt index, see info().salvage).
+  // (ReaderOptions::salvage) opened the file with the defaults standing in
+  // (a damaged block, or none found by a rebuilt index); empty when it was
+  // read. (After a rebuilt index that found only the early metadata,
+  // info().salvage says "early".)
   const std::string& metadata_problem() const;
 
   std::uint32_t voxel_bits(std::uint32_t x, std::uint32_t y, std::uint32_t z, unsigned lod = 0);
