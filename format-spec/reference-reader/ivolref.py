@@ -358,6 +358,8 @@ KIND_NAMES = {1: "octree", 2: "regular grid", 3: "rectilinear grid", 4: "nested 
 MAX_BRICK_LOG2 = 8                                                     # §6.1 byte 11
 PREDICTED_HEADER = 24                                                  # §7.2
 MASKED_HEADER = 4                                                      # §7.3
+TOP_BYTE_HEADER = 8                                                    # §7.4
+TOP_BYTE_LIMIT_EXTRA = 12                                              # §7: 12 + w·n
 MAX_BLOCK_DECODED = 64 * 1024 * 1024                                   # §7
 MAX_METADATA = 16 * 1024 * 1024                                        # §11
 
@@ -536,12 +538,19 @@ def read_index(header, footer, idx):
             fail("malformed", "block table: %s: codec %d is valid only on values and stored "
                  "level of detail blocks of a bricked regular grid of 16-bit values"
                  % (ix.where(e), e.codec))
+        if e.codec == CODEC_TOP_BYTE and not (e.stream in (STREAM_VALUES, STREAM_STORED_LOD)
+                                              and structure_kind == KIND_BRICKED
+                                              and value_encoding in (1, 2, 3)):
+            # §7 codec 6: 2- or 4-byte values (SPEC-NOTES 91)
+            fail("malformed", "block table: %s: codec 6 (top byte in context) is valid only on "
+                 "values and stored level of detail blocks of a bricked regular grid of 2- or "
+                 "4-byte values" % ix.where(e))
         if e.codec == CODEC_PLANE_FRAMES and stream_width(ix, e.stream) < 2:   # §7 codec 5
             fail("malformed", "block table: %s: codec 5 (byte planes, a zstd frame each) is "
                  "valid only on streams whose elements are wider than one byte, not on the "
                  "metadata (width 1)" % ix.where(e))
-        if e.stream == STREAM_STORED_LOD or e.codec == CODEC_PLANE_FRAMES:
-            # §8A.5, §7: the limits of §7 with the block table (SPEC-NOTES 64, 81)
+        if e.stream == STREAM_STORED_LOD or e.codec in (CODEC_PLANE_FRAMES, CODEC_TOP_BYTE):
+            # §8A.5, §7: the limits of §7 with the block table (SPEC-NOTES 64, 81, 87)
             check_block_limits(ix, e)
         entries.append(e)
     if expected_offset != footer.index_offset:
@@ -807,13 +816,18 @@ def zstd_compress_bound(n):
 
 
 CODEC_PLANE_FRAMES = 5                   # §7 codec 5, byte planes a zstd frame each (1.3)
-KNOWN_CODECS = (0, 1, 2, 3, 4, 5)
+CODEC_TOP_BYTE = 6                       # §7.4 codec 6, top byte in context (1.3)
+KNOWN_CODECS = (0, 1, 2, 3, 4, 5, 6)
 
 
 def stored_size_bound(ix, e):
-    """§7: the largest stored_size of a block of codec 1 to 5 (None for others)."""
-    if e.codec not in (1, 2, 3, 4, 5):
+    """§7: the largest stored_size of a block of codec 1 to 6 (None for others)."""
+    if e.codec not in (1, 2, 3, 4, 5, 6):
         return None
+    if e.codec == CODEC_TOP_BYTE:   # §7: 12 + w·n, no zstd frame (SPEC-NOTES 88)
+        n, w = e.element_count, stream_width(ix, e.stream)
+        bound = TOP_BYTE_LIMIT_EXTRA + w * n
+        return bound + (BLOCK_HEADER_SIZE if ix.header.framed else 0)
     bound = zstd_compress_bound(e.element_count * stream_width(ix, e.stream))
     if e.codec == 5:       # §7: w frames of n bytes each, w·bound(n)
         bound = stream_width(ix, e.stream) * zstd_compress_bound(e.element_count)
@@ -831,18 +845,21 @@ def bound_meaning(ix, e):
     if e.codec == 5:
         return ("w = %d times the largest zstd frame of n = %d bytes (codec 5: a frame per "
                 "byte plane)" % (stream_width(ix, e.stream), e.element_count))
+    if e.codec == CODEC_TOP_BYTE:
+        return ("12 + w·n with n = %d and w = %d (codec 6: no larger than its values "
+                "stored and a header)" % (e.element_count, stream_width(ix, e.stream)))
     return "the largest zstd frame of its decoded size"
 
 
 def check_block_limits(ix, e):
     """§6.4, §7, checked with the block table: a known codec, the decoded-size
-    limit, and the stored_size of codec 0 and the bound of codecs 1 to 5.
-    This reader does it for stream 7 (§8A.5) and for every block of codec 5;
+    limit, and the stored_size of codec 0 and the bound of codecs 1 to 6.
+    This reader does it for stream 7 (§8A.5) and for every block of codecs 5 and 6;
     for the other blocks of streams 1 to 5 it checks the same when it reads
-    the block (SPEC-NOTES 8, 54, 64, 81)."""
+    the block (SPEC-NOTES 8, 54, 64, 81, 87)."""
     where = ix.where(e)
     if e.codec not in KNOWN_CODECS:   # §7 (SPEC-NOTES 63)
-        fail("unsupported-feature", "block table: %s: codec %d, this reader knows 0 .. 5"
+        fail("unsupported-feature", "block table: %s: codec %d, this reader knows 0 .. 6"
              % (where, e.codec))
     size = e.element_count * stream_width(ix, e.stream)
     if size > MAX_BLOCK_DECODED:
@@ -879,8 +896,8 @@ def decode_payload(ix, e, stored, limit=MAX_BLOCK_DECODED):
     where = ix.where(e)
     if e.codec not in KNOWN_CODECS:   # checked when the block is read (SPEC-NOTES 8)
         fail("unsupported-feature", "%s: codec %d, this reader knows 0 (stored), 1 (zstd), "
-             "2 (zstd over byte planes), 3 (predicted 16-bit), 4 (masked 16-bit) and 5 (byte "
-             "planes, a zstd frame each)" % (where, e.codec))
+             "2 (zstd over byte planes), 3 (predicted 16-bit), 4 (masked 16-bit), 5 (byte "
+             "planes, a zstd frame each) and 6 (top byte in context)" % (where, e.codec))
     width = stream_width(ix, e.stream)
     size = e.element_count * width
     if size > MAX_BLOCK_DECODED:
@@ -899,6 +916,12 @@ def decode_payload(ix, e, stored, limit=MAX_BLOCK_DECODED):
         if e.codec == 3:
             return decode_predicted(stored, ext, where)
         return decode_masked(stored, e.element_count, where)
+    if e.codec == CODEC_TOP_BYTE:   # §7.4: one brick of stream 3 or of a stored level
+        ext = getattr(ix, "brick_of", {}).get((e.level, e.first_element))
+        if (ext is None or e.stream not in (STREAM_VALUES, STREAM_STORED_LOD)
+                or width not in (2, 4) or ext[0] * ext[1] * ext[2] != e.element_count):
+            fail("malformed", "%s: codec 6 outside a brick of 2- or 4-byte values" % where)
+        return decode_top_byte(stored, ext, width, where)
     if e.codec == CODEC_PLANE_FRAMES:   # §7 codec 5: w frames, one per byte plane
         if width < 2:   # refused with the block table already (metadata)
             fail("malformed", "%s: codec 5 on a stream of width 1" % where)
@@ -1092,6 +1115,187 @@ def decode_rans_residuals(payload, ext, where):
     w = (window >> (at & 7)) & ((np.int64(1) << e) - 1)
     zz = np.where(tok < 2, tok, ((2 + (tok & 1)) << e) + w)
     return zz.tolist()
+
+
+TOP_PROB_BITS = 16                  # §7.4: tables sum to 65536, slots of 16 bits
+TOP_CONTEXTS = 128                  # models of the top bytes (A = 256), one per context k
+TOP_SYMBOLS = 256
+NIBBLE_MODELS = 256                 # mode 1: models of the high nibbles, one per top byte
+NIBBLE_SYMBOLS = 16                 # (A = 16)
+
+
+def top_byte_table(c, T):
+    """§7.4 (made as in §7.2.1): the frequencies f_0 .. f_{A-1} (summing to
+    65536) and the cumulative frequencies s_0 .. s_{A-1} made from the counts
+    c (sum T) of one model, A = len(c) (256 for a top byte, 16 for a high
+    nibble)."""
+    R6 = (1 << 48) // T
+    f = [max(1, (ct * R6) >> 32) for ct in c]
+    j = f.index(max(f))              # the lowest t among equal largest
+    f[j] += (1 << TOP_PROB_BITS) - sum(f)    # D, which may be negative (as SPEC-NOTES 73)
+    s, acc = [], 0
+    for ft in f:
+        s.append(acc)
+        acc += ft
+    return f, s
+
+
+def decode_top_byte(payload, ext, w, where):
+    """§7.4 codec 6: the header (centre C, step S, mode M, reserved, stream
+    length R), the rANS stream of one state coding every voxel's top byte in
+    one of 128 adaptive models chosen by its neighbours' top bytes (mode 1:
+    then its second byte's high nibble in one of 256 models chosen by that
+    top byte), then the stored bits: mode 0, the w - 1 lower byte planes;
+    mode 1, the w - 2 lower planes and the second bytes' low nibbles, two a
+    byte.  Every check of the block is made before any value is returned
+    (SPEC-NOTES 89, 94).  Returns the values as little-endian w-byte integers
+    in raster order."""
+    ex, ey, ez = ext
+    n = ex * ey * ez
+    what = "%s: codec 6" % where
+    if len(payload) < TOP_BYTE_HEADER:
+        fail("malformed", "%s: payload of %d bytes, shorter than its 8-byte header"
+             % (what, len(payload)))
+    C, S, M = payload[0], payload[1], payload[2]
+    if C > 127:
+        fail("malformed", "%s: centre C = %d, expected 0..127" % (what, C))
+    if S == 0:
+        fail("malformed", "%s: step S = 0, expected 1..255" % what)
+    if M > 1:
+        fail("malformed", "%s: mode M = %d, expected 0 or 1" % (what, M))
+    if payload[3]:
+        fail("malformed", "%s: reserved byte 3 is not 0 (0x%02X)" % (what, payload[3]))
+    (R,) = struct.unpack_from("<I", payload, 4)
+    N = n if M == 0 else 2 * n       # symbols in the stream
+    if R < 4 or R > 2 * N + 4:
+        fail("malformed", "%s: rANS stream length R = %d, expected 4 .. 2N + 4 = %d (mode %d, "
+             "N = %d symbols, n = %d)" % (what, R, 2 * N + 4, M, N, n))
+    if M == 0:
+        L = (w - 1) * n
+        formula = "8 + R + (w - 1)n"
+    else:
+        L = (w - 2) * n + (n + 1) // 2
+        formula = "8 + R + (w - 2)n + ceil(n/2)"
+    expected = TOP_BYTE_HEADER + R + L
+    if len(payload) != expected:
+        fail("malformed", "%s: payload of %d bytes, expected %s = %d (mode %d, R = %d, "
+             "n = %d, w = %d)" % (what, len(payload), formula, expected, M, R, n, w))
+    start = TOP_BYTE_HEADER           # stream byte 0
+    end = start + R                   # one past the last stream byte
+    (X,) = struct.unpack_from("<I", payload, start)
+    if not RANS_LOW <= X < 1 << 31:
+        fail("malformed", "%s: initial rANS state X = %d is not in 2^23 .. 2^31 - 1" % (what, X))
+    pos = start + 4                   # next stream byte to read
+    # the class q of every magnitude sum m = 0 .. 381 (// is a floor, also for m < 3C)
+    qof = [min(31, max(0, (m - 3 * C) // S + 16)) for m in range(3 * 127 + 1)]
+    # every model: counts (made when first used), their sum, symbols coded in it,
+    # frequencies and cumulative frequencies (shared until a model's table is made again)
+    counts = [None] * TOP_CONTEXTS
+    totals = [TOP_SYMBOLS] * TOP_CONTEXTS
+    coded = [0] * TOP_CONTEXTS
+    f0, s0 = top_byte_table([1] * TOP_SYMBOLS, TOP_SYMBOLS)   # every f_t = 256
+    freqs = [f0] * TOP_CONTEXTS
+    cums = [s0] * TOP_CONTEXTS
+    if M == 1:
+        ncounts = [None] * NIBBLE_MODELS
+        ntotals = [NIBBLE_SYMBOLS] * NIBBLE_MODELS
+        ncoded = [0] * NIBBLE_MODELS
+        g0, h0 = top_byte_table([1] * NIBBLE_SYMBOLS, NIBBLE_SYMBOLS)   # every f_t = 4096
+        nfreqs = [g0] * NIBBLE_MODELS
+        ncums = [h0] * NIBBLE_MODELS
+        highs = bytearray(n)          # 16·h of every voxel's second byte
+    sign = [0] * n                    # a >> 7 of every voxel's top byte
+    mag = [0] * n                     # a AND 127
+    tops = bytearray(n)
+    sy, sz = ex, ex * ey
+    mask = (1 << TOP_PROB_BITS) - 1
+    find = bisect.bisect_right
+    data = payload
+    i = 0
+    for z in range(ez):
+        for y in range(ey):
+            for x in range(ex):
+                # the neighbours' top bytes at x - 1, y - 1, z - 1, 0 outside the brick
+                g = m = 0
+                if x:
+                    g = sign[i - 1]
+                    m = mag[i - 1]
+                if y:
+                    g += sign[i - sy]
+                    m += mag[i - sy]
+                if z:
+                    g += sign[i - sz]
+                    m += mag[i - sz]
+                k = 32 * g + qof[m]
+                f, s = freqs[k], cums[k]
+                slot = X & mask
+                t = find(s, slot) - 1
+                X = f[t] * (X >> TOP_PROB_BITS) + slot - s[t]
+                while X < RANS_LOW:
+                    if pos >= end:
+                        fail("malformed", "%s: the rANS stream of %d bytes ends at the top "
+                             "byte of voxel %d of %d" % (what, R, i, n))
+                    X = (X << 8) | data[pos]
+                    pos += 1
+                tops[i] = t
+                sign[i] = t >> 7
+                mag[i] = t & 127
+                c = counts[k]
+                if c is None:
+                    c = counts[k] = [1] * TOP_SYMBOLS
+                c[t] += 16
+                totals[k] += 16
+                mc = coded[k] + 1
+                coded[k] = mc
+                if (mc & (mc - 1) == 0 and mc >= 4) or mc % 128 == 0:
+                    freqs[k], cums[k] = top_byte_table(c, totals[k])
+                if M == 1:            # the high nibble, with the model of top byte t
+                    f, s = nfreqs[t], ncums[t]
+                    slot = X & mask
+                    h = find(s, slot) - 1
+                    X = f[h] * (X >> TOP_PROB_BITS) + slot - s[h]
+                    while X < RANS_LOW:
+                        if pos >= end:
+                            fail("malformed", "%s: the rANS stream of %d bytes ends at the "
+                                 "high nibble of voxel %d of %d" % (what, R, i, n))
+                        X = (X << 8) | data[pos]
+                        pos += 1
+                    highs[i] = h << 4
+                    c = ncounts[t]
+                    if c is None:
+                        c = ncounts[t] = [1] * NIBBLE_SYMBOLS
+                    c[h] += 16
+                    ntotals[t] += 16
+                    mc = ncoded[t] + 1
+                    ncoded[t] = mc
+                    if (mc & (mc - 1) == 0 and mc >= 4) or mc % 128 == 0:
+                        nfreqs[t], ncums[t] = top_byte_table(c, ntotals[t])
+                i += 1
+    if X != RANS_LOW:
+        fail("malformed", "%s: final rANS state is %d, expected 2^23 = %d" % (what, X, RANS_LOW))
+    if pos != end:
+        fail("malformed", "%s: %d of the %d bytes of the rANS stream are left over after the "
+             "last symbol" % (what, end - pos, R))
+    if M == 1 and n % 2 and payload[-1] >> 4:   # stored bits, after the stream (SPEC-NOTES 94)
+        fail("malformed", "%s: n = %d is odd and bits 4..7 of the last byte of the low "
+             "nibbles are not 0 (byte 0x%02X)" % (what, n, payload[-1]))
+    # value i = top_i·256^(w-1) + second_i·256^(w-2) + Σ_p plane_p[i]·256^p, little-endian
+    out = np.empty((n, w), np.uint8)
+    out[:, w - 1] = np.frombuffer(bytes(tops), np.uint8)
+    if M == 0:
+        planes = np.frombuffer(bytes(payload[end:]), np.uint8).reshape(w - 1, n)
+        out[:, :w - 1] = planes.T
+    else:
+        low = end + (w - 2) * n       # the low nibbles, two a byte
+        if w > 2:
+            planes = np.frombuffer(bytes(payload[end:low]), np.uint8).reshape(w - 2, n)
+            out[:, :w - 2] = planes.T
+        nib = np.frombuffer(bytes(payload[low:]), np.uint8)
+        pairs = np.empty(2 * len(nib), np.uint8)
+        pairs[0::2] = nib & 15        # value 2j: bits 0..3 of byte j
+        pairs[1::2] = nib >> 4        # value 2j + 1: bits 4..7
+        out[:, w - 2] = np.frombuffer(bytes(highs), np.uint8) | pairs[:n]
+    return out.tobytes()
 
 
 def decode_masked(payload, n, where):

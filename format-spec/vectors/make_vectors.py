@@ -38,6 +38,7 @@ The script contains
     NOT produced by this reader.
 """
 
+import bisect
 import copy
 import json
 import math
@@ -74,6 +75,7 @@ CODEC_STORED, CODEC_ZSTD = 0, 1
 CODEC_PLANES = 2                 # zstd over byte planes, since 1.2 (§7)
 CODEC_PREDICTED = 3              # predicted 16-bit, since 1.3 (§7.2)
 CODEC_MASKED = 4                 # masked 16-bit, since 1.3 (§7.3)
+CODEC_TOP_BYTE = 6               # top byte in context, since 1.3 (§7.4)
 CODEC_FRAMES = 5                 # byte planes, a zstd frame each, since 1.3 (§7)
 LORENZO = (1, 1, 1, -1, -1, -1, 1)
 
@@ -1115,6 +1117,160 @@ def write_nested(src, enc, cell_log2, expo):
     return Grid(KIND_NESTED, enc, (X, Y, Z), vals, cells=cells, cell_log2=cell_log2)
 
 
+
+# ---- §7.4 codec 6, top byte in context ---------------------------------
+
+def top_byte_context(a, b, c, centre, step):
+    """§7.4: the context of a voxel from its neighbours' top bytes a, b, c."""
+    g = (a >> 7) + (b >> 7) + (c >> 7)
+    m = (a & 127) + (b & 127) + (c & 127)
+    q = min(31, max(0, (m - 3 * centre) // step + 16))   # Python's // is a floor
+    return 32 * g + q
+
+
+def top_byte_table(c, T):
+    """§7.4: frequencies summing to 2^16 and their cumulative sums from counts c (sum T)."""
+    R6 = (1 << 48) // T
+    f = [max(1, (ct * R6) >> 32) for ct in c]
+    j = f.index(max(f))
+    f[j] += 65536 - sum(f)
+    s, acc = [], 0
+    for ft in f:
+        s.append(acc)
+        acc += ft
+    return f, s
+
+
+class TopByteModel:
+    """§7.4: one model's counts, sum, symbols coded and table."""
+
+    def __init__(self, A):
+        self.c, self.T, self.m = [1] * A, A, 0
+        self.f, self.s = top_byte_table(self.c, self.T)
+
+    def note(self, t):
+        self.c[t] += 16
+        self.T += 16
+        self.m += 1
+        if (self.m & (self.m - 1) == 0 and self.m >= 4) or self.m % 128 == 0:
+            self.f, self.s = top_byte_table(self.c, self.T)
+
+
+def top_byte_symbols(ext, tops, centre, step, mode, nibbles=None, decode=None):
+    """§7.4: walks the voxels in raster order with their models; decode(model)
+    returns the next symbol (decoder), else the symbols come from tops and
+    nibbles (encoder).  Returns (tops, nibbles, [(f, s) of every symbol])."""
+    ex, ey, ez = ext
+    n = ex * ey * ez
+    models = [TopByteModel(256) for _ in range(128)]
+    nmodels = [TopByteModel(16) for _ in range(256)] if mode else None
+    tops = list(tops) if tops is not None else [0] * n
+    nibbles = list(nibbles) if nibbles is not None else [0] * n
+    coded = []
+    i = 0
+    for z in range(ez):
+        for y in range(ey):
+            for x in range(ex):
+                a = tops[i - 1] if x else 0
+                b = tops[i - ex] if y else 0
+                c = tops[i - ex * ey] if z else 0
+                md = models[top_byte_context(a, b, c, centre, step)]
+                t = decode(md, i) if decode else tops[i]
+                tops[i] = t
+                coded.append((md.f[t], md.s[t]))
+                md.note(t)
+                if mode:
+                    nm = nmodels[t]
+                    h = decode(nm, i) if decode else nibbles[i]
+                    nibbles[i] = h
+                    coded.append((nm.f[h], nm.s[h]))
+                    nm.note(h)
+                i += 1
+    return tops, nibbles, coded
+
+
+def top_byte_payload(data, ext, w, centre, step, mode=0, reserved=0):
+    """§7.4 encoder: data holds n values of w bytes (little-endian), raster order."""
+    n = ext[0] * ext[1] * ext[2]
+    tops = [data[i * w + w - 1] for i in range(n)]
+    highs = [data[i * w + w - 2] >> 4 for i in range(n)]
+    _, _, coded = top_byte_symbols(ext, tops, centre, step, mode, highs)
+    X = 1 << 23
+    out = bytearray()
+    for f, st in reversed(coded):
+        while X >= (1 << 15) * f:
+            out.append(X & 255)
+            X >>= 8
+        X = ((X // f) << 16) + X % f + st
+    stream = struct.pack("<I", X) + bytes(reversed(out))
+    whole = w - 2 if mode else w - 1
+    stored = b"".join(bytes(data[i * w + p] for i in range(n)) for p in range(whole))
+    if mode:
+        lows = bytearray((n + 1) // 2)
+        for i in range(n):
+            lows[i // 2] |= (data[i * w + w - 2] & 15) << (4 * (i % 2))
+        stored += bytes(lows)
+    return bytes([centre, step, mode, reserved]) + struct.pack("<I", len(stream)) + stream + stored
+
+
+def top_byte_decode(st, ext, w):
+    """§7.4 decoder, for the self-test reader."""
+    n = ext[0] * ext[1] * ext[2]
+    if len(st) < 8:
+        _fail("malformed", "codec6.short")
+    centre, step, mode = st[0], st[1], st[2]
+    if centre > 127:
+        _fail("malformed", "codec6.centre")
+    if step == 0:
+        _fail("malformed", "codec6.step")
+    if mode > 1:
+        _fail("malformed", "codec6.mode")
+    if st[3]:
+        _fail("malformed", "codec6.reserved")
+    N = 2 * n if mode else n
+    (R,) = struct.unpack_from("<I", st, 4)
+    if not 4 <= R <= 2 * N + 4:
+        _fail("malformed", "codec6.stream_size", str(R))
+    whole = w - 2 if mode else w - 1
+    L = whole * n + ((n + 1) // 2 if mode else 0)
+    if len(st) != 8 + R + L:
+        _fail("malformed", "codec6.size", "%d bytes" % len(st))
+    end = 8 + R
+    if mode and n % 2 and st[end + whole * n + n // 2] >> 4:
+        _fail("malformed", "codec6.padding")
+    (X,) = struct.unpack_from("<I", st, 8)
+    if not (1 << 23) <= X < (1 << 31):
+        _fail("malformed", "codec6.initial_state", str(X))
+    state = {"X": X, "pos": 12}
+
+    def decode(model, i):
+        X = state["X"]
+        slot = X & 65535
+        t = bisect.bisect_right(model.s, slot) - 1
+        X = model.f[t] * (X >> 16) + slot - model.s[t]
+        while X < (1 << 23):
+            if state["pos"] >= end:
+                _fail("malformed", "codec6.stream_end", "voxel %d" % i)
+            X = (X << 8) | st[state["pos"]]
+            state["pos"] += 1
+        state["X"] = X
+        return t
+
+    tops, highs, _ = top_byte_symbols(ext, None, centre, step, mode, decode=decode)
+    if state["X"] != (1 << 23):
+        _fail("malformed", "codec6.state_end", str(state["X"]))
+    if state["pos"] != end:
+        _fail("malformed", "codec6.stream_left", "%d of %d bytes read" % (state["pos"] - 8, R))
+    out = bytearray(n * w)
+    for i in range(n):
+        for p in range(whole):
+            out[i * w + p] = st[end + p * n + i]
+        if mode:
+            out[i * w + w - 2] = (highs[i] << 4) | ((st[end + whole * n + i // 2] >> (4 * (i % 2))) & 15)
+        out[i * w + w - 1] = tops[i]
+    return bytes(out)
+
+
 def bricked_order(size, b):
     """§8A.4: (first value, extent, origin) of every brick, in raster order of
     the bricks; the first values counted brick after brick."""
@@ -1151,6 +1307,10 @@ def bricked_blocks(g, codec=CODEC_PREDICTED, **pred):
         if c == CODEC_PREDICTED:
             kw = pred["per_brick"](q) if "per_brick" in pred else pred
             blk.stored = predicted_payload(vals, ext, **kw)
+        if c == CODEC_TOP_BYTE:     # §7.4, with the centre and step given (or 60 and 4)
+            kw = pred["per_brick"](q) if "per_brick" in pred else pred
+            blk.stored = top_byte_payload(blk.data, ext, VWIDTH[g.enc], kw.get("centre", 60), kw.get("step", 4),
+                                          kw.get("mode", 0))
         if c == CODEC_MASKED:       # the brick's most common value as background, unless given
             kw = pred["per_brick"](q) if "per_brick" in pred else dict(pred)
             background = kw.pop("background", None)
@@ -1462,6 +1622,10 @@ def decode_block(data, e, width):
         if e.get("brick") is None or width != 2:
             _fail("malformed", "codec3.where")
         return predicted_decode(st, e["brick"])
+    if e["codec"] == CODEC_TOP_BYTE:
+        if e.get("brick") is None or width not in (2, 4):
+            _fail("malformed", "codec6.where")
+        return top_byte_decode(st, e["brick"], width)
     if e["codec"] == CODEC_MASKED:
         if e.get("brick") is None or width != 2:
             _fail("malformed", "codec4.where")
@@ -1668,10 +1832,14 @@ def read_ivol(data, verify=True):
                     _fail("malformed", "lod.level", "block %d level %d" % (b, level))
             elif flags != 0:
                 _fail("malformed", "block.flags", "block %d" % b)
-            if codec not in (0, 1, 2, 3, 4, 5):
+            if codec not in (0, 1, 2, 3, 4, 5, 6):
                 _fail("unsupported-feature", "codec", "block %d codec %d" % (b, codec))
             if codec in (3, 4) and not (stream in (3, STREAM_LOD) and sk == 5 and ve in (1, 2)):
                 _fail("malformed", "codec%d.where" % codec, "block %d" % b)
+            if codec == 6 and not (stream in (3, STREAM_LOD) and sk == 5 and width[stream] in (2, 4)):
+                _fail("malformed", "codec6.where", "block %d" % b)
+            if codec == 6 and ss > 12 + width[stream] * cnt + (32 if framed else 0):
+                _fail("malformed", "block.stored_bound", "block %d" % b)
             if codec == 5 and width[stream] < 2:       # §7: codec 5 needs w >= 2
                 _fail("malformed", "codec5.where", "block %d" % b)
             if codec == 5 and ss > width[stream] * zstd_bound(cnt) + (32 if framed else 0):
@@ -2699,19 +2867,29 @@ def gen():
     inv("block_stored_size_plus_1", pen(vblk, "stored_size", "<I", len(bblocks[vblk].stored_bytes()) + 1),
         "malformed", "block.placement",
         "A block's stored_size one too large: the next block does not start where it ends.")
-    for unknown in (6, 255):
+    for unknown in (7, 255):
         bl = level_blocks(bt, CODEC_ZSTD)
         bl.append(meta_block(DEFAULT_META))
         bl[vblk].codec = unknown
         bl[vblk].stored = bl[vblk].data
         d, _ = assemble(bt, bl)
         inv("codec_%d" % unknown, d, "unsupported-feature", "codec",
-            "A values block with codec %d (unknown: 1.3 defines 0 to 5); its stored bytes are the "
-            "raw values, CRC correct.%s" % (unknown, " (Was codec_5 in the earlier 1.3 drafts, codec_4 "
-                                           "before them, codec_3 up to 1.2, codec_2 in the 1.0 and 1.1 "
-                                           "vectors: 1.2 made codec 2 zstd over byte planes, 1.3 codec 3 "
-                                           "predicted 16-bit, codec 4 masked 16-bit and codec 5 byte "
-                                           "planes a zstd frame each.)" if unknown == 6 else ""))
+            "A values block with codec %d (unknown: 1.3 defines 0 to 6); its stored bytes are the "
+            "raw values, CRC correct.%s" % (unknown, " (Was codec_6 in the earlier 1.3 drafts, codec_5 "
+                                           "before codec 6, codec_4 before codec 5, codec_3 up to 1.2, "
+                                           "codec_2 in the 1.0 and 1.1 vectors: 1.2 made codec 2 zstd over "
+                                           "byte planes, 1.3 codec 3 predicted 16-bit, codec 4 masked "
+                                           "16-bit, codec 5 byte planes a zstd frame each and codec 6 the "
+                                           "top byte in context.)" if unknown == 7 else ""))
+    bl = level_blocks(bt, CODEC_ZSTD)
+    bl.append(meta_block(DEFAULT_META))
+    bl[vblk].codec = CODEC_TOP_BYTE
+    bl[vblk].stored = bl[vblk].data
+    d, _ = assemble(bt, bl)
+    inv("codec6_raw_values", d, "malformed", "codec6.where",
+        "The file that was codec_6 before 1.3 defined codec 6: an octree values block with codec 6 whose "
+        "stored bytes are the raw values, CRC correct. Codec 6 is now the top byte in context (§7.4), valid "
+        "only on a bricked grid's bricks: malformed.")
     bl = level_blocks(bt, CODEC_ZSTD)
     bl.append(meta_block(DEFAULT_META))
     bl[vblk].codec = CODEC_FRAMES
@@ -3075,6 +3253,7 @@ def gen():
     gen_entropy2()
     gen_bricked_float32()
     gen_codec5()
+    gen_codec6()
     return SAMPLE
 
 
@@ -4839,6 +5018,154 @@ def gen_codec2_invalid(bt, vblk, nblk1):
         "(%d bytes) holds exactly that many bytes. Stream coverage is exact; a reader must refuse it "
         "from the index (element_count x width, not element_count alone) before allocating."
         % (S, S, len(big.stored_bytes())))
+
+
+
+def gen_codec6():
+    """§7.4 codec 6 (1.3 draft): the top byte in context, on bricks of binary16,
+    uint16 and float32, then files that break one rule each.  Own generator
+    (seed), after all others, so the vectors before keep their bytes."""
+    rng = np.random.default_rng(2606)
+
+    # binary16 noise around zero: signs flip, the top byte spans many contexts
+    src = arr_f16(rng.normal(0.0, 0.02, 12 * 10 * 9), (9, 10, 12))
+    flat = src.reshape(-1)
+    flat[[0, 7, 100, 333, 600, 1079]] = [0x8000, 0x7E01, 0xFC00, 0x0001, 0x7BFF, 0x8000]
+    add_valid_bricked(
+        "bricked_12x10x9_binary16_codec6_noise", framed_bricked_file(
+            src, BINARY16, 3, CODEC_TOP_BYTE, centre=40, step=6),
+        src, BINARY16, 3,
+        "Bricked grid 12x10x9 binary16 of noise around zero (signs flip), bricks of 8 (edge extents 4, 2 "
+        "and 1), every brick codec 6 (§7.4) with centre 40 and step 6: the top bytes coded in 128 contexts "
+        "from the x, y and z neighbours' top bytes (0 outside the brick), the low bytes stored. -0, a NaN "
+        "with a payload, -inf, the smallest subnormal and the largest finite value come back bit for bit.")
+
+    # float32: several centres and steps, including the extremes, one brick each
+    src = smooth_f32(9, 8, 7, rng, lo=-0.05, noise=0.08)
+    put_bits(src, {(0, 0, 0): 0x80000000, (8, 7, 6): 0x7FC01234, (4, 4, 4): 0xFF800000})
+    per = lambda q: [dict(centre=0, step=1, mode=1), dict(centre=127, step=255), dict(centre=61, step=4, mode=1),
+                     dict(centre=63, step=2)][q % 4]
+    add_valid_bricked(
+        "bricked_9x8x7_float32_codec6_steps", framed_bricked_file(
+            src, FLOAT32, 2, CODEC_TOP_BYTE, per_brick=per),
+        src, FLOAT32, 2,
+        "Bricked grid 9x8x7 float32 around zero, bricks of 4, every brick codec 6 with its own centre, "
+        "step and mode, cycling (0, 1, mode 1), (127, 255, mode 0), (61, 4, mode 1), (63, 2, mode 0): "
+        "classes below 0 and above 31 are clamped, m - 3C < 0 is floored; mode 1 codes the second byte's "
+        "high nibble in the context of the top byte and stores two planes and the low nibbles, mode 0 "
+        "stores three planes. -0, a NaN payload and -inf kept.")
+
+    src = smooth_f32(5, 3, 3, rng, lo=0.01, noise=0.02)
+    add_valid_bricked(
+        "bricked_5x3x3_float32_codec6_odd_nibbles", framed_bricked_file(
+            src, FLOAT32, 3, CODEC_TOP_BYTE, centre=60, step=3, mode=1),
+        src, FLOAT32, 3,
+        "Bricked grid 5x3x3 float32, one brick of 45 voxels as codec 6 mode 1: the low nibbles take "
+        "ceil(45 / 2) = 23 bytes, the last one's high nibble the 0 padding.")
+    src = arr_f16(rng.normal(0.5, 0.2, 7 * 6 * 5), (5, 6, 7))
+    add_valid_bricked(
+        "bricked_7x6x5_binary16_codec6_mode1", framed_bricked_file(
+            src, BINARY16, 3, CODEC_TOP_BYTE, centre=56, step=4, mode=1),
+        src, BINARY16, 3,
+        "Bricked grid 7x6x5 binary16, one brick of 210 voxels as codec 6 mode 1 (either mode is valid "
+        "for either width): the low byte's high nibble coded, its low nibbles stored, no whole plane.")
+
+    # uint16: codec 6 among codecs 3, 0 and 2
+    src = rng.integers(0, 65536, (6, 6, 6)).astype(np.uint16)
+    src[:, :3, :] = 30000 + rng.integers(0, 50, (6, 3, 6))
+    add_valid_bricked(
+        "bricked_6x6x6_uint16_codec6_mixed", framed_bricked_file(
+            src, UINT16, 2, lambda q: (CODEC_TOP_BYTE, CODEC_PREDICTED, CODEC_STORED, CODEC_PLANES)[q % 4],
+            value_map=0),
+        src, UINT16, 2,
+        "Bricked grid 6x6x6 uint16, bricks of 4, the blocks cycling codecs 6, 3, 0 and 2; half random bits, "
+        "half a level with little noise.")
+
+    # a brick of one voxel
+    src = np.array([[[0xBC00]]], np.uint16)
+    add_valid_bricked(
+        "bricked_1x1x1_binary16_codec6", framed_bricked_file(src, BINARY16, 1, CODEC_TOP_BYTE,
+                                                             centre=0, step=1),
+        src, BINARY16, 1, "Bricked grid of one voxel (-1.0) as codec 6: one top byte, one low byte.", lods=False)
+
+    # ---- invalid: one rule broken each
+    src = arr_f16(rng.normal(0.0, 0.05, 6 * 5 * 4), (4, 5, 6))
+    n0 = 4 * 4 * 4
+
+    def inv(name, tag, desc, mutate, expect="malformed"):
+        add_invalid(name, framed_bricked_file(src, BINARY16, 2, CODEC_TOP_BYTE, mutate=mutate, centre=30,
+                                              step=5), expect, tag, desc)
+
+    def first(fn):
+        def mutate(blocks):
+            blocks[0].stored = fn(top_byte_payload(blocks[0].data, (4, 4, 4), 2, 30, 5))
+        return mutate
+
+    def byte(off, value):
+        return first(lambda st: st[:off] + bytes([value]) + st[off + 1:])
+
+    inv("bricked_codec6_centre_128", "codec6.centre", "A codec 6 block whose centre (payload byte 0) is 128.",
+        byte(0, 128))
+    inv("bricked_codec6_step_0", "codec6.step", "A codec 6 block whose step (payload byte 1) is 0.", byte(1, 0))
+    inv("bricked_codec6_reserved", "codec6.reserved", "A codec 6 block whose reserved payload byte 3 is 1.",
+        byte(3, 1))
+    inv("bricked_codec6_mode_2", "codec6.mode", "A codec 6 block whose mode (payload byte 2) is 2.", byte(2, 2))
+    odd = smooth_f32(5, 3, 3, rng, lo=0.01, noise=0.02)
+
+    def padding(blocks):
+        st = bytearray(top_byte_payload(blocks[0].data, (5, 3, 3), 4, 60, 3, mode=1))
+        st[-1] |= 0x10
+        blocks[0].stored = bytes(st)
+
+    add_invalid("bricked_codec6_padding_nibble", framed_bricked_file(odd, FLOAT32, 3, CODEC_TOP_BYTE, mutate=padding,
+                                                                    centre=60, step=3, mode=1),
+                "malformed", "codec6.padding",
+                "A codec 6 mode 1 block of 45 float32 values whose last low-nibble byte has a padding nibble "
+                "of 1 (it must be 0).")
+    inv("bricked_codec6_short", "codec6.short", "A codec 6 block of 6 bytes, shorter than its header.",
+        first(lambda st: st[:6]))
+    inv("bricked_codec6_stream_size_3", "codec6.stream_size",
+        "A codec 6 block whose rANS stream length R is 3 (below 4).",
+        first(lambda st: st[:4] + struct.pack("<I", 3) + st[8:]))
+    inv("bricked_codec6_stream_size_over_2n_plus_4", "codec6.stream_size",
+        "A codec 6 block whose R is 2n + 5 = %d for the n = %d voxels of its brick." % (2 * n0 + 5, n0),
+        first(lambda st: st[:4] + struct.pack("<I", 2 * n0 + 5) + st[8:]))
+    inv("bricked_codec6_trailing_byte", "codec6.size",
+        "A codec 6 block with one byte after its lower plane (8 + R + (w - 1)n + 1 bytes).",
+        first(lambda st: st + b"\0"))
+    inv("bricked_codec6_initial_state", "codec6.initial_state",
+        "A codec 6 block whose initial rANS state is 2^31 (above 2^31 - 1).",
+        first(lambda st: st[:8] + struct.pack("<I", 1 << 31) + st[12:]))
+
+    def wrong_state(st):
+        (R,) = struct.unpack_from("<I", st, 4)
+        b = bytearray(st)
+        b[8 + R - 1] ^= 0x5A     # the last stream byte: every voxel decodes, the state ends elsewhere
+        return bytes(b)
+
+    inv("bricked_codec6_final_state", None,
+        "A codec 6 block with the last byte of its rANS stream changed: the voxels decode, but the final "
+        "state is not 2^23, or the stream runs out or is left over (§7.4: malformed either way).",
+        first(wrong_state))
+
+    g = write_bricked(src, BINARY16, 2)
+    blocks = bricked_blocks(g, CODEC_TOP_BYTE, centre=30, step=5)
+    blocks[0].stored = top_byte_payload(blocks[0].data, (4, 4, 4), 2, 30, 5) + bytes(4 * n0 + 12)
+    blocks.insert(0, meta_block(DEFAULT_META))
+    data, _ = assemble(g, blocks, structure_kind=KIND_BRICKED, ireserved=2, framed=True, minor=3)
+    add_invalid("bricked_codec6_stored_size_over_bound", data, "malformed", "block.stored_bound",
+                "A codec 6 block whose stored_size exceeds 12 + wn + 32 (§7), refused with the "
+                "block table before the block is read.")
+
+    # codec 6 on a regular grid (structure_kind 2) is not allowed
+    reg = write_regular(src, BINARY16)
+    rblocks = grid_blocks(reg, CODEC_ZSTD)
+    rblocks[0].stored = top_byte_payload(rblocks[0].data, (6, 5, 4), 2, 30, 5)
+    rblocks[0].codec = CODEC_TOP_BYTE
+    data, _ = assemble(reg, [meta_block(DEFAULT_META)] + rblocks, structure_kind=KIND_REGULAR, framed=True,
+                       minor=3)
+    add_invalid("regular_with_codec6", data, "malformed", "codec6.where",
+                "A regular grid (structure_kind 2) whose values block is codec 6: valid only on a bricked grid.")
 
 
 def gen_codec5():
