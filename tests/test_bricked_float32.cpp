@@ -112,21 +112,23 @@ TEST(BrickedFloat32, EveryVoxelsBitsComeBackThroughBoxesSlicesAndVoxels) {
     const std::uint64_t edge = 1u << log2;
     std::uint64_t bricks = 1;
     for (int a = 0; a < 3; ++a) bricks *= (d[a] + edge - 1) / edge;
-    std::uint64_t values_blocks = 0, planes = 0;
+    std::uint64_t values_blocks = 0, compressed = 0;
     for (const BlockInfo& b : r.info().blocks)
       if (b.stream == 3) {
         ++values_blocks;
-        EXPECT_TRUE(b.codec == 2 || b.codec == 0) << int{b.codec};  // codecs 3 and 4 hold 16-bit values
-        planes += b.codec == 2;
+        // Codecs 3 and 4 hold 16-bit values; codec 6 where the noise makes it smaller.
+        EXPECT_TRUE(b.codec == 2 || b.codec == 0 || b.codec == 6) << int{b.codec};
+        compressed += b.codec != 0;
       }
     EXPECT_EQ(values_blocks, bricks);
-    EXPECT_GT(planes, 0u);
+    EXPECT_GT(2 * compressed, values_blocks);
   }
 }
 
 // From zstd level 13 the bricks' byte planes are a frame each (codec 5)
-// where a brick holds 4096 values or more, codec 2 below: every bit comes
-// back, the stored levels of detail too, and check_file passes.
+// where a brick holds 4096 values or more, codec 2 below (or codec 6 where
+// the noise makes that smaller): every bit comes back, the stored levels of
+// detail too, and check_file passes.
 TEST(BrickedFloat32, AtLevel13AndUpBricksAreAFrameAPlane) {
   const Dims d{40, 35, 33};
   const auto v = make_volume(d, 4, true);
@@ -143,7 +145,7 @@ TEST(BrickedFloat32, AtLevel13AndUpBricksAreAFrameAPlane) {
     EXPECT_TRUE(report.ok()) << (report.problems.empty() ? "" : report.problems[0].message);
     std::uint64_t frames = 0, planes = 0;
     for (const BlockInfo& b : r.info().blocks) {
-      if (b.stream == 3 && b.element_count == 4096) EXPECT_EQ(b.codec, 5) << b.first_element;
+      if (b.stream == 3 && b.element_count == 4096) EXPECT_TRUE(b.codec == 5 || b.codec == 6) << b.first_element;
       if (b.codec == 5) EXPECT_GE(b.element_count, 4096u);
       frames += b.codec == 5;
       planes += b.codec == 2;

@@ -13,6 +13,7 @@
 #include "ivol/error.hpp"
 #include "ivol/masked_codec.hpp"
 #include "ivol/predicted_codec.hpp"
+#include "ivol/top_byte_codec.hpp"
 #include "layout.hpp"
 #include "zstd_parts.hpp"
 
@@ -177,6 +178,18 @@ void decode_stored_into(const std::string& path, const BlockInfo& block, std::si
       throw Error(e.error_class(), part + e.what());
     }
     for (std::size_t i = 0; i < values.size(); ++i) layout::store<std::uint16_t>(out + 2 * i, values[i]);
+    return;
+  }
+  if (block.codec == 6) {  // spec §7.4: a brick of 2- or 4-byte values, the top byte in context
+    if (!brick || (width != 2 && width != 4) ||
+        std::uint64_t{(*brick)[0]} * (*brick)[1] * (*brick)[2] != block.element_count)
+      throw Error(ErrorClass::Malformed,
+                  part + "codec 6 is only for a values block holding one brick of 2- or 4-byte values");
+    try {
+      decode_top_byte(stored, stored_size, *brick, static_cast<unsigned>(width), out);
+    } catch (const Error& e) {
+      throw Error(e.error_class(), part + e.what());
+    }
     return;
   }
   if (block.codec != 1 && block.codec != 2 && block.codec != 5)

@@ -13,6 +13,7 @@
 #include "ivol/error.hpp"
 #include "ivol/masked_codec.hpp"
 #include "ivol/predicted_codec.hpp"
+#include "ivol/top_byte_codec.hpp"
 #include "layout.hpp"
 
 namespace ivol {
@@ -337,13 +338,16 @@ class StructureReader {
       if (stored_level && blk.flags != layout::kFlagIgnorable)
         bad(ErrorClass::Malformed, "blocks of stream 7 (stored levels of detail) must have the ignorable flag");
       if (!stored_level && blk.flags != 0) bad(ErrorClass::Malformed, "blocks of known streams must have flags 0");
-      if (blk.codec > 5) bad(ErrorClass::UnsupportedFeature, "codec " + std::to_string(blk.codec) + " is not known");
+      if (blk.codec > 6) bad(ErrorClass::UnsupportedFeature, "codec " + std::to_string(blk.codec) + " is not known");
       // Codecs 3 and 4 hold a brick of 16-bit values (spec §7.2, §7.3).
       if ((blk.codec == 3 || blk.codec == 4) &&
           ((blk.stream != 3 && blk.stream != 7) || v.kind != StructureKind::Bricked ||
            v.encoding == ValueEncoding::Float32))
         bad(ErrorClass::Malformed,
             "codec " + std::to_string(blk.codec) + " is only for values blocks of a bricked grid of 16-bit values");
+      // Codec 6 holds a brick of 2- or 4-byte values (spec §7.4).
+      if (blk.codec == 6 && ((blk.stream != 3 && blk.stream != 7) || v.kind != StructureKind::Bricked))
+        bad(ErrorClass::Malformed, "codec 6 is only for values blocks of a bricked grid");
       const std::uint64_t width = stream_width(blk.stream, v.encoding);
       // Codec 5 is a frame a byte plane: for elements of more than one byte.
       if (blk.codec == 5 && width < 2)
@@ -370,6 +374,13 @@ class StructureReader {
                                        std::to_string(masked_payload_bound(blk.element_count) + frame) +
                                        ", the largest codec 4 payload of " + std::to_string(blk.element_count) +
                                        " values" + (frame ? " and the block header" : ""));
+      if (blk.codec == 6 &&
+          blk.stored_size > top_byte_payload_bound(blk.element_count, static_cast<unsigned>(width)) + frame)
+        bad(ErrorClass::Malformed,
+            "stored_size " + std::to_string(blk.stored_size) + " exceeds " +
+                std::to_string(top_byte_payload_bound(blk.element_count, static_cast<unsigned>(width)) + frame) +
+                ", the largest codec 6 payload of " + std::to_string(blk.element_count) + " values" +
+                (frame ? " and the block header" : ""));
       if ((blk.codec == 1 || blk.codec == 2) && blk.stored_size > ZSTD_compressBound(decoded) + frame)
         bad(ErrorClass::Malformed, "stored_size " + std::to_string(blk.stored_size) + " exceeds " +
                                        std::to_string(ZSTD_compressBound(decoded) + frame) +

@@ -190,9 +190,12 @@ class Salvager {
     // Codecs 3 and 4 only on a bricked grid's values, one brick per block (spec §7, §8A.4).
     const bool brick_codec = (b.codec == 3 || b.codec == 4) && brick_of_block(v, b.stream, b.level, b.first_element) &&
                              v.encoding != ValueEncoding::Float32;
+    // Codec 6, the top byte in context, on a bricked grid's bricks of 2 or 4 bytes (spec §7.4).
+    const bool top_byte =
+        b.codec == 6 && (width == 2 || width == 4) && brick_of_block(v, b.stream, b.level, b.first_element);
     // Codec 5, a zstd frame a byte plane, on any stream of elements wider than a byte (spec §7).
     const bool plane_frames = b.codec == 5 && width >= 2;
-    if (b.flags != 0 || (b.codec > 2 && !brick_codec && !plane_frames) || b.element_count == 0)
+    if (b.flags != 0 || (b.codec > 2 && !brick_codec && !plane_frames && !top_byte) || b.element_count == 0)
       why = "flags, codec or element_count out of range";
     else if (b.element_count * width > layout::kMaxBlockDecodedBytes)
       why = "decoded size over 64 MiB";

@@ -38,7 +38,8 @@ enum class Codec : std::uint8_t {
   ZstdBytePlanes = 2,
   Predicted = 3,
   Masked = 4,
-  ZstdPlaneFrames = 5
+  ZstdPlaneFrames = 5,
+  TopByte = 6
 };
 
 // From this zstd level on, framed (format 1.3) files hold byte planes of
