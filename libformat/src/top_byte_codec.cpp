@@ -199,6 +199,20 @@ unsigned cost_q8(std::uint32_t f) {
   return log2_up >= (kPrecision << 8) ? 0 : (kPrecision << 8) - log2_up;
 }
 
+// floor(x / f) for x < 2^31 and 1 ≤ f < 2^16 without a division, which was
+// a quarter of the encoder's time: (x · m) >> 47 with m = floor(2^47 / f) +
+// 1 is exact, since m exceeds 2^47 / f by at most 1 and so the product by
+// less than x / 2^47 < 2^-16 ≤ 1 / f. The reciprocals, 512 KiB, are made
+// once.
+std::uint32_t quotient(std::uint32_t x, std::uint32_t f) {
+  static const std::vector<std::uint64_t> reciprocal = [] {
+    std::vector<std::uint64_t> r(1u << kPrecision);
+    for (std::uint64_t g = 1; g < r.size(); ++g) r[g] = ((std::uint64_t{1} << 47) / g) + 1;
+    return r;
+  }();
+  return static_cast<std::uint32_t>((static_cast<unsigned __int128>(x) * reciprocal[f]) >> 47);
+}
+
 // Visits the brick's rows in raster order: visit(i, parts) for the row
 // starting at voxel i, with its row_parts from the top bytes in `top`.
 template <class Visit>
@@ -298,7 +312,8 @@ std::vector<std::uint8_t> encode_top_byte(const std::uint8_t* values, const Bric
       *--p = static_cast<std::uint8_t>(x);
       x >>= 8;
     }
-    x = ((x / f) << kPrecision) + x % f + starts[i];
+    const std::uint32_t q = quotient(x, f);
+    x = (q << kPrecision) + (x - q * f) + starts[i];
     if (static_cast<std::size_t>(begin + room - p) + 4 >= rans_limit) return {};
   }
   p -= 4;

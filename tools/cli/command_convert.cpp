@@ -176,7 +176,8 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       ->capture_default_str();
   into->add_option("--structure", s->structure,
                    "auto: a bricked regular grid for every voxel kept (16-bit values: bricks predicted in 3-D, "
-                   "codec 3; float32: bricks of byte planes, codec 2), else an octree; octree or bricked to choose")
+                   "codec 3; float32: bricks of byte planes, codec 2; either: the top byte in context, codec 6, where "
+                   "noise dominates), else an octree; octree or bricked to choose")
       ->check(CLI::IsMember({"auto", "octree", "bricked"}))
       ->capture_default_str();
   CLI::Option* brick_option =

@@ -163,10 +163,11 @@ bool choose_bricked(const DenseVolume& shape, const ImportOptions& options, Valu
   report.structure_reason =
       encoding == ValueEncoding::Float32
           ? "every voxel kept, as float32 values: bricks of their byte planes (codec 2, or 5 from --zstd-level 13) "
-            "are smaller than an octree "
+            "or, where noise dominates, their top bytes coded in context (codec 6) are smaller than an octree "
             "of one-voxel leaves, which stores averages and node words besides them (--structure octree overrides)"
-          : "every voxel kept, as 16-bit values: bricks predicted in 3-D (codec 3) or masked around their background "
-            "(codec 4) are smaller than an octree of one-voxel leaves (--structure octree overrides)";
+          : "every voxel kept, as 16-bit values: bricks predicted in 3-D (codec 3), masked around their background "
+            "(codec 4) or, where noise dominates, their top bytes coded in context (codec 6) are smaller than an "
+            "octree of one-voxel leaves (--structure octree overrides)";
   return true;
 }
 
