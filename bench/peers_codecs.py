@@ -15,7 +15,8 @@ way stored bit for bit by every method:
             elsewhere;
   float32   every voxel as the reconstruction's float32.
 Methods: ivol convert (--structure auto: a bricked grid, codec 3 for 16-bit
-values, codec 2 for float32; with --entropy-coder zstd, codec 3's residuals
+values, codec 2 for float32, codec 6 for either where noise dominates; with
+--entropy-coder zstd, codec 3's residuals
 without rANS; with --zstd-level 19, and with --brick 64 --zstd-level 19, its
 smallest) and, for "object", ivol's octree that keeps full resolution only
 there (--keep);
