@@ -226,18 +226,23 @@ TEST(TopByteCodec, EveryChangedByteAndEveryCutIsDecodedOrRefused) {
 }
 
 // The writer tries codec 6 where noise dominates: a noisy binary16 volume
-// holds codec 6 bricks at the default level, a noisy float32 one from level
-// 13 (below, its bricks stay zstd's, which decode several times faster);
-// every bit comes back, and check_file reads every block.
+// holds codec 6 bricks at the default level (none when zstd's entropy
+// coding is asked for, for its decoding speed), a noisy float32 one from
+// level 13 (below, its bricks stay zstd's, which decode several times
+// faster); every bit comes back, and check_file reads every block.
 TEST(TopByteCodec, TheBrickedWriterChoosesItForNoiseAndEveryBitComesBack) {
   const Dims d{64, 64, 40};
+  using Entropy = PredictedOptions::Entropy;
   struct Case {
     ValueEncoding encoding;
     int level;
+    Entropy entropy;
     bool expect_codec6;
   };
-  for (const Case c : {Case{ValueEncoding::Binary16, 3, true}, Case{ValueEncoding::Float32, 3, false},
-                       Case{ValueEncoding::Float32, 13, true}}) {
+  for (const Case c : {Case{ValueEncoding::Binary16, 3, Entropy::Smaller, true},
+                       Case{ValueEncoding::Binary16, 3, Entropy::ZstdPlanes, false},
+                       Case{ValueEncoding::Float32, 3, Entropy::Smaller, false},
+                       Case{ValueEncoding::Float32, 13, Entropy::Smaller, true}}) {
     const ValueEncoding e = c.encoding;
     const std::size_t n = voxel_count(d);
     const BrickDims whole{d[0], d[1], d[2]};
@@ -247,6 +252,7 @@ TEST(TopByteCodec, TheBrickedWriterChoosesItForNoiseAndEveryBitComesBack) {
     o.brick_log2 = 5;
     o.encoding = e;
     o.zstd_level = c.level;
+    o.entropy = c.entropy;
     o.threads = 2;
     BrickedGridWriter writer(path, d, o);
     while (writer.next_layer_count() > 0) {

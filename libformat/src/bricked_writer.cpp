@@ -116,6 +116,8 @@ struct BrickedGridWriter::Impl {
       // saved, and skipped 80 % of the trials on the noise-free pencil
       // holder, where codec 6 wins none (bench/RESULTS.md, "Codec 6").
       if (w.zstd_level <= 3) try_top_byte = 100 * planes.bytes.size() < 105 * block.bytes.size();
+      // Who asked for zstd's entropy coding asked for its decoding speed.
+      if (options.entropy == PredictedOptions::Entropy::ZstdPlanes) try_top_byte = false;
       if (trial.zstd_level != w.zstd_level && planes.bytes.size() < block.bytes.size()) {
         EncodedBlock asked = encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), w);
         if (asked.bytes.size() <= planes.bytes.size()) planes = std::move(asked);

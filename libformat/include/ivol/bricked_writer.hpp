@@ -34,7 +34,7 @@ struct BrickedOptions {
   // Codec 3's entropy coder (spec §7.2): Smaller takes rANS over tokens
   // (§7.2.1), or zstd over byte planes where that brick is nearly flat and
   // zstd is smaller (PredictedOptions); ZstdPlanes only zstd, which decodes
-  // about 2.5 times as fast (bench/RESULTS.md).
+  // about 2.5 times as fast (bench/RESULTS.md), and no codec 6 either.
   PredictedOptions::Entropy entropy = PredictedOptions::Entropy::Smaller;
   unsigned threads = 0;   // 0: all hardware threads
   // Levels of detail stored (spec §8A.5): every level from this one to the
