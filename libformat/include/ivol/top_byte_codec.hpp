@@ -2,7 +2,9 @@
 // values block that is one brick of 2- or 4-byte values. Each value's most
 // significant byte (sign, exponent and the top of the fraction, for binary16
 // and float32) is coded by rANS under adaptive models chosen by the top bytes
-// of its causal neighbours; the bytes below it are stored as they are.
+// of its causal neighbours; in mode 1 (the library's for 4-byte values) also
+// the next byte's high nibble, in the context of the top byte; the other
+// bits are stored as they are.
 //
 // Why: in a CT reconstruction with Poisson noise the air and much of the
 // part are noise around small values, whose sign flips from voxel to voxel.
@@ -35,8 +37,10 @@ std::vector<std::uint8_t> encode_top_byte(const std::uint8_t* values, const Bric
 // Decodes a codec 6 payload of a brick of `dims` and `width` into `out`
 // (dims' product times width bytes, little-endian values). Throws
 // Error(Malformed), the message saying what is wrong (the caller names the
-// file and block), for any byte string that breaks §7.4. Allocates the
-// models (about 3.5 KiB a context, 128 contexts), nothing the payload sizes.
+// file and block), for any byte string that breaks §7.4. Keeps per thread a
+// byte a value and the models (about 3 KiB for each of 128 contexts, in
+// mode 1 also 200 bytes for each of 256), made as their contexts are met;
+// nothing the payload's bytes size.
 void decode_top_byte(const std::uint8_t* payload, std::size_t size, const BrickDims& dims, unsigned width,
                      std::uint8_t* out);
 
