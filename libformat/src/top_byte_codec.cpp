@@ -55,10 +55,12 @@ struct Model {
     const std::uint64_t scale = (std::uint64_t{1} << 48) / total;
     // Three loops the compiler vectorises: the frequencies and their sum,
     // the largest, then the first symbol that has it.
+    // max(1, ·) without a branch: which symbols round to 0 is the data's
+    // choice, and a branch on it mispredicted on most refreshes.
     std::uint32_t sum = 0;
     for (unsigned s = 0; s < A; ++s) {
       const auto scaled = static_cast<std::uint32_t>((count[s] * scale) >> 32);
-      freq[s] = scaled == 0 ? 1 : scaled;
+      freq[s] = scaled + static_cast<std::uint32_t>(scaled == 0);
       sum += freq[s];
     }
     std::uint32_t largest_freq = 0;
@@ -66,8 +68,10 @@ struct Model {
     unsigned largest = 0;
     while (freq[largest] != largest_freq) ++largest;
     freq[largest] = largest_freq + (1u << kPrecision) - sum;
-    start[0] = 0;
-    for (unsigned s = 0; s < A; ++s) start[s + 1] = start[s] + freq[s];
+    // The running sum in a register, not read back from start[].
+    std::uint32_t run = 0;
+    for (unsigned s = 0; s < A; ++s) start[s] = run, run += freq[s];
+    start[A] = run;
   }
 
   bool note(unsigned s) {
@@ -85,21 +89,41 @@ struct Model {
     while (start[s + 1] <= slot) ++s;
     return s;
   }
+  // The same for a small alphabet, from symbol 0: how many starts after the
+  // first lie at or below the slot (start[A] = 2^16 never does), counted in
+  // one loop the compiler vectorises, where the search's exit mispredicted.
+  unsigned symbol_counted(std::uint32_t slot) const {
+    unsigned s = 0;
+    for (unsigned k = 1; k <= A; ++k) s += static_cast<unsigned>(start[k] <= slot);
+    return s;
+  }
 };
 
 using ByteModel = Model<256>;
 using NibbleModel = Model<16>;
 
-// The decoder's byte model: the same, and for every 64th slot the symbol
+// The decoder's byte model: the same, and for every 256th slot the symbol
 // whose range holds it, from which a short search finds a slot's symbol.
 struct ByteDecoderModel : ByteModel {
-  std::array<std::uint8_t, ((1u << kPrecision) >> kLookupShift)> lookup;
+  static constexpr unsigned kBucket = 1u << kLookupShift;
+  static constexpr unsigned kBuckets = (1u << kPrecision) >> kLookupShift;
+  std::array<std::uint8_t, kBuckets> lookup;
   ByteDecoderModel() { fill(); }
+  // lookup[j] is the largest symbol s with start[s] ≤ j·256, that is with
+  // ceil(start[s] / 256) ≤ j: each symbol is written where its start rounds
+  // up to (the largest wins, written last), then a running maximum carries
+  // it over the buckets no start falls in. No branch depends on the table,
+  // where a search per bucket mispredicted at every symbol (it took a
+  // quarter of the decoder's time: tables are made again every 128 symbols
+  // of a context, more often at its start).
   void fill() {
-    unsigned s = 0;
-    for (unsigned j = 0; j < lookup.size(); ++j) {
-      s = symbol_at(j << kLookupShift, s);
-      lookup[j] = static_cast<std::uint8_t>(s);
+    std::array<std::int16_t, kBuckets + 1> last;
+    last.fill(-1);
+    for (unsigned s = 0; s < 256; ++s) last[(start[s] + kBucket - 1) >> kLookupShift] = static_cast<std::int16_t>(s);
+    std::int16_t symbol = 0;
+    for (unsigned j = 0; j < kBuckets; ++j) {
+      symbol = std::max(symbol, last[j]);
+      lookup[j] = static_cast<std::uint8_t>(symbol);
     }
   }
 };
@@ -375,34 +399,50 @@ void decode_top_byte(const std::uint8_t* payload, std::size_t size, const BrickD
   nibble_models.reset(mode ? kNibbleContexts : 0);
   thread_local std::vector<std::uint8_t> top;
   top.resize(n);
-  // One symbol of `m` from the state, the state renormalised.
-  auto decode = [&](auto& m, unsigned from) {
-    const std::uint32_t slot = x & ((1u << kPrecision) - 1);
-    const unsigned s = m.symbol_at(slot, from);
-    x = m.freq[s] * (x >> kPrecision) + slot - m.start[s];
-    while (x < kStateLow) {
-      if (in == end) bad("the rANS stream ends before the brick's last voxel");
-      x = x << 8 | *in++;
-    }
-    return s;
-  };
   walk_rows(dims, top.data(), [&](std::size_t row, const std::uint16_t* parts) {
+    // The state and the stream's position as locals, which the loop keeps in
+    // registers (as captured variables they went through memory, each
+    // symbol's load waiting on the last one's store).
+    std::uint32_t state = x;
+    const std::uint8_t* at = in;
+    // Symbol s of `m` taken from the state, the state renormalised: at most two
+    // bytes (a step leaves the state at 2^7 or more), their number from two
+    // compares rather than a loop whose exit the data decides.
+    auto decode = [&](auto& m, const unsigned s) {
+      const std::uint32_t slot = state & ((1u << kPrecision) - 1);
+      state = m.freq[s] * (state >> kPrecision) + slot - m.start[s];
+      if (__builtin_expect(end - at >= 2, 1)) {
+        const unsigned k = static_cast<unsigned>(state < kStateLow) + static_cast<unsigned>(state < (kStateLow >> 8));
+        const std::uint32_t next = std::uint32_t{at[0]} << 8 | at[1];
+        state = state << (8 * k) | next >> (16 - 8 * k);
+        at += k;
+      } else {
+        while (state < kStateLow) {
+          if (at == end) bad("the rANS stream ends before the brick's last voxel");
+          state = state << 8 | *at++;
+        }
+      }
+      return s;
+    };
     unsigned before = 0;
     for (std::uint32_t i = 0; i < dims[0]; ++i) {
       ByteDecoderModel& m = models[contexts.of(parts[i], before)];
-      const unsigned s = decode(m, m.lookup[(x & ((1u << kPrecision) - 1)) >> kLookupShift]);
+      const std::uint32_t slot = state & ((1u << kPrecision) - 1);
+      const unsigned s = decode(m, m.symbol_at(slot, m.lookup[slot >> kLookupShift]));
       if (m.note(s)) m.fill();
       top[row + i] = static_cast<std::uint8_t>(s);
       std::uint8_t* value = out + (row + i) * width;
       if (mode) {
         NibbleModel& h = nibble_models[s];
-        const unsigned u = decode(h, 0);
+        const unsigned u = decode(h, h.symbol_counted(state & ((1u << kPrecision) - 1)));
         h.note(u);
         value[width - 2] = static_cast<std::uint8_t>(u << 4 | ((nibbles[(row + i) / 2] >> (4 * ((row + i) % 2))) & 15));
       }
       value[width - 1] = static_cast<std::uint8_t>(s);
       before = s;
     }
+    x = state;
+    in = at;
   });
   if (in != end) bad(std::to_string(end - in) + " bytes of the rANS stream are left after the brick's last voxel");
   if (x != kStateLow) bad("the rANS state does not end at 2^23");
