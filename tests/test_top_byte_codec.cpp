@@ -230,6 +230,44 @@ TEST(TopByteCodec, EveryChangedByteAndEveryCutIsDecodedOrRefused) {
 // coding is asked for, for its decoding speed), a noisy float32 one from
 // level 13 (below, its bricks stay zstd's, which decode several times
 // faster); every bit comes back, and check_file reads every block.
+// A part whose values fall off into the air over many octaves (as the blur
+// and scatter of a noise-free reconstruction leave them), with noise of
+// 10^-5: the top bytes (sign and exponent) change smoothly across the brick.
+Bytes smooth_float32(const BrickDims& d, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> noise(0.0f, 1e-5f);
+  Bytes out(4 * count_of(d));
+  std::size_t i = 0;
+  for (std::uint32_t z = 0; z < d[2]; ++z)
+    for (std::uint32_t y = 0; y < d[1]; ++y)
+      for (std::uint32_t x = 0; x < d[0]; ++x, ++i) {
+        const double r = std::hypot(x - 0.3 * d[0], y - 0.5 * d[1], z - 0.6 * d[2]);
+        const float f = (r < 6 ? 0.05f : 0.05f * static_cast<float>(std::exp(-(r - 6) / 8))) + noise(rng);
+        std::memcpy(&out[4 * i], &f, 4);
+      }
+  return out;
+}
+
+// The classes' step is the caller's when asked, as the header's S, and any
+// step decodes. Where the top bytes change smoothly, the finer classes of
+// steps 1 and 2 are smaller than the encoder's own choice (at least 4, made
+// for noise): that is why the bricked writer tries them on float32 bricks.
+TEST(TopByteCodec, TheClassesStepIsTheCallersWhenAsked) {
+  const BrickDims d{32, 32, 32};
+  const Bytes values = smooth_float32(d, 31);
+  const Bytes chosen = encode_top_byte(values.data(), d, 4, SIZE_MAX);
+  ASSERT_FALSE(chosen.empty());
+  EXPECT_GE(chosen[1], 4) << "the encoder's own step is at least 4";
+  for (const unsigned step : {1u, 2u, 7u, 255u, 1000u}) {
+    const Bytes payload = encode_top_byte(values.data(), d, 4, SIZE_MAX, step);
+    ASSERT_FALSE(payload.empty()) << "step " << step;
+    EXPECT_EQ(payload[1], std::min(step, 255u));
+    EXPECT_EQ(decode(payload, d, 4), values) << "step " << step;
+  }
+  EXPECT_LT(encode_top_byte(values.data(), d, 4, SIZE_MAX, 1).size(), chosen.size());
+  EXPECT_LT(encode_top_byte(values.data(), d, 4, SIZE_MAX, 2).size(), chosen.size());
+}
+
 TEST(TopByteCodec, TheBrickedWriterChoosesItForNoiseAndEveryBitComesBack) {
   const Dims d{64, 64, 40};
   using Entropy = PredictedOptions::Entropy;

@@ -258,7 +258,7 @@ std::uint64_t top_byte_payload_bound(std::uint64_t count, unsigned width) {
 }
 
 std::vector<std::uint8_t> encode_top_byte(const std::uint8_t* values, const BrickDims& dims, unsigned width,
-                                          std::size_t limit) {
+                                          std::size_t limit, unsigned step_asked) {
   const std::size_t n = std::size_t{dims[0]} * dims[1] * dims[2];
   // Mode 1 (the second byte's high nibble coded too) for 4-byte values only:
   // float32's second byte holds the exponent's last bit and the fraction's
@@ -272,7 +272,8 @@ std::vector<std::uint8_t> encode_top_byte(const std::uint8_t* values, const Bric
   if (kTopByteHeaderSize + 4 + lower >= limit) return {};
   std::vector<std::uint8_t> top(n);
   for (std::size_t i = 0; i < n; ++i) top[i] = values[i * width + width - 1];
-  const auto [centre, step] = choose_classes(top.data(), n);
+  const auto [centre, step_chosen] = choose_classes(top.data(), n);
+  const unsigned step = step_asked ? std::min(step_asked, 255u) : step_chosen;
   const Contexts contexts(centre, step);
   thread_local Models<ByteModel> models;
   models.reset(kContexts);

@@ -30,9 +30,12 @@ constexpr std::size_t kTopByteHeaderSize = 8;
 // raster order (x fastest), as a codec 6 payload. Returns an empty vector
 // when the payload would not be smaller than `limit` bytes, or would pass
 // the spec's limit (top_byte_payload_bound): the caller then keeps another
-// codec.
+// codec. `step` sets the width of the contexts' magnitude classes (the
+// header's S, at least 1); 0 leaves it to the encoder, which takes two
+// thirds of the top bytes' spread and at least 4 (best for noisy bricks;
+// noise-free float32 bricks of 64³ do better with 1 or 2).
 std::vector<std::uint8_t> encode_top_byte(const std::uint8_t* values, const BrickDims& dims, unsigned width,
-                                          std::size_t limit);
+                                          std::size_t limit, unsigned step = 0);
 
 // Decodes a codec 6 payload of a brick of `dims` and `width` into `out`
 // (dims' product times width bytes, little-endian values). Throws
