@@ -262,6 +262,63 @@ std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const Br
   return out;
 }
 
+namespace {
+
+// Decodes the brick's values from their residuals z[]. An interior row's
+// voxels wait on one another (decode_row), so its rows are decoded two at a
+// time where they can be, their chains interleaved: row (y, z) with row
+// (y − 1, z + 1), whose neighbours (rows (y − 2, z + 1), (y − 1, z) and
+// (y − 2, z)) are decoded before, and which is not one of row (y, z)'s. So
+// layers z and z + 1 are walked together, the second a row behind. Every
+// voxel is predicted from the same neighbours as in raster order: the
+// values are the same.
+template <class Acc>
+void decode_rows(const RowPredictor& p, const BrickDims& d, const std::uint16_t* z, std::uint16_t* out) {
+  const std::uint32_t nx = d[0], ny = d[1], nz = d[2];
+  const std::ptrdiff_t sy = nx, sz = std::ptrdiff_t{nx} * ny;
+  std::vector<Acc> partial(2 * std::size_t{nx});
+  std::vector<std::uint16_t> delta(2 * std::size_t{nx});
+  auto at = [&](std::uint32_t y, std::uint32_t zz) { return (std::size_t{zz} * ny + y) * nx; };
+  // The voxels x < count of a row that the faces' predictor takes.
+  auto face = [&](std::uint32_t y, std::uint32_t zz, std::uint32_t count) {
+    const std::size_t i = at(y, zz);
+    for (std::uint32_t x = 0; x < count; ++x)
+      out[i + x] = detail::unzigzag16(z[i + x], face_prediction(out, i + x, x > 0, y > 0, zz > 0, sy, sz));
+  };
+  auto interior = [&](std::uint32_t y, std::uint32_t zz) { return y > 0 && zz > 0 && nx > 1; };
+  auto neighbours = [&](std::uint16_t* c) { return RowNeighbours{c - sy, c - sz, c - sy - sz}; };
+  auto row = [&](std::uint32_t y, std::uint32_t zz) {
+    if (!interior(y, zz)) return face(y, zz, nx);
+    face(y, zz, 1);
+    std::uint16_t* c = out + at(y, zz);
+    const RowNeighbours n = neighbours(c);
+    detail::decode_row<Acc>(p, c, n, detail::first_x(out, n), nx, z + at(y, zz), partial.data(), delta.data());
+  };
+  for (std::uint32_t y = 0; y < ny; ++y) row(y, 0);
+  for (std::uint32_t zz = 1; zz < nz; zz += 2) {
+    if (zz + 1 == nz) {
+      for (std::uint32_t y = 0; y < ny; ++y) row(y, zz);
+      break;
+    }
+    for (std::uint32_t y = 0; y <= ny; ++y) {
+      if (y < ny && y >= 1 && interior(y, zz) && interior(y - 1, zz + 1)) {
+        face(y, zz, 1);
+        face(y - 1, zz + 1, 1);
+        std::uint16_t* c = out + at(y, zz);
+        std::uint16_t* c2 = out + at(y - 1, zz + 1);
+        const RowNeighbours n = neighbours(c), n2 = neighbours(c2);
+        detail::decode_row_pair<Acc>(p, c, n, detail::first_x(out, n), z + at(y, zz), c2, n2, detail::first_x(out, n2),
+                                     z + at(y - 1, zz + 1), nx, partial.data(), delta.data());
+        continue;
+      }
+      if (y < ny) row(y, zz);
+      if (y >= 1) row(y - 1, zz + 1);
+    }
+  }
+}
+
+}  // namespace
+
 void decode_predicted(const std::uint8_t* payload, std::size_t size, const BrickDims& dims, std::uint16_t* out) {
   auto bad = [](ErrorClass c, const std::string& what) { throw Error(c, "codec 3: " + what); };
   const std::size_t n = std::size_t{dims[0]} * dims[1] * dims[2];
@@ -291,27 +348,10 @@ void decode_predicted(const std::uint8_t* payload, std::size_t size, const Brick
   else
     decode_zstd_planes(payload + kPredictedHeaderSize, size - kPredictedHeaderSize, n, residuals.data());
   const RowPredictor p(taps);
-  const std::uint16_t* z = residuals.data();
-  const std::ptrdiff_t sy = dims[0], sz = std::ptrdiff_t{dims[0]} * dims[1];
-  // The row's sums of the neighbours in earlier rows (decode_row).
-  std::vector<std::int32_t> partial32(p.decode_narrow ? dims[0] : 0);
-  std::vector<std::int64_t> partial64(p.decode_narrow ? 0 : dims[0]);
-  std::vector<std::uint16_t> delta(dims[0]);
-  walk_rows(
-      dims, out,
-      [&](std::size_t i, std::uint32_t y, std::uint32_t z_, std::uint32_t count) {
-        for (std::uint32_t x = 0; x < count; ++x)
-          out[i + x] = detail::unzigzag16(z[i + x], face_prediction(out, i + x, x > 0, y > 0, z_ > 0, sy, sz));
-      },
-      [&](std::uint16_t* c, const RowNeighbours& neighbours) {
-        const std::size_t i = static_cast<std::size_t>(c - out);
-        if (p.decode_narrow)
-          detail::decode_row<std::int32_t>(p, c, neighbours, detail::first_x(out, neighbours), dims[0], z + i,
-                                           partial32.data(), delta.data());
-        else
-          detail::decode_row<std::int64_t>(p, c, neighbours, detail::first_x(out, neighbours), dims[0], z + i,
-                                           partial64.data(), delta.data());
-      });
+  if (p.decode_narrow)
+    decode_rows<std::int32_t>(p, dims, residuals.data(), out);
+  else
+    decode_rows<std::int64_t>(p, dims, residuals.data(), out);
   if (payload[1] == kMapBinary16Order)
     for (std::size_t i = 0; i < n; ++i) out[i] = unmap_binary16(out[i]);
 }

@@ -122,33 +122,69 @@ std::int64_t level_row(const RowPredictor& p, const std::uint16_t* c, const RowN
   return sum;
 }
 
-// Decodes c[1 .. len) of an interior row from its residuals z[]. What
-// does not depend on the voxel before along x is summed for the whole row
-// first (vectorised): the six neighbours in earlier rows, the rounding, the
-// level times 2^s (floor(a / 2^s) + L = floor((a + L·2^s) / 2^s)) and t_0's
-// share of centring, so that the chain from one voxel to the next is a
-// multiply, an add, a shift and the residual's add. The clamp is a branch
-// that is almost never taken, off that chain. Acc must hold those sums:
+// Decoding an interior row from its residuals z[]: what does not depend on
+// the voxel before along x is summed for the whole row first (vectorised):
+// the six neighbours in earlier rows, the rounding, the level times 2^s
+// (floor(a / 2^s) + L = floor((a + L·2^s) / 2^s)) and t_0's share of
+// centring, so that the chain from one voxel to the next is a multiply, an
+// add, a shift and the residual's add. The clamp is a branch that is almost
+// never taken, off that chain. Acc must hold those sums:
 // RowPredictor::decode_narrow says when 32 bits do.
+//
+// The sums of voxels first .. len (first_x(); partial[0] and delta[0]
+// unused) and their residuals' differences.
 template <class Acc>
-void decode_row(const RowPredictor& p, std::uint16_t* c, const RowNeighbours& n, std::uint32_t first, std::uint32_t len,
-                const std::uint16_t* z, Acc* partial, std::uint16_t* delta) {
+void row_partials(const RowPredictor& p, const RowNeighbours& n, std::uint32_t first, std::uint32_t len,
+                  const std::uint16_t* z, Acc* partial, std::uint16_t* delta) {
   const Acc t0 = p.t[0], t1 = p.t[1], t2 = p.t[2], t3 = p.t[3], t4 = p.t[4], t5 = p.t[5], t6 = p.t[6];
-  const unsigned shift = p.shift;
-  const Acc constant = p.round + static_cast<Acc>(p.level * (std::int64_t{1} << shift)) - 32768 * t0;
+  const Acc constant = p.round + static_cast<Acc>(p.level * (std::int64_t{1} << p.shift)) - 32768 * t0;
   const std::uint16_t *up = n.up, *back = n.back, *ub = n.up_back;
-  // From first_x() (partial[0] and delta[0] unused).
   for (std::ptrdiff_t x = first; x < static_cast<std::ptrdiff_t>(len); ++x) {
     partial[x] = t1 * centred<Acc>(up[x]) + t2 * centred<Acc>(back[x]) + t3 * centred<Acc>(up[x - 1]) +
                  t4 * centred<Acc>(back[x - 1]) + t5 * centred<Acc>(ub[x]) + t6 * centred<Acc>(ub[x - 1]) + constant;
     delta[x] = unzigzag16(z[x], 0);
   }
+}
+
+// One voxel of that chain: the prediction from the row's sum and the voxel
+// before, clamped, plus the residual.
+template <class Acc>
+inline Acc next_in_row(Acc partial, Acc previous, Acc t0, unsigned shift, std::uint16_t delta) {
+  Acc q = (partial + t0 * previous) >> shift;
+  if (__builtin_expect(q < 0 || q > 65535, 0)) q = q < 0 ? 0 : 65535;
+  return static_cast<std::uint16_t>(q + delta);
+}
+
+// Decodes c[1 .. len) of an interior row (c[0], a face voxel, known).
+// `partial` and `delta` hold len values of scratch.
+template <class Acc>
+void decode_row(const RowPredictor& p, std::uint16_t* c, const RowNeighbours& n, std::uint32_t first, std::uint32_t len,
+                const std::uint16_t* z, Acc* partial, std::uint16_t* delta) {
+  row_partials<Acc>(p, n, first, len, z, partial, delta);
+  const Acc t0 = p.t[0];
   Acc previous = c[0];
+  for (std::uint32_t x = 1; x < len; ++x)
+    c[x] = static_cast<std::uint16_t>(previous = next_in_row<Acc>(partial[x], previous, t0, p.shift, delta[x]));
+}
+
+// The same for two rows that do not depend on each other, their chains
+// interleaved: a row's voxels wait on one another (a multiply, an add and a
+// shift each), two rows' chains share the core's units. `partial` and
+// `delta` hold 2·len values of scratch.
+template <class Acc>
+void decode_row_pair(const RowPredictor& p, std::uint16_t* c, const RowNeighbours& n, std::uint32_t first,
+                     const std::uint16_t* z, std::uint16_t* c2, const RowNeighbours& n2, std::uint32_t first2,
+                     const std::uint16_t* z2, std::uint32_t len, Acc* partial, std::uint16_t* delta) {
+  Acc* const partial2 = partial + len;
+  std::uint16_t* const delta2 = delta + len;
+  row_partials<Acc>(p, n, first, len, z, partial, delta);
+  row_partials<Acc>(p, n2, first2, len, z2, partial2, delta2);
+  const Acc t0 = p.t[0];
+  const unsigned shift = p.shift;
+  Acc previous = c[0], previous2 = c2[0];
   for (std::uint32_t x = 1; x < len; ++x) {
-    Acc q = (partial[x] + t0 * previous) >> shift;
-    if (__builtin_expect(q < 0 || q > 65535, 0)) q = q < 0 ? 0 : 65535;
-    previous = static_cast<std::uint16_t>(q + delta[x]);
-    c[x] = static_cast<std::uint16_t>(previous);
+    c[x] = static_cast<std::uint16_t>(previous = next_in_row<Acc>(partial[x], previous, t0, shift, delta[x]));
+    c2[x] = static_cast<std::uint16_t>(previous2 = next_in_row<Acc>(partial2[x], previous2, t0, shift, delta2[x]));
   }
 }
 
