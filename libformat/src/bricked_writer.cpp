@@ -95,7 +95,7 @@ struct BrickedGridWriter::Impl {
     if constexpr (sizeof(T) == 4) {
       block = encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 4, brick.data(), w);
       // float32 bricks of codec 6 are 1-2 % smaller than codec 2's but
-      // decode at about 120 MB/s a core against zstd's 1 GB/s and more: a
+      // decode at about 150 MB/s a core against zstd's 1 GB/s and more: a
       // trade for those who ask for the smallest files (the levels from
       // which planes are a frame each), not the default's (bench/RESULTS.md,
       // "Codec 6").

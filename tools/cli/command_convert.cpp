@@ -166,7 +166,7 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
           "Bricked grid: how a predicted brick's residuals are coded (codec 3). auto: rANS over tokens with "
           "contexts (spec 7.2.1), zstd over byte planes where a brick is nearly flat or small and that is smaller "
           "(1-6 % smaller files, whose "
-          "predicted bricks decode at about 200 MB/s a core, and codec 6 where noise dominates, at about 130); "
+          "predicted bricks decode at about 220 MB/s a core, and codec 6 where noise dominates, at about 120); "
           "zstd: byte planes only (about 500 MB/s), no codec 6")
       ->check(CLI::IsMember({"auto", "zstd"}))
       ->capture_default_str();
