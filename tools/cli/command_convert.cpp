@@ -178,7 +178,9 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
   into->add_option("--structure", s->structure,
                    "auto: a bricked regular grid for every voxel kept (16-bit values: bricks predicted in 3-D, "
                    "codec 3; float32: bricks of byte planes, codec 2; either: the top byte in context, codec 6, where "
-                   "noise dominates), else an octree; octree or bricked to choose")
+                   "noise dominates), else an octree; octree or bricked to choose (with --keep, bricked stores one "
+                   "background value outside the kept region, the mean of the values below the threshold, where an "
+                   "octree keeps an average a coarse leaf: a smaller file)")
       ->check(CLI::IsMember({"auto", "octree", "bricked"}))
       ->capture_default_str();
   CLI::Option* brick_option =
@@ -255,8 +257,6 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       // Options that cannot hold together are a bad command line (exit 1),
       // refused before any work.
       if (s->structure == "bricked") {
-        if (!s->keep.empty())
-          throw UsageError("--structure", "bricked: a keep rule (--keep) coarsens regions, which only an octree holds");
         if (s->codec == "zstd")
           throw UsageError("--structure", "bricked: --codec zstd (codec 1 only, for format 1.0/1.1 readers)");
         if (s->format_version == "1.2")

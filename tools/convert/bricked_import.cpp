@@ -6,6 +6,7 @@
 #include <cstring>
 #include <thread>
 
+#include "bricked_keep.hpp"
 #include "ivol/binary16.hpp"
 #include "ivol/error.hpp"
 #include "ivol/geometry.hpp"
@@ -125,7 +126,12 @@ unsigned encoder_threads(const DenseVolume& shape, const ImportOptions& options,
 bool choose_bricked(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding,
                     ImportReport& report) {
   std::string against;
-  if (options.keep) against = "a keep rule coarsens regions, which only an octree holds";
+  // Under a keep rule an octree keeps an average a coarse leaf; a bricked
+  // grid, when asked for, one background value outside (bricked_keep.hpp).
+  if (options.keep && options.structure != StructureChoice::Bricked)
+    against =
+        "a keep rule coarsens regions, which only an octree holds as averages (--structure bricked stores "
+        "one background value there instead)";
   if (!options.byte_planes) against = "--codec zstd (codec 1 only, for format 1.0/1.1 readers)";
   if (!options.framed_blocks) against = "format 1.2 (a bricked grid needs format 1.3)";
   if (options.structure == StructureChoice::Bricked) {
@@ -229,12 +235,28 @@ BrickedImport::BrickedImport(const DenseVolume& shape, const std::string& path, 
   writer_.write_early_metadata(early);
 }
 
-void BrickedImport::finish(const LossTally& loss, ImportReport& report) {
+void BrickedImport::finish(const LossTally& loss, ImportReport& report, const BrickedKeepOutcome* keep) {
   report.encoding_loss = loss;
   refuse_encoding_loss(loss, shape_, options_, path_, encoding_);
   Metadata metadata = import_metadata(shape_, options_);
   report.lossless = loss.exact();
   report.max_abs_error = loss.max_error;
+  if (keep) {
+    report.threshold = keep->threshold;
+    report.lossless = report.lossless && keep->max_abs_error == 0.0 && keep->nans_replaced == 0;
+    report.max_abs_error = std::max(report.max_abs_error, keep->max_abs_error);
+    nlohmann::json rule = {{"rule", "threshold"},
+                           {"threshold", keep->threshold},
+                           {"margin", options_.keep->margin},
+                           {"outside", "background"},
+                           {"background", keep->background},
+                           {"background_rule", "the mean of the values below the threshold"},
+                           {"kept_voxels", keep->kept},
+                           {"background_voxels", keep->replaced}};
+    if (options_.keep->otsu) rule["threshold_method"] = "otsu";
+    if (keep->nans_replaced) rule["background_nans"] = keep->nans_replaced;
+    metadata.structure["keep"] = std::move(rule);
+  }
   metadata.structure["kind"] = "bricked";
   metadata.structure["brick"] = 1u << options_.brick_log2;
   metadata.structure["chosen_because"] = report.structure_reason;
@@ -243,7 +265,7 @@ void BrickedImport::finish(const LossTally& loss, ImportReport& report) {
   metadata.structure["max_abs_error"] = report.max_abs_error;
   inherit_structure(metadata, options_.input_structure);
   report.file_bytes = writer_.finish(metadata).file_bytes;
-  report.kept_voxels = shape_.voxel_count();
+  report.kept_voxels = keep ? keep->kept : shape_.voxel_count();
 }
 
 }  // namespace ivol::convert

@@ -16,6 +16,8 @@
 
 namespace ivol::convert {
 
+struct BrickedKeepOutcome;  // bricked_keep.hpp
+
 // What a layer of bricks of `shape` holds when its samples are read `slices`
 // slices at a time (a part of a layer, or whole layers): the layers' 16-bit
 // values, one layer's encoded bricks (counted at their worst, as large as
@@ -73,9 +75,10 @@ class BrickedImport {
   void add_layer(const std::uint16_t* stored) { writer_.add_layer(stored); }
   void add_layer(const std::uint32_t* stored) { writer_.add_layer(stored); }
   // After the last layer: refuses `loss` unless options.allow_lossy, then
-  // writes the metadata (geometry, the choice and its reason, the outcome)
-  // and the file; fills report's outcome.
-  void finish(const LossTally& loss, ImportReport& report);
+  // writes the metadata (geometry, the choice and its reason, the outcome,
+  // and what a keep rule did, where one was applied) and the file; fills
+  // report's outcome.
+  void finish(const LossTally& loss, ImportReport& report, const BrickedKeepOutcome* keep = nullptr);
 
  private:
   const DenseVolume& shape_;

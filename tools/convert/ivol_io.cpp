@@ -7,6 +7,7 @@
 #include <functional>
 
 #include "bricked_import.hpp"
+#include "bricked_keep.hpp"
 #include "disk_space.hpp"
 #include "ivol/binary16.hpp"
 #include "ivol/bricked_writer.hpp"
@@ -64,10 +65,6 @@ ValueEncoding lossless_encoding(SampleType type) {
   return ValueEncoding::Float32;
 }
 
-namespace {
-
-// Otsu's threshold of a volume read slab by slab: one pass for the range, one
-// for the histogram.
 float streamed_otsu(SlabReader& source, std::uint32_t slab) {
   const DenseVolume& shape = source.shape();
   const std::uint64_t slice = slice_voxels(shape.dims, "Otsu's threshold");
@@ -97,6 +94,8 @@ float streamed_otsu(SlabReader& source, std::uint32_t slab) {
   }
   return otsu_threshold_from_histogram(histogram, lo, hi);
 }
+
+namespace {
 
 // Integer samples as the uint16 encoding's codes (sample - offset).
 // Bytes per voxel of a slab that the streaming writer holds besides the
@@ -326,6 +325,11 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
   const bool bricked = choose_bricked(shape, options, build.encoding, report);
   if (options.check_disk_space)
     require_disk_space(ivol_disk_needs(shape.dims, build.encoding, !bricked, path, options.temp_directory));
+  if (bricked && options.keep) {
+    import_bricked_keep(source, path, options, streaming, report);
+    report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return report;
+  }
   if (bricked) {
     with_stored_type(build.encoding,
                      [&](auto t) { import_bricked<decltype(t)>(source, path, options, streaming, report); });

@@ -110,6 +110,9 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
 // (recon_built_slabs.hpp), so that both write the same file. The writer's
 // options for a volume of this shape (sets report's encoding, scale, offset).
 StreamingOptions import_streaming_options(const DenseVolume& shape, const ImportOptions& options, ImportReport& report);
+// Otsu's threshold of a volume read `slab` slices at a time: one pass for
+// the range, one for the histogram.
+float streamed_otsu(SlabReader& source, std::uint32_t slab);
 // The keep mask of slices [z0, z0 + count) from float samples of slices
 // [lo, hi) of a volume `dims` (the slab and up to `margin` slices either side,
 // which the mask's growth needs).

@@ -12,8 +12,11 @@ PY
 bad structure-octree-for-memory 0 "note: an octree, because a layer of bricks (14 MiB) exceeds the memory budget (--memory), a slab of the octree writer does not; --memory 14 writes a bricked grid" \
     -- "$IVOL" convert "$work/wide.raw" "$work/wide.ivol" --dims 256,256,32 --type u16 --memory 8 -f
 # Options that cannot hold together are a bad command line: exit 1 (README).
-bad bricked-with-keep 1 "--structure: bricked: a keep rule (--keep) coarsens regions, which only an octree holds" \
-    -- "$IVOL" convert "$work/u16.raw" "$out/x.ivol" --dims 8,8,8 --type u16 --structure bricked --keep threshold=10,margin=1
+# A keep rule into a bricked grid: one background value outside the kept
+# region, no longer refused (tests/test_bricked_keep.cpp checks the voxels).
+# Its output goes outside $out.
+bad bricked-with-keep 0 "(ivol bricked uint16" \
+    -- "$IVOL" convert "$work/u16.raw" "$work/keep-bricked.ivol" --dims 8,8,8 --type u16 --structure bricked --keep threshold=10,margin=1 -f
 # float32 values are a bricked grid of byte-plane bricks (codec 2), no longer
 # refused. Its output goes outside $out.
 bad bricked-float32 0 "(ivol bricked float32" \
