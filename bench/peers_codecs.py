@@ -22,7 +22,7 @@ smallest) and, for "object", ivol's octree that keeps full resolution only
 there (--keep);
 blosc2 (zstd 9 + byte shuffle, 64^3 chunks); HDF5 64^3 chunks with shuffle +
 deflate 9 and with blosc zstd 9 + shuffle (hdf5plugin); the zstd CLI (-3 and
--19, whole file); JPEG-XL, JPEG-LS and JPEG 2000 lossless per z slice
+-19, whole file); xz -9 (whole file); JPEG-XL, JPEG-LS and JPEG 2000 lossless per z slice
 (imagecodecs, on the 16-bit patterns); pcodec; fpzip (lossless, on the
 values as float32). Prints one Markdown table per volume: bytes, against
 ivol, encode seconds (wall, the whole volume) and the round trip checked.
@@ -191,6 +191,19 @@ def read_shares(v, kind, tmp, ivol):
     return ivol_size, h5_size, rows
 
 
+def method_xz(v, kind, tmp):
+    raw = os.path.join(tmp, "v.raw")
+    v.tofile(raw)
+    with Timer() as t:
+        with open(raw + ".xz", "wb") as out:
+            subprocess.run(["xz", "-9", "-T1", "-c", raw], stdout=out, check=True)
+    size = os.path.getsize(raw + ".xz")
+    with open(raw + ".back", "wb") as out:
+        subprocess.run(["xz", "-d", "-c", raw + ".xz"], stdout=out, check=True)
+    same = np.array_equal(np.fromfile(raw + ".back", dtype=np.uint16), bits(v.ravel()))
+    return size, t.seconds, same
+
+
 def method_zstd(v, kind, tmp, level):
     raw = os.path.join(tmp, "v.raw")
     v.tofile(raw)
@@ -262,6 +275,7 @@ def main():
         ("HDF5 64^3, shuffle + deflate 9", lambda v, k, tmp: method_hdf5(v, k, tmp, False)),
         ("zstd -3 -T2 (whole file)", lambda v, k, tmp: method_zstd(v, k, tmp, 3)),
         ("zstd -19 -T2 (whole file)", lambda v, k, tmp: method_zstd(v, k, tmp, 19)),
+        ("xz -9 (whole file, one thread)", method_xz),
         ("JPEG-XL lossless per slice", lambda v, k, tmp: method_slices(v, k, tmp, "jpegxl")),
         ("JPEG-LS lossless per slice", lambda v, k, tmp: method_slices(v, k, tmp, "jpegls")),
         ("JPEG 2000 reversible per slice", lambda v, k, tmp: method_slices(v, k, tmp, "jpeg2k")),
