@@ -123,6 +123,25 @@ TEST(BrickedKeep, KeptVoxelsComeBackAsTheyWereAndTheRestAsTheBackgroundMean) {
   }
 }
 
+// A margin deeper than the volume: the slices read stop at its ends, and the
+// kept region still grows by the whole margin across each slice.
+TEST(BrickedKeep, AMarginDeeperThanTheVolumeStillGrowsAcrossTheSlices) {
+  const Dims d{48, 40, 4};
+  std::vector<float> values(voxel_count(d), 0.0f);
+  values[(std::size_t{2} * d[1] + 20) * d[0] + 24] = 1.0f;  // one voxel of material
+  const DenseVolume source = as_samples(values, d, SampleType::Float32);
+  ImportOptions options;
+  options.keep = KeepRule{false, 0.5f, 6};
+  options.structure = StructureChoice::Bricked;
+  const std::string path = test::temp_path("bricked_keep_deep.ivol");
+  const ImportReport report = import_to_ivol(source, path, options);
+  const std::vector<std::uint8_t> keep = threshold_keep_mask(values.data(), d, 0.5f, 6);
+  std::uint64_t kept = 0;
+  for (const std::uint8_t k : keep) kept += k;
+  EXPECT_EQ(kept, 13u * 13u * 4u);  // 13 x 13 around the voxel, every slice
+  EXPECT_EQ(report.kept_voxels, kept);
+}
+
 // Otsu's threshold is found as for the octree, and the same threshold goes
 // into both files' metadata.
 TEST(BrickedKeep, OtsusThresholdIsTheOctreesToo) {

@@ -83,6 +83,8 @@ void import_bricked_keep(SlabReader& source, const std::string& path, const Impo
   build.value_offset = code_offset;  // what samples_to_stored subtracts
   BrickedImport writer(shape, path, options, streaming);
   const std::uint32_t layer = writer.layer_slices();
+  // Slices read either side of a layer: the margin, no more than the volume
+  // (the mask itself grows by the whole margin in x and y).
   const std::uint32_t margin = std::min<std::uint32_t>(rule.margin, shape.dims[2]);
   const std::string what = path + ": a layer of " + std::to_string(layer) + " slices of " +
                            std::to_string(shape.dims[0]) + "x" + std::to_string(shape.dims[1]) + " " +
@@ -130,7 +132,7 @@ void import_bricked_keep(SlabReader& source, const std::string& path, const Impo
       samples_to_stored(shape, build, samples.data() + centre * sample_size(shape.type), count, scratch, stored.data(),
                         loss);
       const std::vector<std::uint8_t> keep =
-          slab_keep_mask(value_data, shape.dims, lo, hi, z0, n, outcome.threshold, margin);
+          slab_keep_mask(value_data, shape.dims, lo, hi, z0, n, outcome.threshold, rule.margin);
       for (std::uint64_t i = 0; i < count; ++i) {
         if (keep[i]) {
           ++outcome.kept;
