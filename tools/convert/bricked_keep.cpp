@@ -16,22 +16,12 @@ namespace {
 // The mean of the values below `threshold` (NaN aside), read `slab` slices
 // at a time, summed in binary64; the threshold where none lies below.
 double streamed_mean_below(SlabReader& source, std::uint32_t slab, float threshold) {
-  const DenseVolume& shape = source.shape();
-  const std::uint64_t slice = slice_voxels(shape.dims, "the background's mean");
-  const std::uint64_t held = std::uint64_t{std::min(slab, shape.dims[2])} * slice;
-  std::vector<std::uint8_t> samples;
-  checked_resize(samples, held * sample_size(shape.type), "the background's mean: a slab of samples");
-  std::vector<float> values;
-  checked_resize(values, held, "the background's mean: a slab as float32");
   double sum = 0.0;
   std::uint64_t count = 0;
-  for (std::uint32_t z = 0; z < shape.dims[2]; z += slab) {
-    const std::uint32_t n = std::min(slab, shape.dims[2] - z);
-    source.read(z, n, samples.data());
-    to_float(shape, samples.data(), n * slice, values.data());
-    for (std::uint64_t i = 0; i < n * slice; ++i)
+  for_each_float_slab(source, slab, "the background's mean", [&](const float* values, std::uint64_t n) {
+    for (std::uint64_t i = 0; i < n; ++i)
       if (values[i] < threshold) sum += values[i], ++count;  // false for NaN
-  }
+  });
   return count ? sum / static_cast<double>(count) : threshold;
 }
 

@@ -65,33 +65,37 @@ ValueEncoding lossless_encoding(SampleType type) {
   return ValueEncoding::Float32;
 }
 
-float streamed_otsu(SlabReader& source, std::uint32_t slab) {
+void for_each_float_slab(SlabReader& source, std::uint32_t slab, const std::string& what,
+                         const std::function<void(const float*, std::uint64_t)>& visit) {
   const DenseVolume& shape = source.shape();
-  const std::uint64_t slice = slice_voxels(shape.dims, "Otsu's threshold");
+  const std::uint64_t slice = slice_voxels(shape.dims, what);
   const std::uint64_t held = std::uint64_t{std::min(slab, shape.dims[2])} * slice;
   std::vector<std::uint8_t> samples;
-  checked_resize(samples, held * sample_size(shape.type), "Otsu's threshold: a slab of samples");
+  checked_resize(samples, held * sample_size(shape.type), what + ": a slab of samples");
   std::vector<float> values;
-  checked_resize(values, held, "Otsu's threshold: a slab as float32");
-  double lo = INFINITY, hi = -INFINITY;
-  std::vector<double> histogram(256, 0.0);
-  for (int pass = 0; pass < 2; ++pass) {
-    const double scale = pass ? histogram.size() / (hi - lo) : 0.0;
-    if (pass && !(hi > lo)) return static_cast<float>(lo);
-    for (std::uint32_t z = 0; z < shape.dims[2]; z += slab) {
-      const std::uint32_t n = std::min(slab, shape.dims[2] - z);
-      source.read(z, n, samples.data());
-      to_float(shape, samples.data(), n * slice, values.data());
-      for (std::uint64_t i = 0; i < n * slice; ++i) {
-        const float v = values[i];
-        if (std::isnan(v)) continue;
-        if (!pass)
-          lo = std::min<double>(lo, v), hi = std::max<double>(hi, v);
-        else
-          histogram[std::min<std::size_t>(histogram.size() - 1, static_cast<std::size_t>((v - lo) * scale))] += 1;
-      }
-    }
+  checked_resize(values, held, what + ": a slab as float32");
+  for (std::uint32_t z = 0; z < shape.dims[2]; z += slab) {
+    const std::uint32_t n = std::min(slab, shape.dims[2] - z);
+    source.read(z, n, samples.data());
+    to_float(shape, samples.data(), n * slice, values.data());
+    visit(values.data(), n * slice);
   }
+}
+
+float streamed_otsu(SlabReader& source, std::uint32_t slab) {
+  double lo = INFINITY, hi = -INFINITY;
+  for_each_float_slab(source, slab, "Otsu's threshold", [&](const float* values, std::uint64_t count) {
+    for (std::uint64_t i = 0; i < count; ++i)
+      if (!std::isnan(values[i])) lo = std::min<double>(lo, values[i]), hi = std::max<double>(hi, values[i]);
+  });
+  if (!(hi > lo)) return static_cast<float>(lo);
+  std::vector<double> histogram(256, 0.0);
+  const double scale = histogram.size() / (hi - lo);
+  for_each_float_slab(source, slab, "Otsu's threshold", [&](const float* values, std::uint64_t count) {
+    for (std::uint64_t i = 0; i < count; ++i)
+      if (!std::isnan(values[i]))
+        histogram[std::min<std::size_t>(histogram.size() - 1, static_cast<std::size_t>((values[i] - lo) * scale))] += 1;
+  });
   return otsu_threshold_from_histogram(histogram, lo, hi);
 }
 

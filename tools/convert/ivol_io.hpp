@@ -110,6 +110,10 @@ ImportReport import_to_ivol(SlabReader& source, const std::string& path, const I
 // (recon_built_slabs.hpp), so that both write the same file. The writer's
 // options for a volume of this shape (sets report's encoding, scale, offset).
 StreamingOptions import_streaming_options(const DenseVolume& shape, const ImportOptions& options, ImportReport& report);
+// Reads `source` `slab` slices at a time as float32 values, calling
+// visit(values, count) for each slab; `what` names the reads in errors.
+void for_each_float_slab(SlabReader& source, std::uint32_t slab, const std::string& what,
+                         const std::function<void(const float*, std::uint64_t)>& visit);
 // Otsu's threshold of a volume read `slab` slices at a time: one pass for
 // the range, one for the histogram.
 float streamed_otsu(SlabReader& source, std::uint32_t slab);
