@@ -293,7 +293,11 @@ class Threads(unittest.TestCase):
 
 
     def test_reads_release_the_gil(self):
-        a = np.random.default_rng(11).normal(size=(160, 160, 160)).astype(np.float32)
+        # 256^3 (64 MB): a read of about 0.15 s, so that the GIL held for it
+        # would stop the loop below far longer than the scheduler's time
+        # slices do on a 2-core machine that ctest shares with another test
+        # (160^3 read in 0.04 s, and one 27 ms slice failed the test).
+        a = np.random.default_rng(11).normal(size=(256, 256, 256)).astype(np.float32)
         with tempfile.TemporaryDirectory() as tmp:
             path = os.path.join(tmp, "gil.ivol")
             ivol.write(path, a)
