@@ -29,6 +29,31 @@ std::string salvaged_line(const Metadata& m) {
   return line + " (provenance.salvage)\n";
 }
 
+// A file that does not hold every value of what it was written from says so
+// where it is looked at, not only in its metadata: a keep rule's region
+// and what stands outside it, or the encoding's rounding, and the largest
+// error (structure.max_abs_error). Nothing for a lossless file.
+std::string fidelity_line(const Metadata& m) {
+  const nlohmann::json& s = m.structure;
+  if (!s.is_object() || !s.contains("lossless") || !s["lossless"].is_boolean() || s["lossless"].get<bool>()) return {};
+  std::ostringstream line;
+  line << "  fidelity       not every value kept: ";
+  const auto keep = s.find("keep");
+  if (keep != s.end() && keep->is_object() && keep->contains("threshold") && keep->contains("margin")) {
+    line << "full resolution above " << (*keep)["threshold"].dump()
+         << (keep->value("threshold_method", "") == "otsu" ? " (Otsu's)" : "") << " and within "
+         << (*keep)["margin"].dump() << " voxels of it, ";
+    if (keep->value("outside", "") == "background" && keep->contains("background"))
+      line << "one background value " << (*keep)["background"].dump() << " elsewhere";
+    else
+      line << "coarse leaves' averages elsewhere";
+  } else {
+    line << "the values rounded to the encoding";
+  }
+  if (s.contains("max_abs_error")) line << "; largest error " << s["max_abs_error"].dump();
+  return line.str() + "\n";
+}
+
 // A bricked grid's stored levels of detail (spec §8A.5), a line of `info`.
 std::string stored_levels_line(const nlohmann::json& d) {
   if (d["structure"].get<std::string>() != "bricked") return {};
@@ -132,7 +157,7 @@ Runner add_info_command(CLI::App& app, const GlobalOptions& /*global*/) {
               << d["ratio_vs_float32"].get<double>() << ")\n"
               << in_memory_line(d) << "  blocks         " << d["blocks"] << " (index "
               << human_bytes(d["index_bytes"].get<std::uint64_t>()) << ")\n"
-              << salvaged_line(reader.metadata());
+              << fidelity_line(reader.metadata()) << salvaged_line(reader.metadata());
     if (d["structure"].get<std::string>() == "bricked") {
       print_bricked_levels(d);
       std::cout << "  metadata       " << d["metadata"].dump() << "\n";

@@ -16,7 +16,10 @@ bad structure-octree-for-memory 0 "note: an octree, because a layer of bricks (1
 # region, no longer refused (tests/test_bricked_keep.cpp checks the voxels).
 # Its output goes outside $out.
 bad bricked-with-keep 0 "(ivol bricked uint16" \
-    -- "$IVOL" convert "$work/u16.raw" "$work/keep-bricked.ivol" --dims 8,8,8 --type u16 --structure bricked --keep threshold=10,margin=1 -f
+    -- "$IVOL" convert "$work/u16.raw" "$work/keep-bricked.ivol" --dims 8,8,8 --type u16 --structure bricked --keep threshold=3000,margin=1 -f
+# `info` says what such a file does not hold, not only its metadata.
+bad info-bricked-keep 0 "fidelity       not every value kept: full resolution above 3000.0 and within 1 voxels of it, one background value" \
+    -- "$IVOL" info "$work/keep-bricked.ivol"
 # float32 values are a bricked grid of byte-plane bricks (codec 2), no longer
 # refused. Its output goes outside $out.
 bad bricked-float32 0 "(ivol bricked float32" \
