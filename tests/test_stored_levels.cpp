@@ -135,6 +135,69 @@ TEST(StoredLevels, EveryStoredLevelIsTheSumOfSpec12_3) {
   for (const BlockInfo& b : written.info().blocks) EXPECT_NE(b.stream, 7);
 }
 
+// Binary16 levels of cells of 2^15 voxels and more, whose binary64 sums in
+// §12.3's order can round: the writer adds such a cell as integers while no
+// sum can round and from there on in binary64, in order.
+//
+// A 32³ volume is one such cell, built so that the rounding changes its
+// mean: 8200 voxels of 65504 and one of 256 sum to 16392 · 32768 > 2^29,
+// where the binary64 spacing is 2^-23, so each of the 24567 voxels of 2^-24
+// that follow is a tie that rounds to the even sum, unchanged. The exact
+// mean lies just above 16392, half-way between binary16's 16384 and 16400,
+// and encodes as 16400; the binary64 sum's mean is the tie itself and
+// encodes as the even 16384, which §12.3 asks for.
+TEST(StoredLevels, BinarySixteenLevelsRoundWhereTheSequentialSumRounds) {
+  const Dims d{32, 32, 32};
+  std::vector<std::uint16_t> v(voxel_count(d), 0x0001);  // 2^-24
+  std::fill(v.begin(), v.begin() + 8200, 0x7BFF);        // 65504
+  v[8200] = 0x5C00;                                      // 256
+  const auto want = level_of(v, d, ValueEncoding::Binary16, 5);
+  ASSERT_EQ(want.size(), 1U);
+  ASSERT_EQ(binary16_to_double(want[0]), 16384.0) << "the reference does not round as the test means it to";
+  const std::string path = write("stored_levels_tie.ivol", d, v, ValueEncoding::Binary16, 3);
+  Reader stored(path);
+  for (unsigned lod = 3; lod <= 5; ++lod)
+    EXPECT_EQ(bits_of(stored, full_box(d, lod), lod), level_of(v, d, ValueEncoding::Binary16, lod)) << "level " << lod;
+
+  // Every binary16 code in order along one row: a cell holds 2^k codes of
+  // about one magnitude, so that any code's value counted wrong shows in
+  // its cell's mean (levels 3 and 4 exact, 5 on watched).
+  const Dims row{65536, 1, 1};
+  std::vector<std::uint16_t> codes(65536);
+  for (std::size_t c = 0; c < codes.size(); ++c) codes[c] = static_cast<std::uint16_t>(c);
+  const std::string row_path = write("stored_levels_codes.ivol", row, codes, ValueEncoding::Binary16, 3);
+  Reader row_reader(row_path);
+  for (unsigned lod = 3; lod <= row_reader.layout().depth; ++lod)
+    EXPECT_EQ(bits_of(row_reader, full_box(row, lod), lod), level_of(codes, row, ValueEncoding::Binary16, lod))
+        << "level " << lod;
+
+  // Large values of both signs, cells that round from some row on and
+  // cells that never do, infinities and NaNs, over levels 5 to 7.
+  const Dims wide{70, 40, 66};
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> large(30000.0f, 65504.0f), small(-2.0f, 2.0f);
+  std::vector<std::uint16_t> w(voxel_count(wide));
+  std::size_t i = 0;
+  for (std::uint32_t z = 0; z < wide[2]; ++z)
+    for (std::uint32_t y = 0; y < wide[1]; ++y)
+      for (std::uint32_t x = 0; x < wide[0]; ++x, ++i) {
+        float value = small(rng);
+        if (x < 32 && z >= 12) value = large(rng);
+        if (x >= 64) value = (x & 1 ? 1.0f : -1.0f) * large(rng);
+        if (x >= 32 && x < 64 && y >= 32 && z >= 40) value = -large(rng);
+        w[i] = float_to_binary16(value);
+      }
+  w[(std::size_t{50} * wide[1] + 3) * wide[0] + 5] = 0x7C00;    // +inf
+  w[(std::size_t{60} * wide[1] + 35) * wide[0] + 40] = 0x7E01;  // a NaN with a payload
+  const std::string wide_path = write("stored_levels_rounding.ivol", wide, w, ValueEncoding::Binary16, 3);
+  Reader wide_reader(wide_path);
+  for (unsigned lod = 3; lod <= wide_reader.layout().depth; ++lod)
+    EXPECT_EQ(bits_of(wide_reader, full_box(wide, lod), lod), level_of(w, wide, ValueEncoding::Binary16, lod))
+        << "level " << lod;
+  const CheckReport report = check_file(wide_path);
+  EXPECT_TRUE(report.problems.empty()) << report.problems.front().message;
+}
+
 TEST(StoredLevels, APreviewReadsTheStoredLevelNotTheVolume) {
   const Dims d{96, 96, 96};
   const auto v = noisy_volume(d, ValueEncoding::UInt16, 5);

@@ -9,9 +9,17 @@
 // of 2^-24, infinities and NaNs as flags), the finest of them voxel by
 // voxel and each coarser one from its finished slices. That covers every
 // level of uint16 grids below 2^37 voxels a cell and binary16 levels of
-// cells up to 4096 voxels (k ≤ 4). The others (binary16, k ≥ 5, whose sums
-// of values near 65504 could round) add the voxels one by one in binary64,
-// in order, all such levels in one pass.
+// cells up to 4096 voxels (k ≤ 4).
+//
+// The coarser binary16 levels (k ≥ 5), whose sums of values near 65504
+// could round, are *watched*: a cell adds each row's run of its voxels as
+// an integer, with the run's sum of magnitudes, while the cell's magnitudes
+// stay below 2^53 units (then no partial sum in any order can round); from
+// the run that would reach 2^53 on, it adds its voxels one by one in
+// binary64, in order, from its exact sum so far. Volumes of ordinary values
+// never leave the integers (adding every voxel in binary64 to each of five
+// levels was a tenth of a binary16 conversion's time). float32 levels add
+// every voxel in binary64, in order, all such levels in one pass.
 #pragma once
 
 #include <cstdint>
@@ -49,9 +57,12 @@ class StoredLevels {
     unsigned k = 0;
     Dims dims{};                           // the level's elements along each axis
     bool exact = false;                    // summed as integers (above)
+    bool watched = false;                  // binary16, k ≥ 5: integers while no sum can round (above)
     std::vector<double> sums;              // not exact: the cells of the level slice being summed
-    std::vector<std::int64_t> exact_sums;  // exact: the same, in units (1, or 2^-24 for binary16)
-    std::vector<std::uint8_t> specials;    // exact binary16: +inf 1, -inf 2, NaN 4 met in the cell
+    std::vector<std::int64_t> exact_sums;  // exact or watched: the same, in units (1, or 2^-24 for binary16)
+    std::vector<std::uint8_t> specials;    // binary16: +inf 1, -inf 2, NaN 4 met in the cell
+    std::vector<std::uint64_t> magnitudes;  // watched: Σ |units| of the cell so far
+    std::vector<std::uint8_t> rounding;     // watched: 1 once the cell adds in binary64 (into sums)
     std::vector<std::uint32_t> layer;      // its finished slices of the current brick layer
     std::uint32_t slice = 0;               // the level slice being summed
   };
@@ -69,15 +80,19 @@ class StoredLevels {
   // One full-resolution row into the cells of the levels that are not exact.
   template <class T>
   void sum_row_inexact(const T* row, double* const* cells, const std::vector<std::size_t>& inexact) const;
+  // One row of 16-bit codes into the finest exact level and the watched ones.
+  void sum_row_exact(const std::uint16_t* row, std::uint64_t y);
 
   Dims dims_;
   unsigned brick_log2_;
   ValueEncoding encoding_;
   std::vector<double> decoded_;          // 16-bit encodings: every code's decoded value (spec §9)
-  std::vector<std::int64_t> units_;      // exact: every code's value in units; 0 for infinities and NaNs
-  std::vector<std::uint8_t> special_;    // exact binary16: every code's flag (above)
   std::vector<Level> levels_;            // finest first
-  std::size_t finest_exact_ = SIZE_MAX;  // the exact level summed voxel by voxel
+  // A row's runs of 2^k voxels (k the finest watched or exact level's):
+  // their sums and magnitudes in units and their special flags.
+  std::vector<std::int64_t> run_sums_;
+  std::vector<std::uint64_t> run_magnitudes_;
+  std::vector<std::uint8_t> run_specials_;
 };
 
 }  // namespace ivol::detail
