@@ -112,14 +112,18 @@ std::uint32_t bit_lengths(const std::uint16_t* z, std::uint32_t len) {
 // `taps` into z[] (the other rows' are left as they are); returns the sum
 // of their bit lengths (what the candidate taps are judged by: the faces'
 // residuals do not depend on the taps).
+// With `others`, the rows the sample leaves out instead (their cost is not
+// summed): the winner's sampled rows are already in z[].
 std::uint64_t interior_residuals(const BrickDims& d, const PredictorTaps& taps, const std::uint16_t* u,
-                                 std::uint16_t* z, detail::RowSample sample = {}) {
+                                 std::uint16_t* z, detail::RowSample sample = {}, bool others = false) {
   const RowPredictor p(taps);
   std::uint64_t cost = 0;
   const std::ptrdiff_t sy = d[0], sz = std::ptrdiff_t{d[0]} * d[1];
   if (d[0] < 2) return 0;  // every voxel is on a face
-  for (std::uint32_t layer = 1; layer < d[2]; layer += sample.step)
-    for (std::uint32_t y = 1; y < d[1]; y += sample.step) {
+  const std::uint32_t step = others ? 1 : sample.step;
+  for (std::uint32_t layer = 1; layer < d[2]; layer += step)
+    for (std::uint32_t y = 1; y < d[1]; y += step) {
+      if (others && (layer - 1) % sample.step == 0 && (y - 1) % sample.step == 0) continue;
       const std::uint16_t* c = u + layer * sz + y * sy;
       const RowNeighbours n{c - sy, c - sz, c - sy - sz};
       std::uint16_t* row = z + (c - u);
@@ -127,7 +131,7 @@ std::uint64_t interior_residuals(const BrickDims& d, const PredictorTaps& taps, 
         detail::residual_row<std::int32_t>(p, c, n, detail::first_x(u, n), d[0], row);
       else
         detail::residual_row<std::int64_t>(p, c, n, detail::first_x(u, n), d[0], row);
-      cost += bit_lengths(row + 1, d[0] - 1);
+      if (!others) cost += bit_lengths(row + 1, d[0] - 1);
     }
   return cost;
 }
@@ -206,7 +210,10 @@ std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const Br
       if (detail::fit_least_squares_with_level(dims, u.data(), moments, fitted, sample)) consider(fitted);
     }
   }
-  if (!have || !sample.all()) interior_residuals(dims, taps, u.data(), best_z.data());
+  if (!have)
+    interior_residuals(dims, taps, u.data(), best_z.data());
+  else if (!sample.all())
+    interior_residuals(dims, taps, u.data(), best_z.data(), sample, true);
   face_residuals(dims, u.data(), best_z.data());
 
   std::vector<std::uint8_t> out(kPredictedHeaderSize);

@@ -107,6 +107,11 @@ bool brick_moments(const BrickDims& d, const std::uint16_t* u, BrickMoments& out
                    static_cast<std::int64_t>(exact_sum(a + 1, b, e - 1, true)),
                    static_cast<std::int64_t>(exact_sum(a, b + 1, e - 1, true))};
   };
+  // A row with itself: both lags are Σ a(x)·a(x − 1).
+  auto self_pair = [&](const double* a) {
+    const auto lag = static_cast<std::int64_t>(exact_sum(a + 1, a, e - 1, true));
+    return RowPair{static_cast<std::int64_t>(exact_sum(a, a, e, true)), lag, lag};
+  };
   // Per brick row (index z * ey + y): its sum and ends, its product with
   // itself, with the row before it along y, along z, along both, and of the
   // rows (y − 1, z) and (y, z − 1); each only where a sampled row needs it
@@ -119,7 +124,7 @@ bool brick_moments(const BrickDims& d, const std::uint16_t* u, BrickMoments& out
       const double* c = row(y, z);
       const bool odd_y = sample.all() || (y & 1), odd_z = sample.all() || (z & 1);
       sum[r] = static_cast<std::int64_t>(exact_sum(c, c, e, false));
-      self[r] = pair(c, c);
+      self[r] = self_pair(c);
       if (y > 0 && odd_y) along_y[r] = pair(c, row(y - 1, z));
       if (z > 0 && odd_z) along_z[r] = pair(c, row(y, z - 1));
       if (y > 0 && z > 0 && odd_y && odd_z)
