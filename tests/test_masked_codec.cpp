@@ -5,11 +5,15 @@
 #include <gtest/gtest.h>
 #include <zstd.h>
 
+#include <algorithm>
+#include <cmath>
+#include <functional>
 #include <map>
 #include <random>
 #include <string>
 
 #include "ivol/error.hpp"
+#include "ivol/geometry.hpp"
 #include "ivol/masked_codec.hpp"
 
 namespace {
@@ -197,6 +201,58 @@ TEST(MaskedCodec, MostCommonValueAgainstACountedMap) {
     const ivol::CommonValue got = ivol::most_common_value(v.data(), v.size());
     EXPECT_EQ(got.value, best.first);
     EXPECT_EQ(got.count, best.second);
+  }
+}
+
+// likely_background finds the background from a sample of every 127th
+// voxel: for bricks of 32³, 64³ and 32 x 32 x 20 (a volume's edge) whose
+// background fills an eighth of them, as a slab along each axis, a corner
+// box, the part of a ball and scattered voxels, it names that background
+// with the count most_common_value gives; in noise it names nothing, or a
+// value with its exact count.
+TEST(MaskedCodec, LikelyBackgroundFindsAnEighthFromItsSample) {
+  std::mt19937 rng(7);
+  constexpr std::uint16_t kBackground = 0x3C00;
+  const ivol::Dims sizes[] = {{32, 32, 32}, {64, 64, 64}, {32, 32, 20}};
+  for (const ivol::Dims& d : sizes) {
+    const std::size_t n = std::size_t{d[0]} * d[1] * d[2];
+    auto noise = [&] {
+      std::vector<std::uint16_t> v(n);
+      for (auto& x : v) x = static_cast<std::uint16_t>(0x4000 + rng() % 16384);
+      return v;
+    };
+    using Inside = std::function<bool(std::uint32_t, std::uint32_t, std::uint32_t)>;
+    const std::uint32_t slab_x = (d[0] + 7) / 8, slab_y = (d[1] + 7) / 8, slab_z = (d[2] + 7) / 8;
+    const double radius = std::cbrt(6.0 * static_cast<double>(n) / 3.14159265) * 1.01;  // an octant of a ball
+    const std::pair<const char*, Inside> shapes[] = {
+        {"slab along x", [&](auto x, auto, auto) { return x >= d[0] - slab_x; }},
+        {"slab along y", [&](auto, auto y, auto) { return y < slab_y; }},
+        {"slab along z", [&](auto, auto, auto z) { return z >= d[2] - slab_z; }},
+        {"corner box", [&](auto x, auto y, auto z) { return x < d[0] / 2 && y < d[1] / 2 && z < (d[2] + 1) / 2; }},
+        {"ball", [&](auto x, auto y, auto z) { return std::hypot(x + 0.5, y + 0.5, z + 0.5) < radius; }},
+        {"scattered", [&](auto, auto, auto) { return rng() % 7 == 0; }},
+    };
+    for (const auto& [name, inside] : shapes) {
+      SCOPED_TRACE(std::string(name) + ", " + std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" +
+                   std::to_string(d[2]));
+      std::vector<std::uint16_t> v = noise();
+      std::size_t i = 0;
+      for (std::uint32_t z = 0; z < d[2]; ++z)
+        for (std::uint32_t y = 0; y < d[1]; ++y)
+          for (std::uint32_t x = 0; x < d[0]; ++x, ++i)
+            if (inside(x, y, z)) v[i] = kBackground;
+      const ivol::CommonValue all = ivol::most_common_value(v.data(), n);
+      ASSERT_EQ(all.value, kBackground);
+      ASSERT_GE(8 * all.count, n) << "the shape fills less than an eighth";
+      const ivol::CommonValue sampled = ivol::likely_background(v.data(), n);
+      EXPECT_EQ(sampled.value, kBackground);
+      EXPECT_EQ(sampled.count, all.count);
+    }
+    const std::vector<std::uint16_t> v = noise();
+    const ivol::CommonValue sampled = ivol::likely_background(v.data(), n);
+    if (sampled.count != 0)
+      EXPECT_EQ(sampled.count, static_cast<std::size_t>(std::count(v.begin(), v.end(), sampled.value)));
+    EXPECT_LT(8 * sampled.count, n);
   }
 }
 

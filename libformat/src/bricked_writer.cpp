@@ -41,36 +41,6 @@ std::vector<std::uint8_t> encode_top_byte_of(const T* values, const Dims& e, std
   return best;
 }
 
-// A value that may fill an eighth of the brick or more (codec 4's
-// background), with its exact count; a count of 0 where none seems to.
-// Counting every voxel's value (most_common_value) was a twentieth of a
-// noisy binary16 conversion's time, though a noisy brick repeats no value
-// that often. So the values of every 127th voxel (a stride coprime with
-// the brick's power-of-two rows, so that x, y and z all vary) are counted
-// first, and only a value that fills a sixteenth of that sample is
-// counted over the brick. A background that fills an eighth of the brick
-// and a sixteenth of no such lattice would be missed; a part's background
-// is a region with a smooth border, which the lattice samples evenly.
-CommonValue likely_background(const std::uint16_t* values, std::size_t n) {
-  constexpr std::size_t kStride = 127, kSampleAtLeast = 64;
-  if (n < kStride * kSampleAtLeast) return most_common_value(values, n);
-  thread_local std::vector<std::uint16_t> counts(65536, 0);  // reset after use, as most_common_value's
-  std::size_t samples = 0;
-  std::uint16_t candidate = 0;
-  std::uint16_t candidate_count = 0;
-  for (std::size_t i = 0; i < n; i += kStride, ++samples) {
-    const std::uint16_t c = ++counts[values[i]];
-    if (c > candidate_count) candidate = values[i], candidate_count = c;
-  }
-  for (std::size_t i = 0; i < n; i += kStride) counts[values[i]] = 0;
-  if (16 * std::size_t{candidate_count} < samples) return CommonValue{values[0], 0};
-  // The sample's most common value, counted over the brick (a loop that
-  // vectorises); only it can be the background the sample shows.
-  std::size_t count = 0;
-  for (std::size_t i = 0; i < n; ++i) count += values[i] == candidate;
-  return CommonValue{candidate, count};
-}
-
 }  // namespace
 
 struct BrickedGridWriter::Impl {

@@ -23,6 +23,14 @@ struct CommonValue {
 };
 CommonValue most_common_value(const std::uint16_t* values, std::size_t count);
 
+// A value that may fill an eighth of the `count` values or more (a
+// background for codec 4), with its exact count, found from a sample of
+// every 127th value first; {values[0], 0} where the sample shows none.
+// Below 8128 values it is most_common_value. It can miss a value that fills
+// an eighth of a brick but a sixteenth of no such lattice (a background
+// with a smooth border is sampled evenly).
+CommonValue likely_background(const std::uint16_t* values, std::size_t count);
+
 // Encodes `count` (at least one) values as a codec 4 payload with
 // `background` as the masked value, at zstd level `zstd_level`.
 std::vector<std::uint8_t> encode_masked(const std::uint16_t* values, std::size_t count, std::uint16_t background,
