@@ -123,6 +123,19 @@ unsigned encoder_threads(const DenseVolume& shape, const ImportOptions& options,
   return static_cast<unsigned>(std::min<std::uint64_t>(std::max(1u, std::thread::hardware_concurrency()), 1 + spare));
 }
 
+bool bricked_prefetch(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding,
+                      std::uint32_t read) {
+  if (read == 0 || read > layer_slices_of(shape, options)) return false;
+  __extension__ using Wide = unsigned __int128;
+  const Wide slice = Wide{shape.dims[0]} * shape.dims[1];
+  const Wide second = slice * layer_slices_of(shape, options) * (encoding == ValueEncoding::Float32 ? 4 : 2) +
+                      slice * read * read_bytes_per_voxel(shape, encoding);
+  const Wide held =
+      Wide{bricked_layer_bytes(shape, options, encoding, read)} +
+      Wide{encoder_threads(shape, options, encoding) - 1} * brick_encoding_bytes(shape, options, encoding);
+  return held + second <= bricked_layer_budget(options);
+}
+
 bool choose_bricked(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding,
                     ImportReport& report) {
   std::string against;

@@ -64,6 +64,11 @@ decltype(auto) with_stored_type(ValueEncoding encoding, F&& f) {
 // Threads the writer encodes bricks on: one, and as many more as the
 // budget holds beside the layers read (bricked_layer_bytes counts one).
 unsigned encoder_threads(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding);
+// Whether the budget also holds a second layer's samples and stored values
+// (read `read` slices at a time), beside the layer and the encoder threads'
+// bricks: the next layer is then read while one is encoded.
+bool bricked_prefetch(const DenseVolume& shape, const ImportOptions& options, ValueEncoding encoding,
+                      std::uint32_t read);
 
 class BrickedImport {
  public:

@@ -5,6 +5,7 @@
 #include <cstring>
 #include <filesystem>
 #include <functional>
+#include <thread>
 
 #include "bricked_import.hpp"
 #include "bricked_keep.hpp"
@@ -266,8 +267,11 @@ std::uint64_t memory_that_would_do(const Dims& dims, const ImportOptions& option
 
 // The bricked regular grid, a layer of bricks at a time, its samples read
 // as many slices at once as the layer's budget allows (bricked_read_slices):
-// whole layers, or parts of one. T: the stored values' type
-// (with_stored_type).
+// whole layers, or parts of one. Where the budget holds a second layer
+// (bricked_prefetch), the next layer is read on a thread of its own while
+// this one is encoded: reading and turning samples into stored values
+// were a core's work that the encoders waited for. T: the stored values'
+// type (with_stored_type).
 template <class T>
 void import_bricked(SlabReader& source, const std::string& path, const ImportOptions& options,
                     const StreamingOptions& streaming, ImportReport& report) {
@@ -283,36 +287,84 @@ void import_bricked(SlabReader& source, const std::string& path, const ImportOpt
   require_within_budget(bricked_layer_bytes(shape, options, build.encoding, std::max(read, 1u)),
                         bricked_layer_budget(options), what);
   const std::uint64_t slice = slice_voxels(shape.dims, what);
-  std::vector<std::uint8_t> samples;
-  checked_resize(samples, checked_mul(checked_mul(read, slice, what), sample_size(shape.type), what),
-                 what + " (samples)");
-  std::vector<float> scratch;
-  std::vector<T> stored;
-  checked_resize(stored, checked_mul(std::max(layer, read), slice, what), what + " (as stored values)");
+  // What one layer is read into: the samples, their float32 copy, the
+  // stored values.
+  struct Buffers {
+    std::vector<std::uint8_t> samples;
+    std::vector<float> scratch;
+    std::vector<T> stored;
+  };
+  auto allocate = [&](Buffers& b) {
+    checked_resize(b.samples, checked_mul(checked_mul(read, slice, what), sample_size(shape.type), what),
+                   what + " (samples)");
+    checked_resize(b.stored, checked_mul(std::max(layer, read), slice, what), what + " (as stored values)");
+  };
+  Buffers current;
+  allocate(current);
   LossTally loss;
   ProgressTicker ticker(options.progress, shape.dims[2]);
-  while (writer.next_layer_count() > 0) {
-    const std::uint32_t z0 = writer.next_layer_first(), n = writer.next_layer_count();
-    if (read > layer) {  // whole layers at a time
+  if (read > layer) {  // whole layers at a time
+    while (writer.next_layer_count() > 0) {
+      const std::uint32_t z0 = writer.next_layer_first();
       const std::uint32_t count = std::min(read, shape.dims[2] - z0);
-      source.read(z0, count, samples.data());
-      samples_to_stored(shape, build, samples.data(), std::uint64_t{count} * slice, scratch, stored.data(), loss);
+      source.read(z0, count, current.samples.data());
+      samples_to_stored(shape, build, current.samples.data(), std::uint64_t{count} * slice, current.scratch,
+                        current.stored.data(), loss);
       for (std::uint32_t done = 0; done < count;) {
         const std::uint32_t next = writer.next_layer_count();
-        writer.add_layer(stored.data() + std::uint64_t{done} * slice);
+        writer.add_layer(current.stored.data() + std::uint64_t{done} * slice);
         done += next;
         ticker.update(z0 + done);
       }
-      continue;
     }
+    writer.finish(loss, report);
+    return;
+  }
+  // The layer of slices z0 .. z0 + n into b, `read` slices at a time.
+  auto fill = [&](Buffers& b, std::uint32_t z0, std::uint32_t n) {
     for (std::uint32_t z = 0; z < n; z += read) {
       const std::uint32_t count = std::min(read, n - z);
-      source.read(z0 + z, count, samples.data());
-      samples_to_stored(shape, build, samples.data(), std::uint64_t{count} * slice, scratch,
-                        stored.data() + std::uint64_t{z} * slice, loss);
-      ticker.update(z0 + z + count);
+      source.read(z0 + z, count, b.samples.data());
+      samples_to_stored(shape, build, b.samples.data(), std::uint64_t{count} * slice, b.scratch,
+                        b.stored.data() + std::uint64_t{z} * slice, loss);
     }
-    writer.add_layer(stored.data());
+  };
+  const bool prefetch = bricked_prefetch(shape, options, build.encoding, read);
+  Buffers next;
+  if (prefetch) allocate(next);
+  std::uint32_t z0 = writer.next_layer_first(), n = writer.next_layer_count();
+  fill(current, z0, n);
+  while (n > 0) {
+    const std::uint32_t next_z0 = z0 + n;
+    const std::uint32_t next_n = next_z0 < shape.dims[2] ? std::min(layer, shape.dims[2] - next_z0) : 0;
+    std::thread reader;
+    std::exception_ptr read_failure;
+    if (prefetch && next_n > 0)
+      reader = std::thread([&] {
+        try {
+          fill(next, next_z0, next_n);
+        } catch (...) {
+          read_failure = std::current_exception();
+        }
+      });
+    try {
+      writer.add_layer(current.stored.data());
+    } catch (...) {
+      if (reader.joinable()) reader.join();
+      throw;
+    }
+    if (reader.joinable()) reader.join();
+    if (read_failure) std::rethrow_exception(read_failure);
+    ticker.update(next_z0);
+    if (writer.next_layer_count() != next_n || (next_n > 0 && writer.next_layer_first() != next_z0))
+      throw Error(ErrorClass::Io, what + ": the writer's next layer is not the one read");
+    if (next_n > 0) {
+      if (prefetch)
+        std::swap(current, next);
+      else
+        fill(current, next_z0, next_n);
+    }
+    z0 = next_z0, n = next_n;
   }
   writer.finish(loss, report);
 }
