@@ -50,9 +50,12 @@ z, y, x = np.mgrid[0:128, 0:256, 0:256].astype(np.float32)
 head -c 32 "$brickmem/s.raw" > "$brickmem/tiny.raw"
 brickmem_need=$("$IVOL" convert "$brickmem/s.raw" "$brickmem/probe.ivol" --dims 256,256,128 --type f32 --brick 128 --memory 8 2>&1 |
   grep -o -- "--memory [0-9]* writes a bricked grid" | grep -o "[0-9]*")
-bands_check bricked-memory-held "
+# Both checks below: ivol, the folder, the least --memory, and the peak
+# resident memory of a conversion (MiB).
+peak_py="
 import os, subprocess, sys
 ivol, folder, need = '$IVOL', '$brickmem', int('${brickmem_need:-0}')
+sanitized = os.environ.get('IVOL_SANITIZED', '0') == '1'
 def peak_mib(args):
     probe = 'import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True); ' \\
             'print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024)'
@@ -60,34 +63,23 @@ def peak_mib(args):
     if done.returncode != 0:
         sys.exit('ivol failed: ' + done.stderr.strip()[-300:])
     return float(done.stdout.split()[-1])
-own = peak_mib([folder + '/tiny.raw', folder + '/tiny.ivol', '--dims', '2,2,2', '--type', 'f32'])
+own = peak_mib([folder + '/tiny.raw', folder + '/tiny.ivol', '--dims', '2,2,2', '--type', 'f32', '-f'])"
+bands_check bricked-memory-held "$peak_py
 big = peak_mib([folder + '/s.raw', folder + '/s.ivol', '--dims', '256,256,128', '--type', 'f32', '--brick', '128',
                 '--memory', str(need)])
 kind = subprocess.run([ivol, 'info', folder + '/s.ivol'], capture_output=True, text=True).stdout
-sanitized = os.environ.get('IVOL_SANITIZED', '0') == '1'
 ok = need > 0 and 'bricked, bricks of 128' in kind and (sanitized or big - own <= need)
 print('same' if ok else 'need %d MiB, held %.0f MiB above %.0f; %s' % (need, big - own, own, kind[:200]))"
 # With room for a second layer the next one is read while one is encoded
 # (bricked_prefetch): within --memory still, and the same values as the
 # layer-at-a-time conversion above.
-bands_check bricked-memory-prefetch "
-import os, subprocess, sys
-ivol, folder, need = '$IVOL', '$brickmem', int('${brickmem_need:-0}')
-def peak_mib(args):
-    probe = 'import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True); ' \\
-            'print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024)'
-    done = subprocess.run([sys.executable, '-c', probe, ivol, '-q', 'convert'] + args, capture_output=True, text=True)
-    if done.returncode != 0:
-        sys.exit('ivol failed: ' + done.stderr.strip()[-300:])
-    return float(done.stdout.split()[-1])
-own = peak_mib([folder + '/tiny.raw', folder + '/tiny2.ivol', '--dims', '2,2,2', '--type', 'f32'])
+bands_check bricked-memory-prefetch "$peak_py
 room = 4 * need
 big = peak_mib([folder + '/s.raw', folder + '/wide.ivol', '--dims', '256,256,128', '--type', 'f32', '--brick', '128',
                 '--memory', str(room)])
 for name in ('s', 'wide'):
     subprocess.run([ivol, '-q', 'convert', folder + '/' + name + '.ivol', folder + '/' + name + '.back.raw', '-f'], check=True)
 same = open(folder + '/s.back.raw', 'rb').read() == open(folder + '/wide.back.raw', 'rb').read()
-sanitized = os.environ.get('IVOL_SANITIZED', '0') == '1'
 ok = need > 0 and same and (sanitized or big - own <= room)
 print('same' if ok else 'memory %d MiB, held %.0f MiB above %.0f; values equal: %s' % (room, big - own, own, same))"
 rm -rf "$brickmem"
