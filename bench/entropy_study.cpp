@@ -27,8 +27,21 @@
 //              block (a Huffman table per context: what zstd can do with the
 //              contexts), plus codec 3's 24-byte header and 4 bytes a
 //              context for the parts' lengths.
-// The first three are entropies, not a coder: a real one adds a few bytes a
-// brick.
+//   coder 2    codec 3's entropy coder 2 as the library writes it (rANS over
+//              the same tokens in 12 adaptive contexts from the rows before,
+//              spec §7.2.1): real payloads, header included;
+//   static 12  what a static coder with stored tables would write (issue 22,
+//              item 4: a coder whose lanes decode a row's voxels side by
+//              side needs tables that do not change within the brick):
+//              coder 2's tokens and row contexts, each context's counts
+//              normalised to 2^12 (every token seen at least 1), the tokens'
+//              ideal cost under those frequencies, the bits below, a table
+//              per brick (a bit for a context not used; else a bit a token
+//              for which are present, and each present frequency in an
+//              Elias gamma code), 8 rANS states of 4 bytes and codec 3's
+//              24-byte header.
+// order-0, contexts and adaptive are entropies, not a coder: a real one adds
+// a few bytes a brick.
 #include <zstd.h>
 
 #include <algorithm>
@@ -61,8 +74,65 @@ double entropy_bits(const double* counts, int size) {
 }
 
 struct Sizes {
-  double codec3 = 0, order0 = 0, static_ctx = 0, adaptive = 0, split = 0;
+  double codec3 = 0, order0 = 0, static_ctx = 0, adaptive = 0, split = 0, coder2 = 0, static12 = 0;
 };
+
+// Coder 2's context of a voxel from the bit lengths of the rows before it
+// (spec §7.2.1): s = 2 up(x) + back(x) + up(x − 1) + up(x + 1), 0 outside
+// the brick, context min(11, (s + 2) / 5).
+int row_context(const std::vector<int>& lengths, const ivol::BrickDims& d, std::uint32_t x, std::uint32_t y,
+                std::uint32_t z, std::size_t i) {
+  const std::size_t sy = d[0], sz = std::size_t{d[0]} * d[1];
+  auto up = [&](std::int64_t dx) {
+    const std::int64_t xx = static_cast<std::int64_t>(x) + dx;
+    return y > 0 && xx >= 0 && xx < static_cast<std::int64_t>(d[0]) ? lengths[i - sy + static_cast<std::size_t>(dx)]
+                                                                    : 0;
+  };
+  const int back = z > 0 ? lengths[i - sz] : 0;
+  return std::min(kContexts - 1, (2 * up(0) + back + up(-1) + up(1) + 2) / 5);
+}
+
+// A brick's tokens under static 12-bit tables, and the tables (above).
+double static_table_bytes(const std::vector<unsigned>& z, const ivol::BrickDims& d) {
+  std::vector<int> lengths(z.size());
+  for (std::size_t i = 0; i < z.size(); ++i) lengths[i] = bit_length(z[i]);
+  std::vector<std::uint32_t> counts(kContexts * kTokens, 0);
+  double raw_bits = 0;
+  std::size_t i = 0;
+  for (std::uint32_t zz = 0; zz < d[2]; ++zz)
+    for (std::uint32_t y = 0; y < d[1]; ++y)
+      for (std::uint32_t x = 0; x < d[0]; ++x, ++i) {
+        const int b = lengths[i];
+        counts[row_context(lengths, d, x, y, zz, i) * kTokens + token(z[i], b)] += 1;
+        raw_bits += b > 2 ? b - 2 : 0;
+      }
+  double bits = raw_bits;
+  for (int c = 0; c < kContexts; ++c) {
+    const std::uint32_t* n = counts.data() + c * kTokens;
+    std::uint64_t total = 0;
+    for (int t = 0; t < kTokens; ++t) total += n[t];
+    bits += 1;  // used or not
+    if (total == 0) continue;
+    // Normalised to 2^12, each present token at least 1, the rest to the largest.
+    std::uint32_t f[kTokens] = {};
+    std::int64_t sum = 0;
+    int largest = 0;
+    for (int t = 0; t < kTokens; ++t) {
+      if (!n[t]) continue;
+      f[t] = std::max<std::uint32_t>(1, static_cast<std::uint32_t>(4096.0 * n[t] / static_cast<double>(total)));
+      sum += f[t];
+      if (n[t] > n[largest]) largest = t;
+    }
+    f[largest] = static_cast<std::uint32_t>(static_cast<std::int64_t>(f[largest]) + 4096 - sum);
+    bits += kTokens;  // which tokens are present
+    for (int t = 0; t < kTokens; ++t)
+      if (n[t]) {
+        bits += 2 * std::floor(std::log2(f[t])) + 1;  // Elias gamma
+        bits -= static_cast<double>(n[t]) * std::log2(f[t] / 4096.0);
+      }
+  }
+  return bits / 8 + 8 * 4 + static_cast<double>(ivol::kPredictedHeaderSize);
+}
 
 // One zstd frame of `parts`, each ending a zstd block; its size.
 std::size_t frame_of_parts(const std::vector<std::vector<std::uint8_t>>& parts) {
@@ -88,9 +158,14 @@ std::size_t frame_of_parts(const std::vector<std::vector<std::uint8_t>>& parts) 
 
 // The residuals of one brick, as codec 3 writes them.
 std::vector<unsigned> residuals(const std::vector<std::uint16_t>& brick, const ivol::BrickDims& d,
-                                ivol::ValueEncoding encoding, double& payload_bytes) {
-  const std::vector<std::uint8_t> payload = ivol::encode_predicted(brick.data(), d, encoding);
-  payload_bytes += static_cast<double>(payload.size());
+                                ivol::ValueEncoding encoding, Sizes& s) {
+  ivol::PredictedOptions planes_only;
+  planes_only.entropy = ivol::PredictedOptions::Entropy::ZstdPlanes;
+  const std::vector<std::uint8_t> payload = ivol::encode_predicted(brick.data(), d, encoding, planes_only);
+  s.codec3 += static_cast<double>(payload.size());
+  ivol::PredictedOptions tokens_only;
+  tokens_only.entropy = ivol::PredictedOptions::Entropy::Tokens;
+  s.coder2 += static_cast<double>(ivol::encode_predicted(brick.data(), d, encoding, tokens_only).size());
   const std::size_t n = brick.size();
   std::vector<std::uint8_t> planes(2 * n);
   const std::size_t got = ZSTD_decompress(planes.data(), planes.size(), payload.data() + ivol::kPredictedHeaderSize,
@@ -141,6 +216,7 @@ void model_brick(const std::vector<unsigned>& z, const ivol::BrickDims& d, Sizes
   for (int c = 0; c < kContexts; ++c) h += entropy_bits(tokens.data() + c * kTokens, kTokens);
   s.static_ctx += h / 8;
   s.adaptive += (adaptive_bits + raw_bits) / 8;
+  s.static12 += static_table_bytes(z, d);
 }
 
 void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint32_t n, unsigned log2,
@@ -155,12 +231,14 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
         for (std::uint32_t z = z0; z < z0 + d[2]; ++z)
           for (std::uint32_t y = y0; y < y0 + d[1]; ++y)
             for (std::uint32_t x = x0; x < x0 + d[0]; ++x) brick.push_back(volume[(std::size_t{z} * n + y) * n + x]);
-        model_brick(residuals(brick, d, encoding, s.codec3), d, s);
+        model_brick(residuals(brick, d, encoding, s), d, s);
       }
   auto vs = [&](double v) { return 100.0 * (v / s.codec3 - 1.0); };
-  std::printf("| %s | %.0f | %.0f (%+.1f %%) | %.0f (%+.1f %%) | %.0f (%+.1f %%) | %.0f (%+.1f %%) |\n", label,
-              s.codec3, s.order0, vs(s.order0), s.static_ctx, vs(s.static_ctx), s.adaptive, vs(s.adaptive), s.split,
-              vs(s.split));
+  std::printf(
+      "| %s | %.0f | %.0f (%+.1f %%) | %.0f (%+.1f %%) | %.0f (%+.1f %%) | %.0f (%+.1f %%) | %.0f (%+.1f %%) | %.0f "
+      "(%+.1f %%; %+.2f %% of coder 2) |\n",
+      label, s.codec3, s.order0, vs(s.order0), s.static_ctx, vs(s.static_ctx), s.adaptive, vs(s.adaptive), s.split,
+      vs(s.split), s.coder2, vs(s.coder2), s.static12, vs(s.static12), 100.0 * (s.static12 / s.coder2 - 1.0));
 }
 
 }  // namespace
@@ -179,8 +257,10 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
     return 2;
   }
-  std::printf("| %s | codec 3 | order-0 | contexts, static | adaptive | split |\n|---|---:|---:|---:|---:|---:|\n",
-              argv[1]);
+  std::printf(
+      "| %s | codec 3, coder 1 | order-0 | contexts, static | adaptive | split | coder 2 | static 12 |\n"
+      "|---|---:|---:|---:|---:|---:|---:|---:|\n",
+      argv[1]);
   run("binary16", volume.binary16, n, log2, ivol::ValueEncoding::Binary16);
   run("uint16", volume.codes, n, log2, ivol::ValueEncoding::UInt16);
   return 0;
