@@ -21,6 +21,13 @@ std::size_t mask_bytes(std::size_t count) { return (count + 7) / 8; }
 
 [[noreturn]] void bad(const std::string& what) { throw Error(ErrorClass::Malformed, "codec 4: " + what); }
 
+// A counter per 16-bit pattern, kept per thread (one table for both
+// functions below) and reset only where it was used.
+std::vector<std::uint32_t>& value_counts() {
+  thread_local std::vector<std::uint32_t> counts(65536, 0);
+  return counts;
+}
+
 }  // namespace
 
 CommonValue most_common_value(const std::uint16_t* values, std::size_t count) {
@@ -29,7 +36,7 @@ CommonValue most_common_value(const std::uint16_t* values, std::size_t count) {
   // Runs of one value are counted first and added at once: a counter
   // incremented voxel after voxel waits on its own last store, and a brick
   // of air is one long run.
-  thread_local std::vector<std::uint32_t> counts(65536, 0);
+  std::vector<std::uint32_t>& counts = value_counts();
   CommonValue best{values[0], 0};
   auto add = [&](std::uint16_t value, std::uint32_t run) {
     const std::uint32_t c = counts[value] += run;
@@ -59,7 +66,7 @@ CommonValue most_common_value(const std::uint16_t* values, std::size_t count) {
 CommonValue likely_background(const std::uint16_t* values, std::size_t n) {
   constexpr std::size_t kStride = 127, kSampleAtLeast = 64;
   if (n < kStride * kSampleAtLeast) return most_common_value(values, n);
-  thread_local std::vector<std::uint32_t> counts(65536, 0);  // reset after use, as most_common_value's
+  std::vector<std::uint32_t>& counts = value_counts();
   std::size_t samples = 0;
   std::uint16_t candidate = 0;
   std::uint32_t candidate_count = 0;

@@ -1,0 +1,345 @@
+// Whether a static-table coder of codec 3's tokens decodes at issue 22's
+// 300 MB/s a core (item 4), against coder 2, on the residuals of a real
+// volume: a prototype, not a format.
+//
+//   static_lanes_study VOLUME.f32 N [BRICK_LOG2 [LANES]]
+//
+// VOLUME.f32: N^3 float32, x fastest (as codec_bench reads it). Each brick's
+// codec 3 residuals (read from a coder 1 payload, as entropy_study does) are
+// coded two ways, both with coder 2's tokens, bits below and contexts from
+// the rows before (spec §7.2.1):
+//   coder 2   the library's (adaptive counts, two rANS states);
+//   static    each context's counts over the brick normalised to 2^12
+//             (bench/RESULTS.md, "What a static-table coder would cost"),
+//             LANES rANS states (default 8) taking the voxels in turn, so
+//             that LANES independent chains run side by side; the tables
+//             are counted as entropy_study's "static 12" counts them, not
+//             written; decoded from three tables (a token a slot, and each
+//             token's frequency and start) and from one word a slot
+//             ("packed", made for each brick by the decoder).
+// Both decoders are checked against the residuals; printed: bytes and
+// decoding MB/s of 16-bit values per second of the thread's CPU time (best
+// of five passes over every brick), for binary16 and uint16.
+#include <zstd.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <ctime>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "../libformat/src/residual_tokens.hpp"  // coder 2, internal to libformat
+#include "ivol/predicted_codec.hpp"
+#include "sixteen_bit_volume.hpp"
+
+namespace {
+
+constexpr unsigned kContexts = 12, kTokens = 32, kPrecision = 12, kTotal = 1u << kPrecision;
+constexpr std::uint32_t kStateLow = 1u << 23;
+
+double cpu_now() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+unsigned bit_length(unsigned z) { return z == 0 ? 0 : 32 - static_cast<unsigned>(__builtin_clz(z)); }
+unsigned token_of(unsigned z) {
+  const unsigned b = bit_length(z);
+  return z < 2 ? z : 2 * b - 2 + ((z >> (b - 2)) & 1);
+}
+unsigned token_length(unsigned t) { return t < 2 ? t : (t >> 1) + 1; }
+
+// Coder 2's contexts of a row from the bit lengths of the rows before.
+void row_contexts(const std::uint8_t* up, const std::uint8_t* back, std::uint32_t nx, std::uint8_t* padded,
+                  std::uint8_t* contexts) {
+  std::memcpy(padded + 1, up, nx);
+  for (std::uint32_t x = 0; x < nx; ++x) {
+    const unsigned s = 2u * padded[x + 1] + back[x] + padded[x] + padded[x + 2] + 2;
+    contexts[x] = static_cast<std::uint8_t>(std::min(kContexts - 1, s / 5));
+  }
+}
+
+template <class Visit>
+void walk_rows(const ivol::BrickDims& d, std::uint8_t* lengths, Visit&& visit) {
+  const std::size_t sy = d[0], sz = std::size_t{d[0]} * d[1];
+  std::vector<std::uint8_t> zeros(d[0], 0), contexts(d[0]), padded(d[0] + 2, 0);
+  std::size_t i = 0;
+  for (std::uint32_t z = 0; z < d[2]; ++z)
+    for (std::uint32_t y = 0; y < d[1]; ++y, i += d[0]) {
+      row_contexts(y ? lengths + i - sy : zeros.data(), z ? lengths + i - sz : zeros.data(), d[0], padded.data(),
+                   contexts.data());
+      visit(i, contexts.data());
+    }
+}
+
+struct Tables {
+  std::array<std::array<std::uint16_t, kTokens>, kContexts> freq{}, start{};
+  std::array<std::array<std::uint8_t, kTotal>, kContexts> token_at{};
+  double table_bits = 0;
+};
+
+// The same tables as one word a slot, made by the decoder for each brick:
+// token | freq << 5 | (slot − start) << 18, so that a voxel's step is one
+// load (192 KiB for 12 contexts: out of the first-level cache).
+struct PackedTables {
+  std::vector<std::uint32_t> slots;  // [context][slot]
+  void make(const Tables& tb) {
+    slots.resize(std::size_t{kContexts} * kTotal);
+    for (unsigned c = 0; c < kContexts; ++c)
+      for (unsigned t = 0; t < kTokens; ++t)
+        for (unsigned k = 0; k < tb.freq[c][t]; ++k)
+          slots[c * kTotal + tb.start[c][t] + k] = t | std::uint32_t{tb.freq[c][t]} << 5 | k << 18;
+  }
+};
+
+struct StaticCoded {
+  std::vector<std::uint8_t> rans, below;
+  Tables tables;
+  std::size_t bytes() const {
+    return rans.size() + below.size() + static_cast<std::size_t>(std::ceil(tables.table_bits / 8)) +
+           ivol::kPredictedHeaderSize;
+  }
+};
+
+StaticCoded encode_static(const std::vector<std::uint16_t>& z, const ivol::BrickDims& d, unsigned lanes) {
+  const std::size_t n = z.size();
+  std::vector<std::uint8_t> lengths(n), ctx(n);
+  for (std::size_t i = 0; i < n; ++i) lengths[i] = static_cast<std::uint8_t>(bit_length(z[i]));
+  walk_rows(d, lengths.data(), [&](std::size_t row, const std::uint8_t* c) { std::memcpy(ctx.data() + row, c, d[0]); });
+  StaticCoded out;
+  Tables& tb = out.tables;
+  std::array<std::array<std::uint32_t, kTokens>, kContexts> counts{};
+  for (std::size_t i = 0; i < n; ++i) ++counts[ctx[i]][token_of(z[i])];
+  for (unsigned c = 0; c < kContexts; ++c) {
+    std::uint64_t total = 0;
+    for (unsigned t = 0; t < kTokens; ++t) total += counts[c][t];
+    tb.table_bits += 1;
+    if (total == 0) {  // unused: any valid table
+      for (unsigned t = 0; t < kTokens; ++t) tb.freq[c][t] = kTotal / kTokens;
+    } else {
+      tb.table_bits += kTokens;
+      std::int64_t sum = 0;
+      unsigned largest = 0;
+      for (unsigned t = 0; t < kTokens; ++t) {
+        if (!counts[c][t]) continue;
+        const auto f = std::max<std::uint32_t>(
+            1, static_cast<std::uint32_t>(double{kTotal} * counts[c][t] / static_cast<double>(total)));
+        tb.freq[c][t] = static_cast<std::uint16_t>(f);
+        sum += f;
+        if (counts[c][t] > counts[c][largest]) largest = t;
+      }
+      tb.freq[c][largest] = static_cast<std::uint16_t>(tb.freq[c][largest] + static_cast<std::int64_t>(kTotal) - sum);
+      for (unsigned t = 0; t < kTokens; ++t)
+        if (tb.freq[c][t]) tb.table_bits += 2 * std::floor(std::log2(tb.freq[c][t])) + 1;
+    }
+    std::uint16_t s = 0;
+    for (unsigned t = 0; t < kTokens; ++t) {
+      tb.start[c][t] = s;
+      std::memset(tb.token_at[c].data() + s, static_cast<int>(t), tb.freq[c][t]);
+      s = static_cast<std::uint16_t>(s + tb.freq[c][t]);
+    }
+  }
+  // The bits below, LSB first.
+  std::uint64_t pending = 0;
+  unsigned pending_bits = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const unsigned b = bit_length(z[i]), e = b > 2 ? b - 2 : 0;
+    pending |= std::uint64_t{z[i] & ((1u << e) - 1)} << pending_bits;
+    for (pending_bits += e; pending_bits >= 8; pending_bits -= 8, pending >>= 8)
+      out.below.push_back(static_cast<std::uint8_t>(pending));
+  }
+  if (pending_bits) out.below.push_back(static_cast<std::uint8_t>(pending));
+  for (int k = 0; k < 8; ++k) out.below.push_back(0);  // the decoder reads 8 bytes at a time
+  // rANS from the back, voxel i on state i mod lanes.
+  std::vector<std::uint8_t> back;
+  std::vector<std::uint32_t> state(lanes, kStateLow);
+  for (std::size_t i = n; i-- > 0;) {
+    const unsigned c = ctx[i], t = token_of(z[i]);
+    const std::uint32_t f = tb.freq[c][t], st = tb.start[c][t];
+    std::uint32_t& x = state[i % lanes];
+    const std::uint32_t x_max = ((kStateLow >> kPrecision) << 8) * f;
+    while (x >= x_max) back.push_back(static_cast<std::uint8_t>(x)), x >>= 8;
+    x = ((x / f) << kPrecision) + x % f + st;
+  }
+  for (unsigned l = lanes; l-- > 0;)
+    for (int k = 3; k >= 0; --k) back.push_back(static_cast<std::uint8_t>(state[l] >> (8 * k)));
+  out.rans.assign(back.rbegin(), back.rend());
+  for (int k = 0; k < 4; ++k) out.rans.push_back(0);  // the decoder reads two bytes ahead
+  return out;
+}
+
+template <unsigned Lanes, bool Packed>
+void decode_static(const StaticCoded& in, const ivol::BrickDims& d, std::uint16_t* z,
+                   std::vector<std::uint8_t>& lengths, PackedTables& packed) {
+  const Tables& tb = in.tables;
+  if constexpr (Packed) packed.make(tb);
+  const std::uint32_t* slots = packed.slots.data();
+  const std::uint8_t* p = in.rans.data();
+  std::uint32_t x[Lanes];
+  for (unsigned l = 0; l < Lanes; ++l, p += 4)
+    x[l] = std::uint32_t{p[0]} | std::uint32_t{p[1]} << 8 | std::uint32_t{p[2]} << 16 | std::uint32_t{p[3]} << 24;
+  const std::uint8_t* q = in.below.data();
+  std::uint64_t bits = 0;
+  unsigned bit_count = 0;
+  const std::uint32_t nx = d[0];
+  walk_rows(d, lengths.data(), [&](std::size_t row, const std::uint8_t* contexts) {
+    for (std::uint32_t x0 = 0; x0 < nx; x0 += Lanes) {
+      unsigned t[Lanes];
+      for (unsigned l = 0; l < Lanes; ++l) {  // the lanes' chains, side by side
+        const unsigned c = contexts[x0 + l];
+        const std::uint32_t slot = x[l] & (kTotal - 1);
+        if constexpr (Packed) {
+          const std::uint32_t w = slots[c * kTotal + slot];
+          t[l] = w & 31;
+          x[l] = ((w >> 5) & 0x1FFF) * (x[l] >> kPrecision) + (w >> 18);
+        } else {
+          t[l] = tb.token_at[c][slot];
+          x[l] = tb.freq[c][t[l]] * (x[l] >> kPrecision) + slot - tb.start[c][t[l]];
+        }
+      }
+      for (unsigned l = 0; l < Lanes; ++l) {  // renormalised in the encoder's order
+        const unsigned k = static_cast<unsigned>(x[l] < kStateLow) + static_cast<unsigned>(x[l] < (kStateLow >> 8));
+        const std::uint32_t next = std::uint32_t{p[0]} << 8 | p[1];
+        x[l] = x[l] << (8 * k) | next >> (16 - 8 * k);
+        p += k;
+      }
+      std::uint64_t word;
+      std::memcpy(&word, q, 8);
+      bits |= word << bit_count;
+      q += (63 - bit_count) >> 3;
+      bit_count |= 56;
+      for (unsigned l = 0; l < Lanes; ++l) {
+        const unsigned b = token_length(t[l]), e = b > 2 ? b - 2 : 0;
+        const unsigned lead = b > 2 ? (2 + (t[l] & 1)) << e : t[l];
+        z[row + x0 + l] = static_cast<std::uint16_t>(lead | (bits & ((1u << e) - 1)));
+        bits >>= e;
+        bit_count -= e;
+        lengths[row + x0 + l] = static_cast<std::uint8_t>(b);
+        if (bit_count < 14 && l + 1 < Lanes) {  // at most 14 bits a voxel
+          std::memcpy(&word, q, 8);
+          bits |= word << bit_count;
+          q += (63 - bit_count) >> 3;
+          bit_count |= 56;
+        }
+      }
+    }
+  });
+}
+
+struct Brick {
+  ivol::BrickDims dims;
+  std::vector<std::uint16_t> residuals;
+  std::vector<std::uint8_t> coder2;
+  StaticCoded coded;
+};
+
+void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint32_t n, unsigned log2,
+         ivol::ValueEncoding encoding, unsigned lanes) {
+  const std::uint32_t edge = 1u << log2;
+  std::vector<Brick> bricks;
+  std::size_t coder2_bytes = 0, static_bytes = 0;
+  for (std::uint32_t z0 = 0; z0 < n; z0 += edge)
+    for (std::uint32_t y0 = 0; y0 < n; y0 += edge)
+      for (std::uint32_t x0 = 0; x0 < n; x0 += edge) {
+        Brick b;
+        b.dims = {std::min(edge, n - x0), std::min(edge, n - y0), std::min(edge, n - z0)};
+        if (b.dims[0] % lanes) throw std::runtime_error("static_lanes_study: a row is not a multiple of LANES");
+        std::vector<std::uint16_t> values;
+        for (std::uint32_t z = z0; z < z0 + b.dims[2]; ++z)
+          for (std::uint32_t y = y0; y < y0 + b.dims[1]; ++y)
+            for (std::uint32_t x = x0; x < x0 + b.dims[0]; ++x)
+              values.push_back(volume[(std::size_t{z} * n + y) * n + x]);
+        ivol::PredictedOptions planes_only;
+        planes_only.entropy = ivol::PredictedOptions::Entropy::ZstdPlanes;
+        const auto payload = ivol::encode_predicted(values.data(), b.dims, encoding, planes_only);
+        std::vector<std::uint8_t> planes(2 * values.size());
+        if (ZSTD_decompress(planes.data(), planes.size(), payload.data() + ivol::kPredictedHeaderSize,
+                            payload.size() - ivol::kPredictedHeaderSize) != planes.size())
+          throw std::runtime_error("static_lanes_study: a codec 3 frame did not decode");
+        b.residuals.resize(values.size());
+        for (std::size_t i = 0; i < values.size(); ++i)
+          b.residuals[i] = static_cast<std::uint16_t>(planes[i] | planes[values.size() + i] << 8);
+        if (!ivol::detail::encode_residual_tokens(b.residuals.data(), b.dims, ~std::size_t{0}, b.coder2))
+          throw std::runtime_error("static_lanes_study: coder 2 refused a brick");
+        b.coded = encode_static(b.residuals, b.dims, lanes);
+        coder2_bytes += b.coder2.size() + ivol::kPredictedHeaderSize;
+        static_bytes += b.coded.bytes();
+        bricks.push_back(std::move(b));
+      }
+  const double mb = 2.0 * n * n * n / 1e6;
+  std::vector<std::uint16_t> out(std::size_t{edge} * edge * edge);
+  std::vector<std::uint8_t> lengths(out.size());
+  PackedTables packed;
+  double best2 = 1e30, best_static = 1e30, best_packed = 1e30;
+  auto decode = [&](const Brick& b, bool pack) {
+    switch (lanes * 2 + pack) {
+      case 8:
+        return decode_static<4, false>(b.coded, b.dims, out.data(), lengths, packed);
+      case 9:
+        return decode_static<4, true>(b.coded, b.dims, out.data(), lengths, packed);
+      case 16:
+        return decode_static<8, false>(b.coded, b.dims, out.data(), lengths, packed);
+      case 17:
+        return decode_static<8, true>(b.coded, b.dims, out.data(), lengths, packed);
+      case 32:
+        return decode_static<16, false>(b.coded, b.dims, out.data(), lengths, packed);
+      case 33:
+        return decode_static<16, true>(b.coded, b.dims, out.data(), lengths, packed);
+      default:
+        throw std::runtime_error("static_lanes_study: LANES is 4, 8 or 16");
+    }
+  };
+  for (int pass = 0; pass < 5; ++pass) {
+    double t = cpu_now();
+    for (const Brick& b : bricks) {
+      ivol::detail::decode_residual_tokens(b.coder2.data(), b.coder2.size(), b.dims, out.data());
+      if (pass == 0 && !std::equal(b.residuals.begin(), b.residuals.end(), out.begin()))
+        throw std::runtime_error("static_lanes_study: coder 2 did not round-trip");
+    }
+    best2 = std::min(best2, cpu_now() - t);
+    t = cpu_now();
+    for (const bool pack : {false, true}) {
+      t = cpu_now();
+      for (const Brick& b : bricks) {
+        decode(b, pack);
+        if (pass == 0 && !std::equal(b.residuals.begin(), b.residuals.end(), out.begin()))
+          throw std::runtime_error("static_lanes_study: the static coder did not round-trip");
+      }
+      double& best = pack ? best_packed : best_static;
+      best = std::min(best, cpu_now() - t);
+    }
+  }
+  std::printf("| %s | %zu | %.0f | %zu (%+.2f %%) | %.0f | %.0f |\n", label, coder2_bytes, mb / best2, static_bytes,
+              100.0 * (static_cast<double>(static_bytes) / static_cast<double>(coder2_bytes) - 1.0), mb / best_static,
+              mb / best_packed);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 3) {
+    std::fprintf(stderr, "usage: static_lanes_study VOLUME.f32 N [BRICK_LOG2 [LANES]]\n");
+    return 2;
+  }
+  const auto n = static_cast<std::uint32_t>(std::stoul(argv[2]));
+  const unsigned log2 = argc > 3 ? static_cast<unsigned>(std::stoul(argv[3])) : 5;
+  const unsigned lanes = argc > 4 ? static_cast<unsigned>(std::stoul(argv[4])) : 8;
+  try {
+    const bench::SixteenBitVolume volume = bench::read_sixteen_bit(argv[1], n);
+    std::printf(
+        "| %s, %u lanes | coder 2 bytes | coder 2 decode MB/s | static bytes | static decode MB/s | packed decode "
+        "MB/s |\n|---|---:|---:|---:|---:|---:|\n",
+        argv[1], lanes);
+    run("binary16", volume.binary16, n, log2, ivol::ValueEncoding::Binary16, lanes);
+    run("uint16", volume.codes, n, log2, ivol::ValueEncoding::UInt16, lanes);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
+    return 1;
+  }
+  return 0;
+}
