@@ -16,7 +16,11 @@
 //             are counted as entropy_study's "static 12" counts them, not
 //             written; decoded from three tables (a token a slot, and each
 //             token's frequency and start) and from one word a slot
-//             ("packed", made for each brick by the decoder).
+//             ("packed", made for each brick by the decoder);
+//   vector    the same tables, 8 or 16 states renormalised by 16-bit words,
+//             decoded with AVX2 where the CPU has it (one or two vectors of
+//             states, a gather of slot words each; the bits below in scalar
+//             code).
 // Both decoders are checked against the residuals; printed: bytes and
 // decoding MB/s of 16-bit values per second of the thread's CPU time (best
 // of five passes over every brick), for binary16 and uint16.
@@ -31,6 +35,10 @@
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
 
 #include "../libformat/src/residual_tokens.hpp"  // coder 2, internal to libformat
 #include "ivol/predicted_codec.hpp"
@@ -99,6 +107,11 @@ struct PackedTables {
 
 struct StaticCoded {
   std::vector<std::uint8_t> rans, below;
+  // The same tokens for 8 states renormalised by 16-bit words (states in
+  // [2^16, 2^32)), for a decoder whose states are the lanes of one vector.
+  std::vector<std::uint16_t> words, words16;  // 8 states; 16 states (two vectors)
+  std::array<std::uint32_t, 8> word_states{};
+  std::array<std::uint32_t, 16> word_states16{};
   Tables tables;
   std::size_t bytes() const {
     return rans.size() + below.size() + static_cast<std::size_t>(std::ceil(tables.table_bits / 8)) +
@@ -170,6 +183,23 @@ StaticCoded encode_static(const std::vector<std::uint16_t>& z, const ivol::Brick
     for (int k = 3; k >= 0; --k) back.push_back(static_cast<std::uint8_t>(state[l] >> (8 * k)));
   out.rans.assign(back.rbegin(), back.rend());
   for (int k = 0; k < 4; ++k) out.rans.push_back(0);  // the decoder reads two bytes ahead
+  // 8 or 16 states, 16-bit words.
+  auto word_stream = [&](auto& states, std::vector<std::uint16_t>& words) {
+    std::vector<std::uint16_t> words_back;
+    const std::size_t count = states.size();
+    states.fill(1u << 16);
+    for (std::size_t i = n; i-- > 0;) {
+      const unsigned c = ctx[i], t = token_of(z[i]);
+      const std::uint32_t f = tb.freq[c][t], st = tb.start[c][t];
+      std::uint32_t& x = states[i % count];
+      if (std::uint64_t{x} >= (std::uint64_t{f} << 20)) words_back.push_back(static_cast<std::uint16_t>(x)), x >>= 16;
+      x = ((x / f) << kPrecision) + x % f + st;
+    }
+    words.assign(words_back.rbegin(), words_back.rend());
+    for (int k = 0; k < 16; ++k) words.push_back(0);  // the decoder loads 8 words at a time
+  };
+  word_stream(out.word_states, out.words);
+  word_stream(out.word_states16, out.words16);
   return out;
 }
 
@@ -231,6 +261,97 @@ void decode_static(const StaticCoded& in, const ivol::BrickDims& d, std::uint16_
   });
 }
 
+#if defined(__x86_64__) && defined(__GNUC__)
+// The 8 states as the lanes of one AVX2 vector: a gather of their slot
+// words, a multiply, and the renormalisation of the lanes below 2^16 from
+// the next words of the stream, moved into their lanes by a permutation
+// chosen by the mask. The bits below a token are taken as the scalar
+// decoders take them.
+struct Permutations {
+  std::array<std::array<std::uint32_t, 8>, 256> index{};
+  Permutations() {
+    for (unsigned m = 0; m < 256; ++m)
+      for (unsigned l = 0, k = 0; l < 8; ++l)
+        if (m >> l & 1) index[m][l] = k++;
+  }
+};
+
+// Vectors: 1 (8 states) or 2 (16 states, two gathers in flight).
+template <unsigned Vectors>
+__attribute__((target("avx2"))) void decode_avx2(const StaticCoded& in, const ivol::BrickDims& d, std::uint16_t* z,
+                                                 std::vector<std::uint8_t>& lengths, PackedTables& packed) {
+  static const Permutations permutations;
+  constexpr unsigned kLanes = 8 * Vectors;
+  packed.make(in.tables);
+  const int* slots = reinterpret_cast<const int*>(packed.slots.data());
+  __m256i xs[Vectors];
+  for (unsigned v = 0; v < Vectors; ++v)
+    xs[v] = _mm256_loadu_si256(
+        reinterpret_cast<const __m256i*>((Vectors == 1 ? in.word_states.data() : in.word_states16.data()) + 8 * v));
+  const std::uint16_t* p = Vectors == 1 ? in.words.data() : in.words16.data();
+  const std::uint8_t* q = in.below.data();
+  std::uint64_t bits = 0;
+  unsigned bit_count = 0;
+  const std::uint32_t nx = d[0];
+  const __m256i low12 = _mm256_set1_epi32(kTotal - 1), low5 = _mm256_set1_epi32(31),
+                freq_mask = _mm256_set1_epi32(0x1FFF), zero = _mm256_setzero_si256();
+  alignas(32) std::uint32_t t[kLanes];
+  // walk_rows written out: a lambda would not take this function's target.
+  const std::size_t sy = d[0], sz = std::size_t{d[0]} * d[1];
+  std::vector<std::uint8_t> zeros(d[0], 0), row_ctx(d[0]), padded(d[0] + 2, 0);
+  std::size_t row = 0;
+  for (std::uint32_t zz = 0; zz < d[2]; ++zz)
+    for (std::uint32_t y = 0; y < d[1]; ++y, row += d[0]) {
+      row_contexts(y ? lengths.data() + row - sy : zeros.data(), zz ? lengths.data() + row - sz : zeros.data(), d[0],
+                   padded.data(), row_ctx.data());
+      const std::uint8_t* contexts = row_ctx.data();
+      for (std::uint32_t x0 = 0; x0 < nx; x0 += kLanes) {
+        __m256i w[Vectors];
+        for (unsigned v = 0; v < Vectors; ++v) {  // the gathers, both in flight
+          std::uint64_t c8;
+          std::memcpy(&c8, contexts + x0 + 8 * v, 8);
+          const __m256i ctx = _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(static_cast<long long>(c8)));
+          const __m256i slot = _mm256_and_si256(xs[v], low12);
+          w[v] = _mm256_i32gather_epi32(slots, _mm256_add_epi32(_mm256_slli_epi32(ctx, kPrecision), slot), 4);
+        }
+        for (unsigned v = 0; v < Vectors; ++v) {
+          __m256i& x = xs[v];
+          _mm256_store_si256(reinterpret_cast<__m256i*>(t + 8 * v), _mm256_and_si256(w[v], low5));
+          x = _mm256_add_epi32(_mm256_mullo_epi32(_mm256_and_si256(_mm256_srli_epi32(w[v], 5), freq_mask),
+                                                  _mm256_srli_epi32(x, kPrecision)),
+                               _mm256_srli_epi32(w[v], 18));
+          const __m256i need = _mm256_cmpeq_epi32(_mm256_srli_epi32(x, 16), zero);
+          const unsigned m = static_cast<unsigned>(_mm256_movemask_ps(_mm256_castsi256_ps(need)));
+          const __m256i next = _mm256_cvtepu16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
+          const __m256i placed = _mm256_permutevar8x32_epi32(
+              next, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(permutations.index[m].data())));
+          x = _mm256_blendv_epi8(x, _mm256_or_si256(_mm256_slli_epi32(x, 16), placed), need);
+          p += __builtin_popcount(m);
+        }
+        std::uint64_t word;
+        std::memcpy(&word, q, 8);
+        bits |= word << bit_count;
+        q += (63 - bit_count) >> 3;
+        bit_count |= 56;
+        for (unsigned l = 0; l < kLanes; ++l) {
+          const unsigned b = token_length(t[l]), e = b > 2 ? b - 2 : 0;
+          const unsigned lead = b > 2 ? (2 + (t[l] & 1)) << e : t[l];
+          z[row + x0 + l] = static_cast<std::uint16_t>(lead | (bits & ((1u << e) - 1)));
+          bits >>= e;
+          bit_count -= e;
+          lengths[row + x0 + l] = static_cast<std::uint8_t>(b);
+          if (bit_count < 14 && l + 1 < kLanes) {
+            std::memcpy(&word, q, 8);
+            bits |= word << bit_count;
+            q += (63 - bit_count) >> 3;
+            bit_count |= 56;
+          }
+        }
+      }
+    }
+}
+#endif
+
 struct Brick {
   ivol::BrickDims dims;
   std::vector<std::uint16_t> residuals;
@@ -275,7 +396,20 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
   std::vector<std::uint16_t> out(std::size_t{edge} * edge * edge);
   std::vector<std::uint8_t> lengths(out.size());
   PackedTables packed;
-  double best2 = 1e30, best_static = 1e30, best_packed = 1e30;
+  double best2 = 1e30, best_static = 1e30, best_packed = 1e30, best_avx2 = 1e30, best_avx2_16 = 1e30;
+  std::size_t word_bytes = 0, word_bytes16 = 0;
+  for (const Brick& b : bricks) {
+    const std::size_t rest = b.coded.below.size() - 8 +
+                             static_cast<std::size_t>(std::ceil(b.coded.tables.table_bits / 8)) +
+                             ivol::kPredictedHeaderSize;
+    word_bytes += 2 * (b.coded.words.size() - 16) + 4 * 8 + rest;
+    word_bytes16 += 2 * (b.coded.words16.size() - 16) + 4 * 16 + rest;
+  }
+#if defined(__x86_64__) && defined(__GNUC__)
+  const bool avx2 = __builtin_cpu_supports("avx2");
+#else
+  const bool avx2 = false;
+#endif
   auto decode = [&](const Brick& b, bool pack) {
     switch (lanes * 2 + pack) {
       case 8:
@@ -313,10 +447,40 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
       double& best = pack ? best_packed : best_static;
       best = std::min(best, cpu_now() - t);
     }
+#if defined(__x86_64__) && defined(__GNUC__)
+    if (avx2)
+      for (const unsigned vectors : {1u, 2u}) {
+        if (vectors == 2 && bricks.front().dims[0] % 16) continue;
+        t = cpu_now();
+        for (const Brick& b : bricks) {
+          if (vectors == 1)
+            decode_avx2<1>(b.coded, b.dims, out.data(), lengths, packed);
+          else
+            decode_avx2<2>(b.coded, b.dims, out.data(), lengths, packed);
+          if (pass == 0 && !std::equal(b.residuals.begin(), b.residuals.end(), out.begin()))
+            throw std::runtime_error("static_lanes_study: the AVX2 decoder did not round-trip");
+        }
+        double& best = vectors == 1 ? best_avx2 : best_avx2_16;
+        best = std::min(best, cpu_now() - t);
+      }
+#endif
   }
-  std::printf("| %s | %zu | %.0f | %zu (%+.2f %%) | %.0f | %.0f |\n", label, coder2_bytes, mb / best2, static_bytes,
-              100.0 * (static_cast<double>(static_bytes) / static_cast<double>(coder2_bytes) - 1.0), mb / best_static,
-              mb / best_packed);
+  // What making the slot words costs alone (every decoder above that
+  // uses them makes them for each brick).
+  double best_make = 1e30;
+  for (int pass = 0; pass < 5; ++pass) {
+    const double t = cpu_now();
+    for (const Brick& b : bricks) packed.make(b.coded.tables);
+    best_make = std::min(best_make, cpu_now() - t);
+  }
+  std::fprintf(stderr, "%s: making the slot words alone: %.0f MB/s of values\n", label, mb / best_make);
+  auto against = [&](std::size_t bytes) {
+    return 100.0 * (static_cast<double>(bytes) / static_cast<double>(coder2_bytes) - 1.0);
+  };
+  std::printf("| %s | %zu | %.0f | %zu (%+.2f %%) | %.0f | %.0f | %zu (%+.2f %%) | %.0f | %zu (%+.2f %%) | %.0f |\n",
+              label, coder2_bytes, mb / best2, static_bytes, against(static_bytes), mb / best_static, mb / best_packed,
+              word_bytes, against(word_bytes), avx2 ? mb / best_avx2 : 0.0, word_bytes16, against(word_bytes16),
+              avx2 && best_avx2_16 < 1e30 ? mb / best_avx2_16 : 0.0);
 }
 
 }  // namespace
@@ -333,7 +497,8 @@ int main(int argc, char** argv) {
     const bench::SixteenBitVolume volume = bench::read_sixteen_bit(argv[1], n);
     std::printf(
         "| %s, %u lanes | coder 2 bytes | coder 2 decode MB/s | static bytes | static decode MB/s | packed decode "
-        "MB/s |\n|---|---:|---:|---:|---:|---:|\n",
+        "MB/s | 8 vector lanes, bytes | AVX2 decode MB/s | 16 vector lanes, bytes | AVX2 x 2 decode MB/s |\n"
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         argv[1], lanes);
     run("binary16", volume.binary16, n, log2, ivol::ValueEncoding::Binary16, lanes);
     run("uint16", volume.codes, n, log2, ivol::ValueEncoding::UInt16, lanes);
