@@ -9,6 +9,9 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#if defined(__SSE2__)
+#include <xmmintrin.h>
+#endif
 
 #include "ivol/binary16.hpp"
 #include "ivol/bricked_writer.hpp"
@@ -197,6 +200,35 @@ TEST(StoredLevels, BinarySixteenLevelsRoundWhereTheSequentialSumRounds) {
   const CheckReport report = check_file(wide_path);
   EXPECT_TRUE(report.problems.empty()) << report.problems.front().message;
 }
+
+#if defined(__SSE2__)
+// A process may run with subnormals flushed to zero (a library built with
+// -ffast-math sets MXCSR's DAZ and FTZ bits when it is loaded, and threads
+// made later inherit them): the stored levels must not depend on how the
+// processor treats subnormal numbers. Every binary16 code in one row,
+// written with DAZ and FTZ set, against the reference summed without.
+TEST(StoredLevels, SubnormalsCountWhereTheProcessorFlushesThem) {
+  const Dims row{65536, 1, 1};
+  std::vector<std::uint16_t> codes(65536);
+  for (std::size_t c = 0; c < codes.size(); ++c) codes[c] = static_cast<std::uint16_t>(c);
+  std::vector<std::vector<std::uint16_t>> want;
+  for (unsigned lod = 0; lod <= depth_for(row); ++lod)
+    want.push_back(level_of(codes, row, ValueEncoding::Binary16, lod));
+  const unsigned saved = _mm_getcsr();
+  _mm_setcsr(saved | 0x8040);  // FTZ and DAZ
+  std::string path;
+  try {
+    path = write("stored_levels_daz.ivol", row, codes, ValueEncoding::Binary16, 3);
+  } catch (...) {
+    _mm_setcsr(saved);
+    throw;
+  }
+  _mm_setcsr(saved);
+  Reader reader(path);
+  for (unsigned lod = 3; lod <= reader.layout().depth; ++lod)
+    EXPECT_EQ(bits_of(reader, full_box(row, lod), lod), want[lod]) << "level " << lod;
+}
+#endif
 
 TEST(StoredLevels, APreviewReadsTheStoredLevelNotTheVolume) {
   const Dims d{96, 96, 96};

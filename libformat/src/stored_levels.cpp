@@ -267,25 +267,46 @@ struct Binary16Units {
 
 #if defined(__SSE2__)
 // Eight binary16 codes at p into the sums of their values and of their
-// magnitudes, as binary64 lanes in units of 2^-136 (a code's bits << 13
-// are a binary32 of its value · 2^-112, subnormals included), infinities
-// and NaNs as 0 and marked in `special`. Within a run of at most 2^12
-// voxels every sum needs at most 52 bits: exact in any order.
-inline void add_eight_binary16(const std::uint16_t* p, __m128d& sum, __m128d& magnitude, __m128i& special) {
+// magnitudes. Normal numbers as binary64 lanes in units of 2^-136 (a
+// code's bits << 13 are a binary32 of its value · 2^-112); subnormals
+// (exponent 0, whose units are their significand) as 32-bit integer lanes,
+// so that no subnormal binary32 is made and the sums do not depend on a
+// processor that flushes them (MXCSR's DAZ); infinities and NaNs as 0 and
+// marked in `special`. Within a run of at most 2^12 voxels every sum needs
+// at most 52 bits: exact in any order.
+struct EightBinary16Sums {
+  __m128d sum = _mm_setzero_pd(), magnitude = _mm_setzero_pd();
+  __m128i subnormal_sum = _mm_setzero_si128(), subnormal_magnitude = _mm_setzero_si128();
+  __m128i special = _mm_setzero_si128();
+};
+
+inline void add_eight_binary16(const std::uint16_t* p, EightBinary16Sums& s) {
   const __m128i h = _mm_loadu_si128(reinterpret_cast<const __m128i*>(p));
-  const __m128i abs_mask = _mm_set1_epi32(0x7FFF), finite_max = _mm_set1_epi32(0x7BFF);
+  const __m128i abs_mask = _mm_set1_epi32(0x7FFF), finite_max = _mm_set1_epi32(0x7BFF),
+                normal_min = _mm_set1_epi32(0x0400);
   const __m128d abs_pd = _mm_castsi128_pd(_mm_set1_epi64x(0x7FFFFFFFFFFFFFFF));
   for (const __m128i v : {_mm_unpacklo_epi16(h, _mm_setzero_si128()), _mm_unpackhi_epi16(h, _mm_setzero_si128())}) {
     const __m128i bits = _mm_and_si128(v, abs_mask);
     const __m128i infinite_or_nan = _mm_cmpgt_epi32(bits, finite_max);
-    special = _mm_or_si128(special, infinite_or_nan);
+    const __m128i subnormal = _mm_cmplt_epi32(bits, normal_min);  // and zeros
+    s.special = _mm_or_si128(s.special, infinite_or_nan);
     const __m128i sign = _mm_slli_epi32(_mm_andnot_si128(abs_mask, v), 16);
-    const __m128 value =
-        _mm_castsi128_ps(_mm_or_si128(_mm_slli_epi32(_mm_andnot_si128(infinite_or_nan, bits), 13), sign));
+    const __m128i normal_bits = _mm_andnot_si128(_mm_or_si128(infinite_or_nan, subnormal), bits);
+    const __m128 value = _mm_castsi128_ps(_mm_or_si128(_mm_slli_epi32(normal_bits, 13), sign));
     const __m128d low = _mm_cvtps_pd(value), high = _mm_cvtps_pd(_mm_movehl_ps(value, value));
-    sum = _mm_add_pd(sum, _mm_add_pd(low, high));
-    magnitude = _mm_add_pd(magnitude, _mm_add_pd(_mm_and_pd(low, abs_pd), _mm_and_pd(high, abs_pd)));
+    s.sum = _mm_add_pd(s.sum, _mm_add_pd(low, high));
+    s.magnitude = _mm_add_pd(s.magnitude, _mm_add_pd(_mm_and_pd(low, abs_pd), _mm_and_pd(high, abs_pd)));
+    const __m128i units = _mm_and_si128(subnormal, bits);  // a subnormal's units: its significand
+    const __m128i negative = _mm_srai_epi32(sign, 31);
+    s.subnormal_sum = _mm_add_epi32(s.subnormal_sum, _mm_sub_epi32(_mm_xor_si128(units, negative), negative));
+    s.subnormal_magnitude = _mm_add_epi32(s.subnormal_magnitude, units);
   }
+}
+
+inline std::int64_t lanes_sum(__m128i v) {
+  alignas(16) std::int32_t lanes[4];
+  _mm_store_si128(reinterpret_cast<__m128i*>(lanes), v);
+  return std::int64_t{lanes[0]} + lanes[1] + lanes[2] + lanes[3];
 }
 
 inline double lanes_sum(__m128d v) { return _mm_cvtsd_f64(_mm_add_sd(v, _mm_unpackhi_pd(v, v))); }
@@ -307,13 +328,13 @@ void sum_runs_exact(const std::uint16_t* row, std::uint64_t width, unsigned k, s
 #if defined(__SSE2__)
     if constexpr (std::is_same_v<Units, Binary16Units>) {
       if (end - x0 >= 8) {
-        __m128d sum8 = _mm_setzero_pd(), magnitude8 = _mm_setzero_pd();
-        __m128i special8 = _mm_setzero_si128();
-        for (; x + 8 <= end; x += 8) add_eight_binary16(row + x, sum8, magnitude8, special8);
+        EightBinary16Sums eight;
+        for (; x + 8 <= end; x += 8) add_eight_binary16(row + x, eight);
         constexpr double kUnitsPerLaneUnit = 0x1p136;  // 2^136 lane units are one of 2^-24
-        sum = static_cast<std::int64_t>(lanes_sum(sum8) * kUnitsPerLaneUnit);
-        magnitude = static_cast<std::uint64_t>(lanes_sum(magnitude8) * kUnitsPerLaneUnit);
-        special = _mm_movemask_epi8(special8) != 0;
+        sum = static_cast<std::int64_t>(lanes_sum(eight.sum) * kUnitsPerLaneUnit) + lanes_sum(eight.subnormal_sum);
+        magnitude = static_cast<std::uint64_t>(lanes_sum(eight.magnitude) * kUnitsPerLaneUnit) +
+                    static_cast<std::uint64_t>(lanes_sum(eight.subnormal_magnitude));
+        special = _mm_movemask_epi8(eight.special) != 0;
       }
     }
 #endif
