@@ -203,6 +203,37 @@ StaticCoded encode_static(const std::vector<std::uint16_t>& z, const ivol::Brick
   return out;
 }
 
+// The bits below the tokens, LSB first: `bits` holds the next `count` of
+// them, `q` the first byte not yet in it (refills without bounds checks:
+// the encoder pads the stream by 8 bytes).
+struct BitsBelow {
+  const std::uint8_t* q;
+  std::uint64_t bits = 0;
+  unsigned count = 0;
+  // Tops up to 56 bits or more; bits above `count` may come in too, and a
+  // later refill ORs the same bits over them.
+  void refill() {
+    std::uint64_t word;
+    std::memcpy(&word, q, 8);
+    bits |= word << count;
+    q += (63 - count) >> 3;
+    count |= 56;
+  }
+  // The residuals and bit lengths of `lanes` voxels from their tokens.
+  void take(const std::uint32_t* t, unsigned lanes, std::uint16_t* z, std::uint8_t* lengths) {
+    refill();
+    for (unsigned l = 0; l < lanes; ++l) {
+      const unsigned b = token_length(t[l]), e = b > 2 ? b - 2 : 0;
+      const unsigned lead = b > 2 ? (2 + (t[l] & 1)) << e : t[l];
+      z[l] = static_cast<std::uint16_t>(lead | (bits & ((1u << e) - 1)));
+      bits >>= e;
+      count -= e;
+      lengths[l] = static_cast<std::uint8_t>(b);
+      if (count < 14 && l + 1 < lanes) refill();  // at most 14 bits a voxel
+    }
+  }
+};
+
 template <unsigned Lanes, bool Packed>
 void decode_static(const StaticCoded& in, const ivol::BrickDims& d, std::uint16_t* z,
                    std::vector<std::uint8_t>& lengths, PackedTables& packed) {
@@ -213,13 +244,11 @@ void decode_static(const StaticCoded& in, const ivol::BrickDims& d, std::uint16_
   std::uint32_t x[Lanes];
   for (unsigned l = 0; l < Lanes; ++l, p += 4)
     x[l] = std::uint32_t{p[0]} | std::uint32_t{p[1]} << 8 | std::uint32_t{p[2]} << 16 | std::uint32_t{p[3]} << 24;
-  const std::uint8_t* q = in.below.data();
-  std::uint64_t bits = 0;
-  unsigned bit_count = 0;
+  BitsBelow below{in.below.data()};
   const std::uint32_t nx = d[0];
   walk_rows(d, lengths.data(), [&](std::size_t row, const std::uint8_t* contexts) {
     for (std::uint32_t x0 = 0; x0 < nx; x0 += Lanes) {
-      unsigned t[Lanes];
+      std::uint32_t t[Lanes];
       for (unsigned l = 0; l < Lanes; ++l) {  // the lanes' chains, side by side
         const unsigned c = contexts[x0 + l];
         const std::uint32_t slot = x[l] & (kTotal - 1);
@@ -238,25 +267,7 @@ void decode_static(const StaticCoded& in, const ivol::BrickDims& d, std::uint16_
         x[l] = x[l] << (8 * k) | next >> (16 - 8 * k);
         p += k;
       }
-      std::uint64_t word;
-      std::memcpy(&word, q, 8);
-      bits |= word << bit_count;
-      q += (63 - bit_count) >> 3;
-      bit_count |= 56;
-      for (unsigned l = 0; l < Lanes; ++l) {
-        const unsigned b = token_length(t[l]), e = b > 2 ? b - 2 : 0;
-        const unsigned lead = b > 2 ? (2 + (t[l] & 1)) << e : t[l];
-        z[row + x0 + l] = static_cast<std::uint16_t>(lead | (bits & ((1u << e) - 1)));
-        bits >>= e;
-        bit_count -= e;
-        lengths[row + x0 + l] = static_cast<std::uint8_t>(b);
-        if (bit_count < 14 && l + 1 < Lanes) {  // at most 14 bits a voxel
-          std::memcpy(&word, q, 8);
-          bits |= word << bit_count;
-          q += (63 - bit_count) >> 3;
-          bit_count |= 56;
-        }
-      }
+      below.take(t, Lanes, z + row + x0, lengths.data() + row + x0);
     }
   });
 }
@@ -289,9 +300,7 @@ __attribute__((target("avx2"))) void decode_avx2(const StaticCoded& in, const iv
     xs[v] = _mm256_loadu_si256(
         reinterpret_cast<const __m256i*>((Vectors == 1 ? in.word_states.data() : in.word_states16.data()) + 8 * v));
   const std::uint16_t* p = Vectors == 1 ? in.words.data() : in.words16.data();
-  const std::uint8_t* q = in.below.data();
-  std::uint64_t bits = 0;
-  unsigned bit_count = 0;
+  BitsBelow below{in.below.data()};
   const std::uint32_t nx = d[0];
   const __m256i low12 = _mm256_set1_epi32(kTotal - 1), low5 = _mm256_set1_epi32(31),
                 freq_mask = _mm256_set1_epi32(0x1FFF), zero = _mm256_setzero_si256();
@@ -328,25 +337,7 @@ __attribute__((target("avx2"))) void decode_avx2(const StaticCoded& in, const iv
           x = _mm256_blendv_epi8(x, _mm256_or_si256(_mm256_slli_epi32(x, 16), placed), need);
           p += __builtin_popcount(m);
         }
-        std::uint64_t word;
-        std::memcpy(&word, q, 8);
-        bits |= word << bit_count;
-        q += (63 - bit_count) >> 3;
-        bit_count |= 56;
-        for (unsigned l = 0; l < kLanes; ++l) {
-          const unsigned b = token_length(t[l]), e = b > 2 ? b - 2 : 0;
-          const unsigned lead = b > 2 ? (2 + (t[l] & 1)) << e : t[l];
-          z[row + x0 + l] = static_cast<std::uint16_t>(lead | (bits & ((1u << e) - 1)));
-          bits >>= e;
-          bit_count -= e;
-          lengths[row + x0 + l] = static_cast<std::uint8_t>(b);
-          if (bit_count < 14 && l + 1 < kLanes) {
-            std::memcpy(&word, q, 8);
-            bits |= word << bit_count;
-            q += (63 - bit_count) >> 3;
-            bit_count |= 56;
-          }
-        }
+        below.take(t, kLanes, z + row + x0, lengths.data() + row + x0);
       }
     }
 }
