@@ -8,7 +8,8 @@
 // (the volume's range scaled to 0 .. 65535), with codec 3 and with codec 2 at
 // zstd level ZSTD_LEVEL (default 3) for both, codec 3 with the entropy coder
 // ENTROPY (smaller: the smaller of the two per brick, the default; zstd:
-// coder 1 only; tokens: coder 2 only, where the spec allows it); prints bytes, and encode and decode (best of three
+// coder 1 only; tokens: coder 2 only, where the spec allows it; lanes: coder 3, coder 1 where Smaller
+// would try it); prints bytes, and encode and decode (best of three
 // passes) MB/s of 16-bit values per second of the thread's CPU time.
 #include <algorithm>
 #include <cmath>
@@ -114,7 +115,7 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: codec_bench VOLUME.f32 N [BRICK_LOG2 [ZSTD_LEVEL [smaller|zstd|tokens]]]\n");
+    std::fprintf(stderr, "usage: codec_bench VOLUME.f32 N [BRICK_LOG2 [ZSTD_LEVEL [smaller|zstd|tokens|lanes]]]\n");
     return 2;
   }
   const std::uint32_t n = static_cast<std::uint32_t>(std::stoul(argv[2]));
@@ -122,7 +123,10 @@ int main(int argc, char** argv) {
   const int zstd_level = argc > 4 ? std::stoi(argv[4]) : 3;
   const std::string coder = argc > 5 ? argv[5] : "smaller";
   using Entropy = ivol::PredictedOptions::Entropy;
-  const Entropy entropy = coder == "zstd" ? Entropy::ZstdPlanes : coder == "tokens" ? Entropy::Tokens : Entropy::Smaller;
+  const Entropy entropy = coder == "zstd"     ? Entropy::ZstdPlanes
+                          : coder == "tokens" ? Entropy::Tokens
+                          : coder == "lanes"  ? Entropy::Lanes
+                                              : Entropy::Smaller;
   bench::SixteenBitVolume volume;
   try {
     volume = bench::read_sixteen_bit(argv[1], n);

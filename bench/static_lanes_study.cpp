@@ -40,6 +40,7 @@
 #include <immintrin.h>
 #endif
 
+#include "../libformat/src/residual_lanes.hpp"   // coder 3, internal to libformat
 #include "../libformat/src/residual_tokens.hpp"  // coder 2, internal to libformat
 #include "ivol/predicted_codec.hpp"
 #include "sixteen_bit_volume.hpp"
@@ -590,6 +591,23 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
       best_split32 = std::min(best_split32, cpu_now() - t);
     }
 #endif
+  }
+  // The library's coder 2 and coder 3 encoders on the same residuals.
+  for (int coder = 2; coder <= 3; ++coder) {
+    double best = 1e30;
+    std::vector<std::uint8_t> sink;
+    for (int pass = 0; pass < 3; ++pass) {
+      const double t = cpu_now();
+      for (const Brick& b : bricks) {
+        sink.clear();
+        if (coder == 2)
+          ivol::detail::encode_residual_tokens(b.residuals.data(), b.dims, ~std::size_t{0}, sink);
+        else
+          ivol::detail::encode_residual_lanes(b.residuals.data(), b.dims, ~std::size_t{0}, sink);
+      }
+      best = std::min(best, cpu_now() - t);
+    }
+    std::fprintf(stderr, "%s: the library's coder %d encoder alone: %.0f MB/s\n", label, coder, mb / best);
   }
   // What making the slot words costs alone (every decoder above that
   // uses them makes them for each brick).

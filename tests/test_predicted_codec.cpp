@@ -356,8 +356,8 @@ TEST(PredictedCodec, HostilePayloadsAreRefused) {
   expect_refused(p, d, C::Malformed, "shift 16");
   p = good, p[3] = 0;
   expect_refused(p, d, C::UnsupportedFeature, "entropy coder 0");
-  p = good, p[3] = 3;
-  expect_refused(p, d, C::UnsupportedFeature, "entropy coder 3");
+  p = good, p[3] = 4;
+  expect_refused(p, d, C::UnsupportedFeature, "entropy coder 4");
   p = good, p[23] = 1;
   expect_refused(p, d, C::Malformed, "reserved");
   p = good, p.push_back(0);

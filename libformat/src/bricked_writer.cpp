@@ -128,8 +128,11 @@ struct BrickedGridWriter::Impl {
       // saved, and skipped 80 % of the trials on the noise-free pencil
       // holder, where codec 6 wins none (bench/RESULTS.md, "Codec 6").
       if (w.zstd_level <= 3) try_top_byte = 100 * planes.bytes.size() < 105 * block.bytes.size();
-      // Who asked for zstd's entropy coding asked for its decoding speed.
-      if (options.entropy == PredictedOptions::Entropy::ZstdPlanes) try_top_byte = false;
+      // Who asked for zstd's entropy coding or coder 3 asked for their
+      // decoding speed, which codec 6 does not have.
+      if (options.entropy == PredictedOptions::Entropy::ZstdPlanes ||
+          options.entropy == PredictedOptions::Entropy::Lanes)
+        try_top_byte = false;
       if (trial.zstd_level != w.zstd_level && planes.bytes.size() < block.bytes.size()) {
         EncodedBlock asked = encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), w);
         if (asked.bytes.size() <= planes.bytes.size()) planes = std::move(asked);
@@ -270,7 +273,8 @@ void BrickedGridWriter::add_layer(const std::uint32_t* values) {
 template <class T>
 void BrickedGridWriter::Impl::add_layer(const T* values) {
   Impl& m = *this;
-  if (m.next_layer >= m.grid.bricks()[2]) throw Error(ErrorClass::InvalidArgument, "bricked grid: a layer after the last");
+  if (m.next_layer >= m.grid.bricks()[2])
+    throw Error(ErrorClass::InvalidArgument, "bricked grid: a layer after the last");
   // The stored levels of detail take the layer's voxels on a thread of
   // their own while its bricks are encoded; a layer of a level's bricks is
   // written once its last slice is summed (spec §15), after the layer.

@@ -16,6 +16,7 @@
 #include "ivol/error.hpp"
 #include "predicted_fit.hpp"
 #include "predicted_rows.hpp"
+#include "residual_lanes.hpp"
 #include "residual_tokens.hpp"
 #include "zstd_parts.hpp"
 
@@ -31,6 +32,7 @@ constexpr std::uint8_t kMapIdentity = 0;       // the u16 as it is
 constexpr std::uint8_t kMapBinary16Order = 1;  // binary16 bit patterns in numeric order
 constexpr std::uint8_t kEntropyZstdPlanes = 1;
 constexpr std::uint8_t kEntropyTokens = 2;  // rANS over tokens with contexts (§7.2.1)
+constexpr std::uint8_t kEntropyLanes = 3;   // the same tokens under stored tables, 32 states (§7.2.2)
 constexpr unsigned kMaxShift = 15;
 
 // Negative numbers reversed below the positive ones: -0 (0x8000) becomes
@@ -251,8 +253,16 @@ std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const Br
     return out;
   }
   std::vector<std::uint8_t> tokens(out.begin(), out.begin() + kPredictedHeaderSize);
-  tokens[3] = kEntropyTokens;
-  const bool coded = detail::encode_residual_tokens(best_z.data(), dims, limit, tokens);
+  // Coder 3 in bricks of 2^18 voxels (64³) or more unless coder 2 was asked
+  // for: there its stored tables and states weigh nothing (−0.05 to +0.04 %
+  // of coder 2's bytes on the 256³ phantoms) and it decodes twice as fast;
+  // in 32³ bricks they cost 0.3–0.5 % (bench/RESULTS.md, "Entropy coder 3").
+  constexpr std::size_t kLanesFromVoxels = std::size_t{1} << 18;
+  const bool lanes = options.entropy == PredictedOptions::Entropy::Lanes ||
+                     (options.entropy == PredictedOptions::Entropy::Smaller && n >= kLanesFromVoxels);
+  tokens[3] = lanes ? kEntropyLanes : kEntropyTokens;
+  const bool coded = lanes ? detail::encode_residual_lanes(best_z.data(), dims, limit, tokens)
+                           : detail::encode_residual_tokens(best_z.data(), dims, limit, tokens);
   if (coded && options.entropy == PredictedOptions::Entropy::Tokens) return tokens;
   // Coder 1 wins only where coder 2 spends under about a bit a voxel (air
   // and flat material, where zstd's matches beat any per-voxel cost), and
@@ -336,7 +346,7 @@ void decode_predicted(const std::uint8_t* payload, std::size_t size, const Brick
   if (payload[1] != kMapIdentity && payload[1] != kMapBinary16Order)
     bad(ErrorClass::Malformed, "value map " + std::to_string(payload[1]) + " is not 0 or 1");
   if (payload[2] > kMaxShift) bad(ErrorClass::Malformed, "shift " + std::to_string(payload[2]) + " exceeds 15");
-  if (payload[3] != kEntropyZstdPlanes && payload[3] != kEntropyTokens)
+  if (payload[3] != kEntropyZstdPlanes && payload[3] != kEntropyTokens && payload[3] != kEntropyLanes)
     bad(ErrorClass::UnsupportedFeature, "entropy coder " + std::to_string(payload[3]) + " is not known");
   if (payload[22] != 0 || payload[23] != 0) bad(ErrorClass::Malformed, "the reserved bytes 22 .. 24 are not 0");
   PredictorTaps taps;
@@ -352,6 +362,8 @@ void decode_predicted(const std::uint8_t* payload, std::size_t size, const Brick
   residuals.resize(n);
   if (payload[3] == kEntropyTokens)
     detail::decode_residual_tokens(payload + kPredictedHeaderSize, size - kPredictedHeaderSize, dims, residuals.data());
+  else if (payload[3] == kEntropyLanes)
+    detail::decode_residual_lanes(payload + kPredictedHeaderSize, size - kPredictedHeaderSize, dims, residuals.data());
   else
     decode_zstd_planes(payload + kPredictedHeaderSize, size - kPredictedHeaderSize, n, residuals.data());
   const RowPredictor p(taps);

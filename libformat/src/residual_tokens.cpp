@@ -10,14 +10,15 @@
 #include <string>
 
 #include "ivol/error.hpp"
+#include "token_contexts.hpp"
 
 namespace ivol::detail {
 namespace {
 
-constexpr unsigned kContexts = 12;
-constexpr int kTokens = 32;
-constexpr unsigned kPrecision = 12;  // every table sums to 2^12
-constexpr std::uint32_t kTotal = 1u << kPrecision;
+constexpr unsigned kContexts = kTokenContexts;
+constexpr unsigned kTokens = kTokenCount;
+constexpr unsigned kPrecision = kTableBits;
+constexpr std::uint32_t kTotal = kTableTotal;
 constexpr std::uint32_t kStateLow = 1u << 23;  // a state lies in [2^23, 2^32) between symbols
 constexpr std::uint32_t kCountStart = 1;       // every token's count before the brick
 constexpr std::uint32_t kCountStep = 16;       // added to a token's count each time it occurs
@@ -27,27 +28,6 @@ constexpr std::uint32_t kRefreshEvery = 128;   // tables made again every 128 to
 [[noreturn]] void bad(const std::string& what) {
   throw Error(ErrorClass::Malformed, "codec 3, entropy coder 2: " + what);
 }
-
-// A residual's token: 0 and 1 themselves, else 2b − 2 plus the bit after the
-// leading one (b its bit length), 2 .. 31; with its bit length, for n
-// residuals in one loop that vectorises: for z ≥ 2, z as a binary32 (exact)
-// has the exponent b − 1 and the bit after the leading one as its first
-// mantissa bit, so the token is the float's bits >> 22, less 2·127.
-void tokens_of(const std::uint16_t* __restrict z, std::size_t n, std::uint8_t* __restrict tokens,
-               std::uint8_t* __restrict lengths) {
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::uint32_t v = z[i];
-    const float f = static_cast<float>(static_cast<std::int32_t>(v));
-    std::uint32_t bits;
-    std::memcpy(&bits, &f, sizeof bits);
-    const std::uint32_t t = v < 2 ? v : (bits >> 22) - 254;
-    tokens[i] = static_cast<std::uint8_t>(t);
-    lengths[i] = static_cast<std::uint8_t>(t < 2 ? t : (t >> 1) + 1);
-  }
-}
-
-// The bit length of the residuals a token stands for.
-constexpr unsigned token_bit_length(unsigned t) { return t < 2 ? t : (t >> 1) + 1; }
 
 // What a token says of its residual: its bit length, how many bits below
 // its two leading bits follow in the stream (e = length − 2, at most 14),
@@ -168,47 +148,6 @@ std::uint64_t le64(std::uint64_t v) {
 
 void put_u32(std::uint8_t* p, std::uint32_t v) {
   for (int k = 0; k < 4; ++k) p[k] = static_cast<std::uint8_t>(v >> (8 * k));
-}
-
-// The contexts of a row of voxels from the bit lengths of the tokens in the
-// row before it along y (`up`) and along z (`back`), 0 outside the brick:
-// s = 2·up(x) + back(x) + up(x − 1) + up(x + 1), context min(11, (s + 2) / 5).
-// Only earlier rows count, not the voxel before along x: the contexts of a
-// whole row are known before its first token is decoded, so the decoder's
-// loop carries only the rANS states from voxel to voxel (and these contexts
-// compressed better than ones with the x neighbour, bench/RESULTS.md).
-//
-// `padded` holds nx + 2 bytes, 0 at both ends: the up row is copied between
-// them, so that the loop has no edge cases and vectorises (its edge cases
-// took a tenth of either coder's time).
-// Not inlined: GCC 12 vectorises it alone, not inside the walk's loops.
-#if defined(__GNUC__)
-__attribute__((noinline))
-#endif
-void row_contexts(const std::uint8_t* up, const std::uint8_t* __restrict back, std::uint32_t nx,
-                  std::uint8_t* __restrict padded, std::uint8_t* __restrict contexts) {
-  std::memcpy(padded + 1, up, nx);
-  for (std::size_t x = 0; x < nx; ++x) {
-    const auto s = static_cast<std::uint16_t>(2 * padded[x + 1] + back[x] + padded[x] + padded[x + 2] + 2);
-    const auto c = static_cast<std::uint16_t>(s / 5);
-    contexts[x] = static_cast<std::uint8_t>(c < kContexts - 1 ? c : kContexts - 1);
-  }
-}
-
-// Visits a brick's rows in raster order with each row's contexts:
-// visit(i, contexts, lengths + i) for the row starting at voxel i, which
-// sets the bit lengths of its tokens.
-template <class Visit>
-void walk_rows(const BrickDims& d, std::uint8_t* lengths, Visit&& visit) {
-  const std::size_t sy = d[0], sz = std::size_t{d[0]} * d[1];
-  std::vector<std::uint8_t> zeros(d[0]), contexts(d[0]), padded(std::size_t{d[0]} + 2);
-  std::size_t i = 0;
-  for (std::uint32_t z = 0; z < d[2]; ++z)
-    for (std::uint32_t y = 0; y < d[1]; ++y, i += d[0]) {
-      row_contexts(y ? lengths + i - sy : zeros.data(), z ? lengths + i - sz : zeros.data(), d[0], padded.data(),
-                   contexts.data());
-      visit(i, contexts.data(), lengths + i);
-    }
 }
 
 }  // namespace

@@ -32,8 +32,7 @@ BrickedOptions bricked_options(const ImportOptions& options, const StreamingOpti
   bricked.threads = threads;
   bricked.brick_log2 = options.brick_log2;
   bricked.zstd_level = options.zstd_level;
-  bricked.entropy =
-      options.rans_residuals ? PredictedOptions::Entropy::Smaller : PredictedOptions::Entropy::ZstdPlanes;
+  bricked.entropy = options.residual_coder;
   bricked.encoding = streaming.build.encoding;
   bricked.value_scale = streaming.build.value_scale;
   bricked.value_offset = streaming.build.value_offset;
@@ -70,9 +69,9 @@ std::uint64_t bricked_layer_bytes(const DenseVolume& shape, const ImportOptions&
   Wide levels = 65536 * 17;
   for (unsigned k = 3; k <= depth_for(shape.dims); ++k) {
     const Dims level = lod_dims(shape.dims, k);
-    levels += Wide{level[0]} * level[1] *
-              (9 + (4 + width) *
-                       std::min<std::uint64_t>(level[2], std::uint64_t{1} << std::min(options.brick_log2, 31u)));
+    levels +=
+        Wide{level[0]} * level[1] *
+        (9 + (4 + width) * std::min<std::uint64_t>(level[2], std::uint64_t{1} << std::min(options.brick_log2, 31u)));
   }
   // Whole layers read at once hold their stored values until they are added.
   const Wide stored = slice * std::max(slices, layer_slices_of(shape, options)) * width;

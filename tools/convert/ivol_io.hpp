@@ -13,6 +13,7 @@
 #include "ivol/block_encoder.hpp"
 #include "ivol/encoding.hpp"
 #include "ivol/metadata.hpp"
+#include "ivol/predicted_codec.hpp"
 #include "ivol/reader.hpp"
 #include "ivol/streaming_writer.hpp"
 #include "slab_io.hpp"
@@ -48,7 +49,9 @@ struct ImportOptions {
   std::optional<KeepRule> keep;           // default: lossless (equal leaves merge)
   std::uint32_t block_bytes = 0;          // 0: the library's default
   bool byte_planes = true;                // values over byte planes (codec 2, format 1.2)
-  bool rans_residuals = true;             // codec 3 may code residuals by rANS (§7.2.1); false: zstd only
+  // How codec 3 codes residuals: Smaller (coder 2, §7.2.1, or zstd where
+  // smaller), ZstdPlanes (zstd only), Lanes (coder 3, §7.2.2).
+  PredictedOptions::Entropy residual_coder = PredictedOptions::Entropy::Smaller;
   bool framed_blocks = true;              // format 1.3 framing (salvageable); false: format 1.2
   std::uint64_t slab_budget_bytes = 0;    // 0: the library's default
   std::uint64_t memory_bytes = 0;         // all the conversion may hold (--memory); 0: kDefaultMemoryBytes

@@ -26,14 +26,19 @@ struct PredictedOptions {
   // Best: the smallest residuals of Lorenzo and both fits; LeastSquares: of
   // the fits only.
   enum class Taps { Best, Lorenzo, LeastSquares } taps = Taps::Best;
-  // Which entropy coder (§7.2, header byte 3) the encoder may use. Smaller:
-  // coder 2 (rANS over tokens), or coder 1 (zstd over byte planes) where
-  // coder 2 spends under a bit a voxel or the brick has fewer than 4096
-  // voxels, and coder 1 is smaller (elsewhere
-  // coder 1 did not win by more than a few bytes a file and cost a fifth of
-  // the encoding time). ZstdPlanes, Tokens: only that one (Tokens falls back
-  // to coder 1 where coder 2 passes the spec's limit).
-  enum class Entropy { Smaller, ZstdPlanes, Tokens } entropy = Entropy::Smaller;
+  // Which entropy coder (§7.2, header byte 3) the encoder may use.
+  // Smaller: coder 2 (rANS over tokens with adaptive contexts, §7.2.1), or
+  // in bricks of 2^18 voxels (64³) or more coder 3 (the same tokens under
+  // stored tables with 32 states, §7.2.2: as small there, and decoding
+  // twice as fast); and coder 1 (zstd over byte planes) where that coder
+  // spends under a bit a voxel or the brick has fewer than 4096 voxels, and
+  // coder 1 is smaller (elsewhere coder 1 did not win by more than a few
+  // bytes a file and cost a fifth of the encoding time). ZstdPlanes, Tokens:
+  // only that one (Tokens falls back to coder 1 where coder 2 passes the
+  // spec's limit). Lanes: coder 3 in every brick, or coder 1 under the same
+  // rule as Smaller (1.7–1.8 times coder 2's decoding speed in 32³ bricks,
+  // for 0.3–0.5 % more bytes).
+  enum class Entropy { Smaller, ZstdPlanes, Tokens, Lanes } entropy = Entropy::Smaller;
 };
 
 // Size of the codec header in front of the zstd frame (spec §7.2).
