@@ -31,6 +31,12 @@ The script contains
     adaptive model, an rANS encoder with two interleaved states (model run
     forward, voxels coded last to first) and the self-test's decoder with
     every check of §7.2.1,
+  * (1.3 draft) codec 3's entropy coder 3 (§7.2.2): the same tokens, contexts
+    and bits below under tables stored per context (counted over the brick,
+    frequencies proportional, or chosen otherwise for some vectors), the
+    tables' bit string, an rANS encoder with 32 interleaved states and 16-bit
+    words (voxels coded last to first, every state from 2^16) and the
+    self-test's decoder with every check of §7.2.2,
   * a small reader that follows the check order of §13; it is used only as a
     self-test: every valid vector must read back to its expected dense export
     and levels of detail, and every invalid vector must fail with its
@@ -156,15 +162,18 @@ def values_from_residuals(zs, ext, value_map=1, shift=0, taps=LORENZO, level=0):
 
 
 def predicted_payload(vals, ext, value_map=1, shift=0, taps=LORENZO, level=0, predictor=1,
-                      entropy=1, reserved=b"\0\0", zcheck=False, e2=None):
+                      entropy=1, reserved=b"\0\0", zcheck=False, e2=None, e3=None):
     """§7.2: the codec header, then (entropy 1) the zstd frame of the zigzag
-    residuals' byte planes, or (entropy 2) the rANS coding of §7.2.1, e2 the
-    options of e2_encode (for invalid vectors and statistics)."""
+    residuals' byte planes, (entropy 2) the rANS coding of §7.2.1, e2 the
+    options of e2_encode (for invalid vectors and statistics), or (entropy 3)
+    the coding of §7.2.2, e3 the options of e3_encode."""
     n = ext[0] * ext[1] * ext[2]
     zs = predicted_residuals(vals, ext, value_map, shift, taps, level)
     head = struct.pack("<BBBB7hi", predictor, value_map, shift, entropy, *taps, level) + reserved
     if entropy == 2:
         return head + e2_encode(zs, ext, **(e2 or {}))
+    if entropy == 3:
+        return head + e3_encode(zs, ext, **(e3 or {}))
     low, high = bytes(zz & 0xFF for zz in zs), bytes(zz >> 8 for zz in zs)
     assert len(low) == n
     return head + zframe(low + high, zcheck)
@@ -183,7 +192,7 @@ def predicted_decode(st, ext):
         _fail("malformed", "codec3.map")
     if shift > 15:
         _fail("malformed", "codec3.shift")
-    if entropy not in (1, 2):
+    if entropy not in (1, 2, 3):
         _fail("unsupported-feature", "codec3.entropy")
     if st[22:24] != b"\0\0":
         _fail("malformed", "codec3.reserved")
@@ -192,8 +201,10 @@ def predicted_decode(st, ext):
     if entropy == 1:
         planes = zstd_content(st[24:], 2 * n)
         zs = [planes[i] | planes[n + i] << 8 for i in range(n)]
-    else:
+    elif entropy == 2:
         zs = e2_decode(st[24:], ext)
+    else:
+        zs = e3_decode(st[24:], ext)
     vals = values_from_residuals(zs, ext, value_map, shift, taps, level)
     return struct.pack("<%dH" % n, *vals)
 
@@ -404,6 +415,285 @@ def e2_decode(body, ext, skip=()):
         w = int(bitstr[j:j + e][::-1], 2) if e else 0
         j += e
         zs.append(e2_residual(t, w))
+    return zs
+
+
+# ------------------------------------------- codec 3, entropy coder 3 (§7.2.2)
+
+E3_LOW = 1 << 16        # the states' lower bound: where the encoder starts them, where the decoder ends them
+E3_STATES = 32          # the number of rANS states; voxel i is coded with X_{i mod 32}
+
+
+class BitString:
+    """A bit string packed into bytes from bit 0 of its first byte up (bit j
+    is bit j mod 8 of byte j // 8), as §7.2.2's tables and §7.2.1's bits
+    below are.  Every number is put least significant bit first (see
+    SPEC-NOTES, §7.2.2).  `marks` records (name, bit position, width) of the
+    fields put with a name, so that invalid vectors can change one."""
+
+    def __init__(self):
+        self.acc = 0
+        self.n = 0
+        self.marks = []
+
+    def put(self, v, nbits, mark=None):
+        assert 0 <= v < 1 << nbits or (nbits == 0 and v == 0), (v, nbits)
+        if mark is not None:
+            self.marks.append((mark, self.n, nbits))
+        self.acc |= v << self.n
+        self.n += nbits
+
+    def tobytes(self):
+        return self.acc.to_bytes((self.n + 7) // 8, "little")
+
+
+def set_bits(data, pos, nbits, v):
+    """data (bytes) with bits pos .. pos + nbits - 1 of its bit string set to
+    the number v, least significant bit first."""
+    acc = int.from_bytes(data, "little")
+    acc = acc & ~(((1 << nbits) - 1) << pos) | v << pos
+    return acc.to_bytes(len(data), "little")
+
+
+def e3_tables_bits(tables):
+    """§7.2.2 Tables: the bit string of the 12 contexts' tables (unpadded, as
+    a BitString).  tables[k] is None (used = 0: every f_t = 128) or the list of
+    (t, f_t) of the present tokens in increasing t; the last f is not written
+    (a reader takes 4096 minus the others), the others as a = floor(log2 f)
+    in 4 bits and w = f - 2^a in a bits."""
+    bs = BitString()
+    for k in range(12):
+        pairs = tables[k]
+        if pairs is None:
+            bs.put(0, 1, ("used", k))
+            continue
+        bs.put(1, 1, ("used", k))
+        present = 0
+        for t, _ in pairs:
+            present |= 1 << t
+        bs.put(present, 32, ("present", k))
+        for t, f in pairs[:-1]:
+            a = f.bit_length() - 1
+            assert 0 <= a <= 11, f
+            bs.put(a, 4, ("a", k, t))
+            bs.put(f - (1 << a), a, ("w", k, t))
+    return bs
+
+
+def e3_frequencies(counts):
+    """One choice the encoder paragraph of §7.2.2 allows: f_t = max(1,
+    floor(4096 c_t / N)) for every token that occurs (c_t > 0), 0 for the
+    others, and the remainder 4096 - sum added to the most frequent token
+    (the lowest t among equal counts)."""
+    N = sum(counts)
+    f = [max(1, 4096 * c // N) if c else 0 for c in counts]
+    j = max(range(32), key=lambda t: (counts[t], -t))
+    f[j] += 4096 - sum(f)
+    assert f[j] >= 1 and sum(f) == 4096
+    return f
+
+
+def e3_analyse(zs, ext):
+    """(tokens as (t, e, w), bit lengths B, contexts k) of the residuals zs of
+    a brick, raster order (§7.2.1 Tokens and Contexts)."""
+    toks = [e2_token(zz) for zz in zs]
+    B = [e2_bitlen(t) for t, _, _ in toks]
+    ks = [e2_context(B, ext, x, y, z) for x, y, z in _raster(ext)]     # earlier rows only
+    return toks, B, ks
+
+
+def e3_encode(zs, ext, freqs=None, uniform=(), start=None, extra=None, tables_out=None):
+    """§7.2.2, the encoder paragraph: the tables, the 32 states, W, the word
+    stream and the bits below of the residuals zs (raster order) of a brick
+    of extent ext.  Each context's tokens are counted over the brick and its
+    frequencies chosen by e3_frequencies, unless
+      freqs = {k: [f_0 .. f_31]}: the frequencies of context k as given
+              (f_t >= 1 for every token that occurs in k, sum 4096; tokens
+              with f_t >= 1 that do not occur are allowed),
+      uniform = contexts written with used = 0 although they code voxels
+              (§7.2.2: "or may be read so"), coded under f_t = 128;
+    a context that codes no voxel is written with used = 0 (unless freqs
+    gives it a table).  The voxels are
+    coded from the last to the first, voxel i with state X_{i mod 32}, every
+    state starting at `start[j]` (2^16 in a valid payload).  extra = j
+    (invalid vectors only): before the last coding step of state j emit one
+    word more than the encoder rule asks, so that X_j ends below 2^16 while
+    the stream otherwise decodes exactly.  tables_out (a dict or None)
+    receives the tables' BitString and the frequencies used."""
+    n = len(zs)
+    toks, B, ks = e3_analyse(zs, ext)
+    counts = [[0] * 32 for _ in range(12)]
+    for (t, _, _), k in zip(toks, ks):
+        counts[k][t] += 1
+    F, tables = [], []
+    for k in range(12):
+        if k in uniform or not (any(counts[k]) or (freqs and k in freqs)):
+            F.append([128] * 32)
+            tables.append(None)
+            continue
+        f = list(freqs[k]) if freqs and k in freqs else e3_frequencies(counts[k])
+        assert sum(f) == 4096 and all(ft >= 1 for ft, c in zip(f, counts[k]) if c), (k, f)
+        F.append(f)
+        tables.append([(t, ft) for t, ft in enumerate(f) if ft])
+    S = []
+    for f in F:
+        s, acc = [], 0
+        for ft in f:
+            s.append(acc)
+            acc += ft
+        S.append(s)
+    X = list(start) if start is not None else [E3_LOW] * E3_STATES
+    emitted = []
+    for i in range(n - 1, -1, -1):
+        j = i % E3_STATES
+        x = X[j]
+        t = toks[i][0]
+        f, s = F[ks[i]][t], S[ks[i]][t]
+        if x >= f << 20:
+            emitted.append(x & 0xFFFF)
+            x >>= 16
+        elif extra == j and i == j:          # (only where the rule emitted nothing: see e3 invalid vectors)
+            emitted.append(x & 0xFFFF)
+            x >>= 16
+        X[j] = 4096 * (x // f) + x % f + s
+        assert X[j] < 1 << 32
+    if extra is not None:
+        assert X[extra] < E3_LOW, "state %d emitted at its last step: choose another" % extra
+    bs = e3_tables_bits(tables)
+    if tables_out is not None:
+        tables_out.update(bits=bs, F=F, counts=counts, W=len(emitted))
+    words = list(reversed(emitted))
+    acc = nbits = 0
+    for _, e, w in toks:                         # least significant bit first
+        acc |= w << nbits
+        nbits += e
+    bits = acc.to_bytes((nbits + 7) // 8, "little")
+    return (bs.tobytes() + struct.pack("<32I", *X) + struct.pack("<I", len(words))
+            + struct.pack("<%dH" % len(words), *words) + bits)
+
+
+def e3_split(body):
+    """(tables, states, W, words, bits below) of the bytes after a codec 3
+    header of entropy 3, as bytes (W an int), for building invalid vectors;
+    the tables end is found by parsing them."""
+    tb = e3_tables_size(body)
+    st = body[tb:tb + 128]
+    (W,) = struct.unpack_from("<I", body, tb + 128)
+    words = body[tb + 132:tb + 132 + 2 * W]
+    return body[:tb], st, W, words, body[tb + 132 + 2 * W:]
+
+
+def e3_join(tables, states, W, words, bits):
+    return tables + states + struct.pack("<I", W) + words + bits
+
+
+def e3_parse_tables(body):
+    """§7.2.2 Tables, for the self-test: (frequencies of the 12 contexts, the
+    number of bits the tables take), with every check of the tables."""
+    nb = 8 * len(body)
+    pos = 0
+
+    def get(width):
+        nonlocal pos
+        if pos + width > nb:
+            _fail("malformed", "codec3.entropy3.tables_short", "bit %d of %d" % (pos + width, nb))
+        v = 0
+        for q in range(width):                   # least significant bit first
+            v |= (body[(pos + q) >> 3] >> ((pos + q) & 7) & 1) << q
+        pos += width
+        return v
+    F = []
+    for k in range(12):
+        if not get(1):                           # used = 0
+            F.append([128] * 32)
+            continue
+        present = get(32)
+        if present == 0:
+            _fail("malformed", "codec3.entropy3.present_zero", "context %d" % k)
+        ts = [t for t in range(32) if present >> t & 1]
+        f = [0] * 32
+        for t in ts[:-1]:
+            a = get(4)
+            if a > 11:
+                _fail("malformed", "codec3.entropy3.a_over_11", "context %d token %d: a = %d" % (k, t, a))
+            f[t] = (1 << a) + get(a)
+        last = 4096 - sum(f)
+        if last < 1:
+            _fail("malformed", "codec3.entropy3.last_frequency", "context %d token %d: %d" % (k, ts[-1], last))
+        f[ts[-1]] = last
+        F.append(f)
+    return F, pos
+
+
+def e3_tables_size(body):
+    return (e3_parse_tables(body)[1] + 7) // 8
+
+
+def e3_decode(body, ext, skip=()):
+    """§7.2.2, for the self-test: the residuals of the bytes after a codec 3
+    header of entropy 3, with every check of §7.2.2 in the order a decoder
+    meets them (the tables as they parse, their padding, 132 bytes, the
+    initial states, 2·W bytes, the word stream per renormalisation, the end
+    states, no word left, the bits below and their padding).  skip: names of
+    checks left out (only to show that an invalid vector breaks nothing
+    else)."""
+    n = ext[0] * ext[1] * ext[2]
+    F, pos = e3_parse_tables(body)
+    tb = (pos + 7) // 8
+    if pos % 8 and body[pos // 8] >> (pos % 8):
+        _fail("malformed", "codec3.entropy3.tables_padding")
+    if len(body) < tb + 132:
+        _fail("malformed", "codec3.entropy3.states_short", "%d bytes after the tables" % (len(body) - tb))
+    X = list(struct.unpack_from("<32I", body, tb))
+    if any(x < E3_LOW for x in X) and "initial_state" not in skip:
+        _fail("malformed", "codec3.entropy3.initial_state", " ".join(str(x) for x in X))
+    (W,) = struct.unpack_from("<I", body, tb + 128)
+    wo = tb + 132
+    if 2 * W > len(body) - wo:                   # exact arithmetic: no wrap of 2·W
+        _fail("malformed", "codec3.entropy3.words_short", "W = %d, %d bytes left" % (W, len(body) - wo))
+    words = struct.unpack_from("<%dH" % W, body, wo)
+    S = []
+    for f in F:
+        s, acc = [], 0
+        for ft in f:
+            s.append(acc)
+            acc += ft
+        S.append(s)
+    rd = 0
+    toks, B = [0] * n, [0] * n
+    for i, (x, y, z) in enumerate(_raster(ext)):
+        k = e2_context(B, ext, x, y, z)
+        j = i % E3_STATES
+        st = X[j]
+        slot = st % 4096
+        f, s = F[k], S[k]
+        t = 0
+        while not s[t] <= slot < s[t] + f[t]:    # a token of frequency 0 is never chosen
+            t += 1
+        st = f[t] * (st // 4096) + slot - s[t]
+        if st < E3_LOW:                          # one word always suffices
+            if rd >= W:
+                _fail("malformed", "codec3.entropy3.stream_end", "voxel %d" % i)
+            st = 65536 * st + words[rd]
+            rd += 1
+        X[j] = st
+        toks[i], B[i] = t, e2_bitlen(t)
+    if any(x != E3_LOW for x in X) and "states_end" not in skip:
+        _fail("malformed", "codec3.entropy3.states_end", " ".join(str(x) for x in X))
+    if rd != W and "words_left" not in skip:
+        _fail("malformed", "codec3.entropy3.words_left", "%d of %d words read" % (rd, W))
+    bits = body[wo + 2 * W:]
+    E = sum(max(0, b - 2) for b in B)
+    if len(bits) != (E + 7) // 8:
+        _fail("malformed", "codec3.entropy3.bits_size", "%d bytes for %d bits" % (len(bits), E))
+    acc = int.from_bytes(bits, "little")
+    if acc >> E:
+        _fail("malformed", "codec3.entropy3.padding")
+    zs, j = [], 0
+    for t, b in zip(toks, B):
+        e = max(0, b - 2)
+        zs.append(e2_residual(t, acc >> j & ((1 << e) - 1)))
+        j += e
     return zs
 
 
@@ -3254,6 +3544,7 @@ def gen():
     gen_bricked_float32()
     gen_codec5()
     gen_codec6()
+    gen_entropy3()
     return SAMPLE
 
 
@@ -4428,11 +4719,12 @@ def gen_entropy2():
     inv("bricked_codec3_entropy2_short", "malformed", "codec3.entropy2.short",
         head + "is cut to 27 bytes, the codec header and 3 bytes: too short for R (§7.2.1: 28 + R <= "
                "payload size).", mutate=lambda blocks: setattr(blocks[0], "stored", blocks[0].stored[:27]))
-    inv("bricked_codec3_entropy_3", "unsupported-feature", "codec3.entropy",
-        head + "has entropy (payload byte 3) 3, not defined (§7.2: unsupported-feature); the bytes after "
-               "the header are its valid entropy 2 coding.",
+    inv("bricked_codec3_entropy_4", "unsupported-feature", "codec3.entropy",
+        head + "has entropy (payload byte 3) 4, not defined (§7.2 defines 1, 2 and 3: unsupported-feature); "
+               "the bytes after the header are its valid entropy 2 coding. (Before §7.2.2 this file had "
+               "entropy 3 and was named bricked_codec3_entropy_3.)",
         mutate=lambda blocks: setattr(blocks[0], "stored",
-                                      blocks[0].stored[:3] + b"\x03" + blocks[0].stored[4:]))
+                                      blocks[0].stored[:3] + b"\x04" + blocks[0].stored[4:]))
     add_invalid("bricked_codec3_entropy2_over_bound",
                 bricked_file(adv, UINT16, 3, value_map=0, entropy=2), "malformed", "block.stored_bound",
                 "Bricked grid 8x8x8 uint16, one brick, codec 3 with entropy coder 2, whose residuals were "
@@ -4441,6 +4733,462 @@ def gen_entropy2():
                 "bytes, more than codec 3's limit 24 + bound(2n) = %d (§7; its entropy 1 payload fits). The stored_size rule is checked from "
                 "the block table, whatever the coder." % (len(over), limit))
 
+
+# --------------------------------- codec 3 with entropy coder 3 (§7.2.2, 1.3 draft)
+
+def gen_entropy3():
+    """§7.2.2 (1.3 draft): bricked grids whose codec 3 blocks code their
+    residuals with entropy coder 3 (§7.2.1's tokens, contexts and bits below
+    under frequencies stored per context, 32 rANS states renormalised by
+    16-bit words), then files whose first codec 3 block breaks one rule of
+    §7.2.2 each, and codings that exceed codec 3's limit of §7.  Own random
+    generator, so that the vectors before it keep their bytes."""
+    rng = np.random.default_rng(2603)
+
+    def bricked_file(src, enc, b, codec=CODEC_PREDICTED, mutate=None, **pred):
+        return framed_bricked_file(src, enc, b, codec, mutate, **pred)
+
+    def valid(name, src, enc, b, desc, lods=True, **kw):
+        add_valid_bricked(name, bricked_file(src, enc, b, **kw), src, enc, b, desc, lods)
+
+    def limit(n):
+        return 24 + zstd_bound(2 * n)        # §7: codec 3's limit on the payload (+ 32 for the block header)
+
+    def brick_vals(src, enc, b, q):
+        first, ext, _ = bricked_order((src.shape[2], src.shape[1], src.shape[0]), b)[q]
+        n = ext[0] * ext[1] * ext[2]
+        return [int(v) for v in write_bricked(src, enc, b).values[first:first + n]], ext
+
+    def info(vals, ext, **kw):
+        """(payload, tables_out) of the entropy 3 coding of one brick."""
+        out = {}
+        pl = predicted_payload(vals, ext, entropy=3, e3=dict(kw.pop("e3", {}), tables_out=out), **kw)
+        return pl, out
+
+    def from_rule(ext, rule):
+        """Residuals chosen voxel by voxel (raster order): rule(k, x, y, z)
+        gives the token of a voxel in context k; its bits below are random."""
+        n = ext[0] * ext[1] * ext[2]
+        B, zs = [0] * n, []
+        for i, (x, y, z) in enumerate(_raster(ext)):
+            t = rule(e2_context(B, ext, x, y, z), x, y, z)
+            e = max(0, e2_bitlen(t) - 2)
+            zs.append(e2_residual(t, int(rng.integers(0, 1 << e)) if e else 0))
+            B[i] = e2_bitlen(t)
+        return zs
+
+    smooth = lambda X, Y, Z, lo, step: (lo + step * (np.arange(X)[None, None, :] + 2 * np.arange(Y)[None, :, None]
+                                                     + 3 * np.arange(Z)[:, None, None]))
+    e3u = dict(value_map=0, entropy=3)
+
+    # ---- valid
+    # edge bricks: extents of 1 along one axis in entropy 3, along two and three axes in entropy 2 (the limit of §7)
+    size = (9, 9, 9)
+    src = (smooth(9, 9, 9, 3000, 7) + (rng.random((9, 9, 9)) < 0.15)).astype(np.uint16)    # sparse noise
+    order = bricked_order(size, 3)
+    exts = [e for _, e, _ in order]
+    big = [q for q, e in enumerate(exts) if e[0] * e[1] * e[2] >= 64]
+    assert sorted(exts[q] for q in big) == [(1, 8, 8), (8, 1, 8), (8, 8, 1), (8, 8, 8)]
+    small = {}
+    for q, e in enumerate(exts):
+        if q not in big:
+            vals, _ = brick_vals(src, UINT16, 3, q)
+            small[e] = (len(predicted_payload(vals, e, **e3u)), limit(len(vals)))
+            assert small[e][0] > small[e][1]
+    for q in big:
+        vals, e = brick_vals(src, UINT16, 3, q)
+        pl, out = info(vals, e, value_map=0)
+        assert len(pl) <= limit(len(vals)) and any(f != [128] * 32 for f in out["F"]), (e, len(pl))
+    valid("bricked_entropy3_9x9x9_uint16_edge_bricks", src, UINT16, 3,
+          "Bricked grid 9x9x9 uint16, bricks of 8, codec 3 (Lorenzo taps, identity map). The bricks of 64 "
+          "voxels and more use entropy coder 3 (§7.2.2): 8x8x8 and the edge bricks of extent 1 along one "
+          "axis, 1x8x8 (context neighbours (x-1, y-1, z) and (x+1, y-1, z) outside the brick), 8x1x8 "
+          "((x, y-1, z), (x-1, y-1, z), (x+1, y-1, z) outside: the context is from (x, y, z-1) alone) and "
+          "8x8x1 ((x, y, z-1) outside). The edge bricks of extent 1 along two and three axes, 1x1x8, "
+          "1x8x1, 8x1x1 and 1x1x1, use entropy coder 2, because their entropy 3 payloads exceed codec 3's "
+          "limit 24 + bound(2n) (§7; %s): the tables, the 32 states and W alone take at least 134 bytes, so "
+          "no brick of fewer than 36 voxels can use coder 3 (see bricked_codec3_entropy3_1x1x1_over_bound "
+          "and bricked_entropy3_6x6x1_uint16_smallest_brick)."
+          % "; ".join("%dx%dx%d: %d > %d bytes" % (e + small[e]) for e in sorted(small)),
+          value_map=0, per_brick=lambda q: dict(value_map=0, entropy=3 if q in big else 2))
+    edge_src, edge_exts, edge_big = src, exts, big
+
+    # a column: bricks of extent 1 along two axes (x and y)
+    walk = 20000 + np.cumsum(rng.integers(-3, 4, 128))
+    src = walk.astype(np.uint16).reshape(128, 1, 1)
+    pl, out = info(*brick_vals(src, UINT16, 6, 0), value_map=0)
+    used = [k for k in range(12) if any(out["counts"][k])]
+    valid("bricked_entropy3_1x1x128_uint16_column", src, UINT16, 6,
+          "Bricked grid 1x1x128 uint16 (a column along z), bricks of 64: two bricks of extent 1x1x64 (extent "
+          "1 along x and y), codec 3 (identity map; every prediction is the voxel one step back along z) "
+          "with entropy coder 3. Each row is one voxel, so of the context neighbours only (x, y, z-1) lies "
+          "in the brick: k = min(11, floor((B + 2) / 5)) from the bit length B of the voxel below (first "
+          "brick: contexts %s used); each of the 32 states codes 2 voxels of a brick (z and z + 32)."
+          % ", ".join(map(str, used)), **e3u)
+
+    # rows of exactly 64 and 32 voxels
+    src = (smooth(64, 2, 2, 9000, 3) + rng.integers(0, 30, (2, 2, 64))).astype(np.uint16)
+    pl, out = info(*brick_vals(src, UINT16, 6, 0), value_map=0)
+    valid("bricked_entropy3_64x2x2_uint16_rows_of_64", src, UINT16, 6,
+          "Bricked grid 64x2x2 uint16, one brick of bricks of 64 (256 voxels), codec 3 (Lorenzo, identity "
+          "map) with entropy coder 3: rows of exactly 64 voxels, so state X_j codes the voxels x = j and "
+          "x = j + 32 of every row, 8 voxels each; the context neighbour (x+1, y-1, z) falls outside at "
+          "x = 63 only. W = %d words, %d bytes of payload." % (out["W"], len(pl)), **e3u)
+
+    vals = 0.25 + 0.002 * (np.arange(32)[None, None, :] - 3 * np.arange(4)[None, :, None]
+                           + 5 * np.arange(2)[:, None, None]) + rng.normal(0, 0.003, (2, 4, 32))
+    src = arr_f16(np.round(vals, 4).reshape(-1), (2, 4, 32))
+    kw32 = dict(value_map=1, shift=2, taps=(3, 3, 2, -2, -2, -1, 1), level=-3, entropy=3)
+    pl, out = info(*brick_vals(src, BINARY16, 5, 0), **{k: v for k, v in kw32.items() if k != "entropy"})
+    valid("bricked_entropy3_32x4x2_binary16_rows_of_32", src, BINARY16, 5,
+          "Bricked grid 32x4x2 binary16, one brick of bricks of 32 (256 voxels), codec 3 with the binary16 "
+          "order map, shift 2, taps 3, 3, 2, -2, -2, -1, 1 and level -3, with entropy coder 3: rows of "
+          "exactly 32 voxels, so state X_j codes column x = j of every row (8 voxels each). W = %d words."
+          % out["W"], **kw32)
+
+    # binary16 specials through the binary16 order map
+    X, Y, Z = 12, 8, 8
+    vals = 0.5 + 0.01 * (np.arange(X)[None, None, :] + np.arange(Y)[None, :, None] - np.arange(Z)[:, None, None]) \
+        + rng.normal(0, 0.002, (Z, Y, X))
+    src = arr_f16(np.round(vals, 4).reshape(-1), (Z, Y, X))
+    specials = {(0, 0, 0): 0x8000, (3, 2, 1): 0x0000, (5, 5, 5): 0x7E01, (6, 1, 7): 0xFE77, (2, 7, 3): 0x7C00,
+                (7, 3, 2): 0xFC00, (1, 1, 1): 0x0001, (4, 6, 6): 0x8001, (7, 7, 7): 0x03FF, (9, 4, 2): 0x8000,
+                (10, 6, 5): 0x7C00, (11, 0, 7): 0x7D55, (8, 2, 4): 0x8000, (8, 3, 4): 0x0000, (8, 4, 4): 0x83FF}
+    for (x, y, z), v in specials.items():
+        src[z, y, x] = v
+    for q in (0, 1):
+        vv, e = brick_vals(src, BINARY16, 3, q)
+        assert len(predicted_payload(vv, e, entropy=3)) <= limit(len(vv))
+    valid("bricked_entropy3_12x8x8_binary16_specials", src, BINARY16, 3,
+          "Bricked grid 12x8x8 binary16, bricks of 8 (8x8x8 and 4x8x8), codec 3 with the binary16 order map "
+          "(value_map 1) and entropy coder 3: -0 (0x8000) and +0 next to each other, NaNs with payloads "
+          "(0x7E01, 0xFE77, 0x7D55), both infinities and subnormals (0x0001, 0x8001, 0x03FF, 0x83FF) in a "
+          "smooth field come back bit for bit; their residuals are large tokens among small ones.",
+          entropy=3)
+
+    # contexts with a single present token: f = 4096, the state does not change
+    ext = (8, 8, 8)
+    zs = from_rule(ext, lambda k, x, y, z: 20 if k == 0 else 31 if k == 11 else
+                   int(rng.integers(max(2, 2 * k), 31)) if z >= 6 else int(rng.integers(max(2, 2 * k - 5), 2 * k + 2)))
+    src = np.array(values_from_residuals(zs, ext, value_map=0), np.uint16).reshape(8, 8, 8)
+    pl, out = info([int(v) for v in src.reshape(-1)], ext, value_map=0)
+    cnt = out["counts"]
+    assert [t for t in range(32) if cnt[0][t]] == [20] and [t for t in range(32) if cnt[11][t]] == [31]
+    assert all(any(c) for c in cnt) and len(pl) <= limit(512)
+    assert out["F"][0][20] == 4096 and out["F"][11][31] == 4096
+    valid("bricked_entropy3_8x8x8_uint16_single_token_contexts", src, UINT16, 3,
+          "Bricked grid 8x8x8 uint16, one brick, codec 3 (Lorenzo, identity map) with entropy coder 3, whose "
+          "values are made from chosen residuals: all 12 contexts code voxels; context 0 (%d voxels) only "
+          "token 20 (9 bits below) and context 11 (%d voxels) only token 31 (14 bits below), so each of their tables "
+          "has a single present token, written as `present` alone (no a, no w: the last present token takes "
+          "4096 - 0), f = 4096 and s = 0 (also s_31 of context 11: no token before it is present): coding "
+          "such a voxel leaves its state "
+          "unchanged (the encoder never emits, X >= 2^20 * 4096 = 2^32 being impossible; the decoder's "
+          "X = 4096 * floor(X / 4096) + slot is X)." % (sum(cnt[0]), sum(cnt[11])), **e3u)
+
+    # every residual 0 (a constant brick of 0), next to a constant brick of 1000
+    src = np.zeros((8, 8, 16), np.uint16)
+    src[:, :, 8:] = 1000
+    pl0, out0 = info(*brick_vals(src, UINT16, 3, 0), value_map=0)
+    pl1, out1 = info(*brick_vals(src, UINT16, 3, 1), value_map=0)
+    assert e2_token(2000)[:2] == (21, 9) and predicted_residuals(brick_vals(src, UINT16, 3, 1)[0], (8, 8, 8),
+                                                                  value_map=0) == [2000] + [0] * 511
+    assert len(pl0) == 24 + 6 + 132 and out0["W"] == 0 and pl0[24 + 6:24 + 6 + 128] == struct.pack("<I", E3_LOW) * 32
+    valid("bricked_entropy3_16x8x8_uint16_constant", src, UINT16, 3,
+          "Bricked grid 16x8x8 uint16, two bricks of 8x8x8, codec 3 (Lorenzo, identity map) with entropy coder "
+          "3. The first brick is all 0: every residual is 0, token 0 in context 0 only, so the tables are 44 "
+          "bits in 6 bytes (used = 1 and present = bit 0 for context 0, used = 0 for the 11 others), every "
+          "state stays 2^16, W = 0 and there are no bits below: a %d-byte payload (24 + 6 + 128 + 4). The "
+          "second brick is all 1000: only voxel 0 has a residual (2000, token 21 with 9 bits below), the "
+          "others 0 (%d bytes, W = %d)." % (len(pl0), len(pl1), out1["W"]), **e3u)
+
+    # every token 0 .. 31, values over the whole 16-bit range
+    ext = (8, 8, 8)
+    n = 512
+    ends = []
+    for t in range(32):
+        e = max(0, e2_bitlen(t) - 2)
+        ends += [e2_residual(t, 0), e2_residual(t, (1 << e) - 1)]
+    rest = []
+    for t in rng.integers(0, 10, n - len(ends)):
+        e = max(0, e2_bitlen(int(t)) - 2)
+        rest.append(e2_residual(int(t), int(rng.integers(0, 1 << e)) if e else 0))
+    zs = [int(z) for z in rng.permutation(np.array(ends + rest))]
+    assert {e2_token(z)[0] for z in zs} == set(range(32)) and max(zs) == 65535
+    src = np.array(values_from_residuals(zs, ext, value_map=0), np.uint16).reshape(8, 8, 8)
+    assert predicted_residuals([int(v) for v in src.reshape(-1)], ext, value_map=0) == zs
+    assert int(src.min()) < 2000 and int(src.max()) > 63000
+    pl, out = info([int(v) for v in src.reshape(-1)], ext, value_map=0)
+    assert len(pl) <= limit(n)
+    valid("bricked_entropy3_8x8x8_uint16_all_tokens", src, UINT16, 3,
+          "Bricked grid 8x8x8 uint16, one brick, codec 3 (Lorenzo, identity map) with entropy coder 3, whose "
+          "values (%d .. %d) are made from chosen residuals: every token 0 .. 31 occurs, each at the lowest "
+          "and the highest residual of its range (0, 1, 2, 3, 4 .. 5, ..., 32768 .. 49151 (token 30), "
+          "49152 .. 65535 (token 31), 0 .. 14 bits below), among random tokens 0 .. 9: the stored tables "
+          "hold up to %d present tokens a context, with frequencies from 1 (a = 0, no bits of w) up; "
+          "%d bytes, within the limit %d." % (int(src.min()), int(src.max()),
+                                              max(sum(1 for c in cc if c) for cc in out["counts"]), len(pl), limit(n)),
+          **e3u)
+
+    # entropy coders 1, 2 and 3 in one file, each brick with its own predictor settings
+    X, Y, Z = 16, 16, 8
+    vals = 1.5 + 0.02 * (np.arange(X)[None, None, :] - np.arange(Y)[None, :, None]) \
+        + 0.03 * np.arange(Z)[:, None, None] + rng.normal(0, 0.004, (Z, Y, X))
+    src = arr_f16(np.round(vals, 4).reshape(-1), (Z, Y, X))
+    src.reshape(-1)[[3, 500, 1100, 1801]] = [0x8000, 0x7C00, 0x7E00, 0x0000]
+    per = [dict(entropy=3, value_map=1),
+           dict(entropy=1, value_map=0, shift=3, taps=(8, 8, 8, -8, -8, -8, 8), level=-2),
+           dict(entropy=2, value_map=1, shift=1, taps=(2, 2, 2, -2, -2, -2, 2), level=0),
+           dict(entropy=3, value_map=1, shift=2, taps=(3, 3, 2, -2, -2, -1, 1), level=7)]
+    for q in (0, 3):
+        vv, e = brick_vals(src, BINARY16, 3, q)
+        assert len(predicted_payload(vv, e, **per[q])) <= limit(len(vv))
+    valid("bricked_entropy3_16x16x8_binary16_mixed_entropy", src, BINARY16, 3,
+          "Bricked grid 16x16x8 binary16, 4 bricks of 8x8x8, codec 3 in every brick with entropy coders 3, "
+          "1, 2, 3 in brick order, each brick with its own value map, shift, taps and level (brick 3: shift "
+          "2, taps 3, 3, 2, -2, -2, -1, 1, level 7); -0, +inf, a NaN and +0 among the values.",
+          per_brick=lambda q: per[q])
+
+    # the encoder's freedom in choosing tables (§7.2.2: "any with f_t >= 1 for every token that occurs")
+    ext = (8, 8, 8)
+    zs = from_rule(ext, lambda k, x, y, z: 12 if k == 0 else int(rng.integers(max(2, 2 * k - 4), 2 * k + 2)))
+    src = np.array(values_from_residuals(zs, ext, value_map=0), np.uint16).reshape(8, 8, 8)
+    toks, B, ks = e3_analyse(zs, ext)
+    counts = [[0] * 32 for _ in range(12)]
+    for (t, _, _), k in zip(toks, ks):
+        counts[k][t] += 1
+    assert [t for t in range(32) if counts[0][t]] == [12]
+    by_use = sorted((k for k in range(1, 12) if any(counts[k])), key=lambda k: (-sum(counts[k]), k))
+    k_all, k_uni = by_use[0], by_use[1]
+    absent = [t for t in range(32) if not counts[k_all][t]]
+    N = sum(counts[k_all])
+    f_all = [max(1, (4096 - len(absent)) * c // N) if c else 1 for c in counts[k_all]]
+    j = max(range(32), key=lambda t: (counts[k_all][t], -t))
+    f_all[j] += 4096 - sum(f_all)
+    f0 = [0] * 32
+    f0[12], f0[31] = 4095, 1
+    k_none = max(k for k in range(12) if not any(counts[k]))
+    f_none = [0] * 32
+    f_none[0], f_none[2], f_none[9] = 1, 2048, 2047
+    e3kw = dict(freqs={0: f0, k_all: f_all, k_none: f_none}, uniform=(k_uni,))
+    pl, out = info([int(v) for v in src.reshape(-1)], ext, value_map=0, e3=e3kw)
+    assert len(pl) <= limit(512) and absent and ("a", 0, 12) in [m[0] for m in out["bits"].marks]
+    valid("bricked_entropy3_8x8x8_uint16_table_choices", src, UINT16, 3,
+          "Bricked grid 8x8x8 uint16, one brick, codec 3 (Lorenzo, identity map) with entropy coder 3 whose "
+          "tables are not the proportional ones most other files use (§7.2.2 lets the encoder choose any "
+          "frequencies with f_t >= 1 for every token that occurs in the context, summing to 4096): context 0 "
+          "codes only token 12 (%d voxels) but its table has tokens 12 and 31 present, f_12 = 4095 (a = 11, "
+          "w = 2047: the largest a written frequency can be) and f_31 = 1 (the last present token, not "
+          "written: 4096 - 4095); context %d (the most used, %d voxels) has all 32 tokens present "
+          "(present = 0xFFFFFFFF), the %d that do not occur with f = 1 (a = 0, no bits of w); context %d "
+          "(%d voxels) is written with used = 0 although it codes voxels, so they are coded under f_t = 128 "
+          "for every t (§7.2.2: \"or may be read so\"); context %d codes no voxel but is written with "
+          "used = 1 and a table (tokens 0, 2 and 9 present, f_0 = 1, f_2 = 2048 = 2^11 + 0, f_9 = 2047)."
+          % (sum(counts[0]), k_all, N, len(absent), k_uni, sum(counts[k_uni]), k_none),
+          value_map=0, entropy=3, e3=e3kw)
+
+    # stored levels of detail (stream 7) in entropy 3
+    X, Y, Z = 16, 16, 8
+    src = (4000 + 23 * np.arange(X)[None, None, :] - 17 * np.arange(Y)[None, :, None]
+           + 31 * np.arange(Z)[:, None, None] + rng.integers(0, 50, (Z, Y, X))).astype(np.uint16)
+    g = write_bricked(src, UINT16, 3)
+    lods = flat_lods(src, UINT16, g.D)
+    levels = {1: dict(entropy=3, value_map=0), 2: dict(entropy=2, value_map=0),
+              3: dict(entropy=1, value_map=0), 4: dict(entropy=2, value_map=0)}
+    blocks = [meta_block(DEFAULT_META)] + bricked_blocks(g, CODEC_PREDICTED, **e3u)
+    for k, how in sorted(levels.items()):
+        blocks += lod_level_blocks(lods[k], UINT16, 3, k, CODEC_PREDICTED, **how)
+    assert [lods[k].shape for k in (1, 2, 3, 4)] == [(4, 8, 8), (2, 4, 4), (1, 2, 2), (1, 1, 1)]
+    l1 = [int(v) for v in lods[1].reshape(-1)]
+    assert len(predicted_payload(l1, (8, 8, 4), **e3u)) <= limit(256)
+    l2 = [int(v) for v in lods[2].reshape(-1)]
+    assert len(predicted_payload(l2, (4, 4, 2), **e3u)) > limit(32)
+    data, _ = assemble(g, blocks, structure_kind=KIND_BRICKED, ireserved=3, framed=True, minor=3)
+    add_valid("bricked_lods_16x16x8_uint16_entropy3", data, src, UINT16,
+              "Bricked grid 16x16x8 uint16, bricks of 8, values codec 3 with entropy coder 3 (§7.2.2), storing "
+              "every level of detail in stream 7 as codec 3 bricks: level 1 (8x8x4, one brick of 256 "
+              "elements) with entropy coder 3; level 2 (4x4x2, 32 elements, too few for coder 3 within the "
+              "limit of §7) and level 4 (1x1x1) with entropy coder 2, level 3 (2x2x1) with entropy coder 1. "
+              "The contexts of a level's brick use the level's brick extents.",
+              kind=KIND_BRICKED, extra={"brick_log2": 3, "stored_levels": sorted(levels)})
+
+    # ---- invalid: the first brick of a bricked grid breaks one rule of §7.2.2 each
+    X, Y, Z = 8, 8, 10
+    src = (smooth(X, Y, Z, 1500, 4) + rng.integers(0, 37, (Z, Y, X))).astype(np.uint16)
+    vals0, ext0 = brick_vals(src, UINT16, 3, 0)
+    assert ext0 == (8, 8, 8)
+    base, out0 = info(vals0, ext0, value_map=0)
+    zs0 = predicted_residuals(vals0, ext0, value_map=0)
+    tab0, st0, W0, words0, bits0 = e3_split(base[24:])
+    nbits0 = out0["bits"].n
+    E0 = sum(e2_token(z)[1] for z in zs0)
+    marks = out0["bits"].marks
+    k3 = next(k for k in range(12) if sum(1 for f in out0["F"][k] if f) >= 3 and any(out0["counts"][k]))
+    assert 1 <= nbits0 % 8 <= 7 and 1 <= E0 % 8 <= 7 and W0 >= 2 and len(tab0) > 3, (nbits0, E0, W0)
+    assert base == predicted_payload(vals0, ext0, **e3u)
+
+    # the codings that break one check only: each decodes to the brick without that check
+    def emits_at_last_step(j):         # whether the encoder rule emits a word at state j's last step
+        try:
+            predicted_payload(vals0, ext0, e3=dict(extra=j), **e3u)
+        except AssertionError:
+            return True
+        return False
+    j_init = next(j for j in range(31, -1, -1) if not emits_at_last_step(j))
+    bad_init = predicted_payload(vals0, ext0, e3=dict(extra=j_init), **e3u)[24:]
+    assert e3_decode(bad_init, ext0, skip=("initial_state",)) == zs0
+    j_end = 17
+    bad_end = predicted_payload(vals0, ext0, e3=dict(start=[E3_LOW + (j == j_end) for j in range(32)]), **e3u)[24:]
+    assert e3_decode(bad_end, ext0, skip=("states_end",)) == zs0
+    assert e3_decode(e3_join(tab0, st0, W0 + 1, words0 + b"\x5a\xa5", bits0), ext0, skip=("words_left",)) == zs0
+
+    def body(fn):                       # mutate the bytes after the codec header of the first brick
+        def mutate(blocks):
+            st = blocks[0].stored
+            blocks[0].stored = st[:24] + fn(*e3_split(st[24:]))
+        return mutate
+
+    def inv(name, tag, desc, first=None, expect="malformed", **kw):
+        args = dict(e3u)
+        if first is not None:           # settings of the first brick only
+            args = dict(per_brick=lambda q: dict(e3u, **(first if q == 0 else {})))
+        args.update(kw)
+        add_invalid(name, bricked_file(src, UINT16, 3, **args), expect, "codec3.entropy3." + tag, desc)
+
+    def mark(name):
+        return next((pos, width) for m, pos, width in marks if m[0] == name)    # the first field of that name
+
+    head = ("Bricked grid 8x8x10 uint16, bricks of 8, codec 3 (Lorenzo, identity map) with entropy coder 3 in "
+            "both bricks, whose first brick (8x8x8; %d bytes of tables for %d bits, W = %d words, %d bytes of "
+            "bits below for E = %d bits) " % (len(tab0), nbits0, W0, len(bits0), E0))
+    inv("bricked_codec3_entropy3_tables_short", "tables_short",
+        head + "is cut to 27 bytes, the codec header and 3 bytes of its tables: the tables do not parse "
+               "within the payload (§7.2.2: a payload too short for the tables as they parse is malformed).",
+        mutate=lambda blocks: setattr(blocks[0], "stored", blocks[0].stored[:27]))
+    p, w = mark("present")
+    kp = next(m[0][1] for m in marks if m[0][0] == "present")
+    inv("bricked_codec3_entropy3_present_zero", "present_zero",
+        head + "has the 32 bits `present` of context %d (its first context with used = 1, table bits %d .. "
+               "%d) all 0 (§7.2.2: present = 0 is malformed); the bits after them are unchanged."
+               % (kp, p, p + 31),
+        mutate=body(lambda t, s, W, wd, b: e3_join(set_bits(t, p, 32, 0), s, W, wd, b)))
+    pa, _ = mark("a")
+    ma = next(m for m in marks if m[0][0] == "a")[0]
+    inv("bricked_codec3_entropy3_a_12", "a_over_11",
+        head + "has the 4-bit number a of its first written frequency (context %d, token %d, table bits %d .. "
+               "%d) set to 12 (§7.2.2: a <= 11); the bits after it are unchanged." % (ma[1], ma[2], pa, pa + 3),
+        mutate=body(lambda t, s, W, wd, b: e3_join(set_bits(t, pa, 4, 12), s, W, wd, b)))
+    pairs = [[(t, f) for t, f in enumerate(out0["F"][k]) if f] if any(out0["counts"][k]) else None
+             for k in range(12)]
+    bigj = max(range(len(pairs[k3]) - 1), key=lambda q: (pairs[k3][q][1], -q))
+    fl = pairs[k3][-1][1]
+    assert pairs[k3][bigj][1] + fl <= 4095
+    pairs[k3][bigj] = (pairs[k3][bigj][0], pairs[k3][bigj][1] + fl)
+    tab_last = e3_tables_bits(pairs).tobytes()
+    inv("bricked_codec3_entropy3_last_frequency_0", "last_frequency",
+        head + "has in the table of context %d the frequency of token %d raised by %d, the frequency of the "
+               "last present token %d, so that the written frequencies sum to 4096 and the last one would be "
+               "4096 - 4096 = 0 (§7.2.2: it MUST be >= 1); the tables are otherwise those of the valid coding."
+               % (k3, pairs[k3][bigj][0], fl, pairs[k3][-1][0]),
+        mutate=body(lambda t, s, W, wd, b: e3_join(tab_last, s, W, wd, b)))
+    inv("bricked_codec3_entropy3_tables_padding", "tables_padding",
+        head + "has bit 7 of the last byte of its tables set, a padding bit (the tables take %d bits, so "
+               "bits %d .. 7 of that byte are padding; §7.2.2: they MUST be 0)." % (nbits0, nbits0 % 8),
+        mutate=body(lambda t, s, W, wd, b: e3_join(t[:-1] + bytes([t[-1] | 0x80]), s, W, wd, b)))
+    inv("bricked_codec3_entropy3_states_short", "states_short",
+        head + "is cut to 24 + %d + 131 bytes: its tables parse, then 131 bytes where the 32 states and W "
+               "need 132 (§7.2.2)." % len(tab0),
+        mutate=lambda blocks: setattr(blocks[0], "stored", blocks[0].stored[:24 + len(tab0) + 131]))
+    inv("bricked_codec3_entropy3_initial_state_below_2_16", "initial_state",
+        head + "was coded with one word more emitted before the last coding step of state X_%d (voxel %d), "
+               "so that X_%d starts below 2^16 (§7.2.2: each state MUST lie in 2^16 .. 2^32 - 1); a decoder "
+               "that did not check it would read that word back at voxel %d and decode the brick exactly, "
+               "every state ending at 2^16 and every word read (W = %d)."
+               % (j_init, j_init, j_init, j_init, W0 + 1), first=dict(e3=dict(extra=j_init)))
+    rest0 = 2 * W0 + len(bits0)
+    inv("bricked_codec3_entropy3_words_over_payload", "words_short",
+        head + "says W = %d: 2W = %d bytes, one or two more than the %d bytes after W (the words and the "
+               "bits below) (§7.2.2: a payload too short for 2W is malformed)."
+               % (rest0 // 2 + 1, 2 * (rest0 // 2 + 1), rest0),
+        mutate=body(lambda t, s, W, wd, b: e3_join(t, s, rest0 // 2 + 1, wd, b)))
+    inv("bricked_codec3_entropy3_words_count_wraps", "words_short",
+        head + "says W = %d + 2^31: 2W = 2^32 + %d, which a reader that computes 2W in 32 bits takes for "
+               "%d, the true size of the words (§7.2.2: the payload is too short for 2W; sizes are exact "
+               "integers)." % (W0, 2 * W0, 2 * W0),
+        mutate=body(lambda t, s, W, wd, b: e3_join(t, s, W + (1 << 31), wd, b)))
+    inv("bricked_codec3_entropy3_stream_ends_early", "stream_end",
+        head + "lacks the last word of its word stream (W - 1, bits below unchanged): the decoder's last "
+               "renormalisation finds no word left (§7.2.2 step 3).",
+        mutate=body(lambda t, s, W, wd, b: e3_join(t, s, W - 1, wd[:-2], b)))
+    inv("bricked_codec3_entropy3_word_left", "words_left",
+        head + "has one word more at the end of its word stream (W + 1, bits below unchanged): every state "
+               "ends at 2^16 with that word unread (§7.2.2: all W words MUST have been read).",
+        mutate=body(lambda t, s, W, wd, b: e3_join(t, s, W + 1, wd + b"\x5a\xa5", b)))
+    inv("bricked_codec3_entropy3_states_end", "states_end",
+        head + "was coded with state X_%d starting at 2^16 + 1 instead of 2^16: the decoder reads every word "
+               "and ends with X_%d = 2^16 + 1, the 31 other states at 2^16 (§7.2.2: every state MUST equal "
+               "2^16)." % (j_end, j_end),
+        first=dict(e3=dict(start=[E3_LOW + (j == j_end) for j in range(32)])))
+    inv("bricked_codec3_entropy3_bits_short", "bits_size",
+        head + "lacks the last byte of its bits below: ceil(E / 8) - 1 bytes (§7.2.2, as §7.2.1: exactly the "
+               "bytes the tokens need).", mutate=body(lambda t, s, W, wd, b: e3_join(t, s, W, wd, b[:-1])))
+    inv("bricked_codec3_entropy3_bits_long", "bits_size",
+        head + "has a zero byte after its bits below: ceil(E / 8) + 1 bytes (§7.2.2: exactly the bytes the "
+               "tokens need).", mutate=body(lambda t, s, W, wd, b: e3_join(t, s, W, wd, b + b"\0")))
+    inv("bricked_codec3_entropy3_padding_bit", "padding",
+        head + "has bit 7 of the last byte of its bits below set, a padding bit (E mod 8 = %d, so bits %d .. "
+               "7 of that byte are padding; §7.2.2: padding bits 0)." % (E0 % 8, E0 % 8),
+        mutate=body(lambda t, s, W, wd, b: e3_join(t, s, W, wd, b[:-1] + bytes([b[-1] | 0x80]))))
+
+    # correct codings over codec 3's limit of §7: no brick of fewer than 36 voxels fits coder 3
+    q1, q8 = edge_exts.index((1, 1, 1)), edge_exts.index((8, 1, 1))
+    v1, _ = brick_vals(edge_src, UINT16, 3, q1)
+    p1 = predicted_payload(v1, (1, 1, 1), **e3u)
+    assert e3_tables_size(p1[24:]) == 6 and p1[30:158] == struct.pack("<I", E3_LOW) * 32
+    v8, _ = brick_vals(edge_src, UINT16, 3, q8)
+    p8 = predicted_payload(v8, (8, 1, 1), **e3u)
+    for q, name, what in ((q1, "1x1x1", "its one voxel (token %d alone in context 0: f = 4096, so X_0 stays "
+                                      "2^16 like the 31 unused states; all 32 states are 2^16)"
+                           % e2_token(predicted_residuals(v1, (1, 1, 1), value_map=0)[0])[0]),
+                          (q8, "8x1x1", "its 8 voxels (states X_8 .. X_31 unused, 2^16)")):
+        pl = p1 if q == q1 else p8
+        add_invalid("bricked_codec3_entropy3_%s_over_bound" % name,
+                    bricked_file(edge_src, UINT16, 3, per_brick=lambda r, q=q: dict(
+                        value_map=0, entropy=3 if r in edge_big or r == q else 2)),
+                    "malformed", "block.stored_bound",
+                    "bricked_entropy3_9x9x9_uint16_edge_bricks with its %s edge brick (n = %d) coded with "
+                    "entropy coder 3 instead of 2: a correct §7.2.2 coding of %s, %d bytes (the tables, the "
+                    "32 states and W alone take %d), more than codec 3's limit 24 + bound(2n) = %d (§7). The "
+                    "stored_size rule is checked from the block table, whatever the coder: a brick of fewer "
+                    "than 36 voxels cannot use coder 3, so §7.2.2's \"a brick of fewer than 32 voxels leaves "
+                    "the states it does not use at 2^16\" never applies to a valid file."
+                    % (name, len(v1) if q == q1 else len(v8), what, len(pl), e3_tables_size(pl[24:]) + 132,
+                       limit(1 if q == q1 else 8)))
+    # the smallest coder 3 payload: every context written with used = 0, tokens 0 .. 3 (no bits below), W = 0
+    def smallest(ext):
+        n = ext[0] * ext[1] * ext[2]
+        zs = [int(z) for z in rng.choice([0, 2, 2, 3], n)]
+        vals = values_from_residuals(zs, ext, value_map=0)
+        pl = predicted_payload(vals, ext, e3=dict(uniform=range(12)), **e3u)
+        assert len(pl) == 24 + 2 + 132 and pl[24:26] == b"\0\0"
+        return np.array(vals, np.uint16).reshape(ext[2], ext[1], ext[0]), len(pl), limit(n)
+    src, size36, lim36 = smallest((6, 6, 1))
+    assert size36 <= lim36 == 159
+    valid("bricked_entropy3_6x6x1_uint16_smallest_brick", src, UINT16, 3,
+          "Bricked grid 6x6x1 uint16, one brick of 36 voxels, codec 3 (Lorenzo, identity map) with entropy "
+          "coder 3 in the smallest payload coder 3 has: all 12 contexts written with used = 0 (12 zero bits, "
+          "2 bytes of tables; every voxel coded under f_t = 128), residuals 0, 2 and 3 only (tokens 0, 2, 3: "
+          "no bits below), so no state reaches 2^27 = 2^20 * 128 and W = 0: %d bytes, within codec 3's limit "
+          "24 + bound(72) = %d (§7). 36 voxels is the fewest for which coder 3 fits the limit at all "
+          "(bricked_codec3_entropy3_7x5x1_over_bound)." % (size36, lim36), **dict(e3u, e3=dict(uniform=range(12))))
+    src, size35, lim35 = smallest((7, 5, 1))
+    assert size35 > lim35 == 157
+    add_invalid("bricked_codec3_entropy3_7x5x1_over_bound",
+                bricked_file(src, UINT16, 3, e3=dict(uniform=range(12)), **e3u), "malformed", "block.stored_bound",
+                "Bricked grid 7x5x1 uint16, one brick of 35 voxels, codec 3 with entropy coder 3 coded as "
+                "bricked_entropy3_6x6x1_uint16_smallest_brick is (every context used = 0, tokens 0, 2 and 3, "
+                "W = 0): %d bytes, the smallest coder 3 payload, one byte over codec 3's limit 24 + bound(70) "
+                "= %d (§7), checked from the block table." % (size35, lim35))
 
 def gen_grids_valid():
     # ---- regular grid (§8A.1)
@@ -5636,6 +6384,38 @@ dictionary, a wrong content checksum (`checksum`), the last frame cut
 short, `stored_size` one byte over w * bound(n), codec 5 on the metadata,
 stored bytes that are no frame); every other is `malformed`.
 
+Codec 3's entropy coder 3 (1.3 draft, §7.2.2): the codec header's `entropy`
+byte 3; the residuals are sent as §7.2.1's tokens and bits below, in §7.2.1's
+12 contexts, but each context's frequencies are stored in the payload (a bit
+string: `used`, then `present` and each present token's frequency but the
+last as 4 bits a and a bits w, f = 2^a + w; the last takes what is left of
+4096), and 32 rANS states X_{i mod 32} take the voxels in turn, renormalised
+by 16-bit words (payload: tables, 32 states, W, W words, bits below). The
+vectors read every multi-bit field of the tables least significant bit
+first (bit t of `present` is token t). The `bricked_entropy3_*` files and
+`bricked_lods_16x16x8_uint16_entropy3` cover it: uint16 and binary16 (the
+binary16 order map with -0, +0, NaN payloads, infinities, subnormals), edge
+bricks of extent 1 along one axis, rows of exactly 32 and 64 voxels, a
+column of 1x1x64 bricks, contexts with a single present token (f = 4096: the
+state does not change), a brick of residuals 0 only (W = 0), every token
+0 .. 31, entropy coders 1, 2 and 3 in one file, tables an encoder may choose
+besides the proportional ones (a context that codes voxels written with
+used = 0, one that codes none written with a table, tokens present that do
+not occur, f = 4095 and f = 1), stored
+levels of detail in coder 3, and the smallest payload coder 3 has. Codec 3's
+limit of §7, 24 + bound(2n), holds whatever the coder: the tables, states
+and W take at least 134 bytes, so a brick of fewer than 36 voxels cannot be
+coded with coder 3 at all (edge bricks of extent 1 along two or three axes
+use coder 2 in `bricked_entropy3_9x9x9_uint16_edge_bricks`; the
+`bricked_codec3_entropy3_*_over_bound` files are correct codings that a
+reader refuses from the block table). The invalid `bricked_codec3_entropy3_*`
+files break one rule of §7.2.2 each in their first brick, all `malformed`:
+the tables cut short, `present` = 0, a = 12, a last frequency of 0, table
+padding, fewer than 132 bytes for the states and W, an initial state below
+2^16, W beyond the payload (also by 2^31, where 2W wraps in 32 bits), the
+word stream ending early or a word left over, a state not ending at 2^16,
+the bits below one byte short or long, and their padding.
+
 ### Changes to the 1.0 vectors for 1.1
 
 * `invalid/structure_kind_2.ivol` is now `invalid/structure_kind_9.ivol`:
@@ -5676,7 +6456,8 @@ stored bytes that are no frame); every other is `malformed`.
   1x1x1, binary16 specials, every token 0 .. 31, one 32x16x16 brick whose
   context tables are made again past m = 128, 256, 384, entropy coders 1
   and 2 mixed per brick, stored levels of detail), and 12 invalid
-  `bricked_codec3_entropy2_*` / `bricked_codec3_entropy_3` files, each
+  `bricked_codec3_entropy2_*` / `bricked_codec3_entropy_4` (named
+  `bricked_codec3_entropy_3` until §7.2.2, see below) files, each
   breaking one rule of §7.2.1 (R, the initial and final states, the rANS
   stream's length, the bits below and their padding, the entropy byte, the
   limit of §7 on an over-long but correct coding). The older vectors are
@@ -5699,6 +6480,15 @@ stored bytes that are no frame); every other is `malformed`.
   `invalid/codec5_raw_values.ivol` (its bytes are no zstd frame:
   `malformed`). New: 7 valid and 13 invalid `codec5_*` files (above). The
   other vectors are unchanged byte for byte.
+* Codec 3's entropy coder 3 (§7.2.2): `invalid/bricked_codec3_entropy_3.ivol`
+  is now `invalid/bricked_codec3_entropy_4.ivol` (the same file with
+  entropy byte 4 instead of 3, CRCs recomputed; same class,
+  `unsupported-feature`: §7.2 now defines entropy 1, 2 and 3). New (above):
+  12 valid files, `bricked_entropy3_*` and
+  `bricked_lods_16x16x8_uint16_entropy3`, and 18 invalid
+  `bricked_codec3_entropy3_*` files (15 that break one rule of §7.2.2, 3
+  correct codings over codec 3's limit of §7). The other vectors are
+  unchanged byte for byte.
 
 ### Changes to the 1.1 vectors for 1.2
 
@@ -5762,6 +6552,11 @@ def write_readme(zver):
   elements (64 MiB decoded, within the block limit of §7); a reader must
   refuse it by the limit of §8A.2 (at most size_x + size_y + size_z + 3
   borders) from the block table, before it allocates or decodes.
+* No valid file has a codec 3 block of entropy coder 3 with fewer than 36
+  voxels: §7.2.2's bricks "of fewer than 32 voxels", whose unused states
+  stay 2^16, are always over codec 3's limit of §7
+  (`invalid/bricked_codec3_entropy3_1x1x1_over_bound.ivol`,
+  `..._8x1x1_over_bound`, `..._7x5x1_over_bound`; see `SPEC-NOTES.md`).
 * Invalid files marked "ok without verify" break the inner-average rule of
   §10, or the rule of §8A.5 that a stored level of detail equals the level
   computed from full resolution, which only a verifying reader checks.
