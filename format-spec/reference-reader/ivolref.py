@@ -42,13 +42,16 @@ ERROR_CLASSES = ("not-ivol", "unsupported-version", "unsupported-feature",
 
 
 class IvolError(Exception):
-    """The file is refused; `cls` is one of the error classes of §13."""
+    """The file is refused; `cls` is one of the error classes of §13.
+    `reason`, where given, names the check that failed (for example
+    "codec3.entropy3.present_zero"); None elsewhere."""
 
-    def __init__(self, cls, message):
+    def __init__(self, cls, message, reason=None):
         assert cls in ERROR_CLASSES
         super().__init__("%s: %s" % (cls, message))
         self.cls = cls
         self.message = message
+        self.reason = reason
 
 
 class ReaderLimit(Exception):
@@ -59,8 +62,8 @@ class UsageError(Exception):
     """The command line asks for something impossible (exit status 2)."""
 
 
-def fail(cls, message):
-    raise IvolError(cls, message)
+def fail(cls, message, reason=None):
+    raise IvolError(cls, message, reason)
 
 
 # Limits of this reader (lower than the format allows, as §13 permits).
@@ -934,8 +937,8 @@ def decode_payload(ix, e, stored, limit=MAX_BLOCK_DECODED):
 
 def decode_predicted(payload, ext, where):
     """§7.2 codec 3: the codec header, the residuals (entropy coder 1: a zstd
-    frame of two byte planes; 2: §7.2.1), then every voxel in raster order
-    from its prediction.  Returns the values as little-endian u16."""
+    frame of two byte planes; 2: §7.2.1; 3: §7.2.2), then every voxel in
+    raster order from its prediction.  Returns the values as little-endian u16."""
     ex, ey, ez = ext
     n = ex * ey * ez
     if len(payload) < PREDICTED_HEADER:
@@ -948,8 +951,8 @@ def decode_predicted(payload, ext, where):
         fail("malformed", "%s: codec 3 value_map %d, expected 0 or 1" % (where, value_map))
     if s > 15:
         fail("malformed", "%s: codec 3 shift %d, expected 0..15" % (where, s))
-    if entropy not in (1, 2):
-        fail("unsupported-feature", "%s: codec 3 entropy coder %d, this reader knows 1 and 2"
+    if entropy not in (1, 2, 3):
+        fail("unsupported-feature", "%s: codec 3 entropy coder %d, this reader knows 1, 2 and 3"
              % (where, entropy))
     t = struct.unpack_from("<7h", payload, 4)
     (level,) = struct.unpack_from("<i", payload, 18)
@@ -959,9 +962,12 @@ def decode_predicted(payload, ext, where):
         content = decode_zstd_frame(bytes(payload[PREDICTED_HEADER:]), 2 * n, where)
         planes = np.frombuffer(content, np.uint8).astype(np.int64)
         zz = planes[:n] + 256 * planes[n:]
-    else:
+    elif entropy == 2:
         # every check of §7.2.1 is made before any value is predicted (SPEC-NOTES 71)
         zz = np.array(decode_rans_residuals(bytes(payload), ext, where), np.int64)
+    else:
+        # every check of §7.2.2 likewise (SPEC-NOTES 71, 99)
+        zz = np.array(decode_rans3_residuals(bytes(payload), ext, where), np.int64)
     diff = np.where(zz % 2 == 0, zz // 2, -(zz + 1) // 2).tolist()
     r = (1 << (s - 1)) if s > 0 else 0
     sy, sz = ex, ex * ey          # index steps along y and z
@@ -1008,11 +1014,70 @@ def rans_table(c, T):
     f = [max(1, (ct * R4) >> 32) for ct in c]
     j = f.index(max(f))              # the lowest t among equal largest
     f[j] += (1 << RANS_PROB_BITS) - sum(f)   # D, which may be negative (SPEC-NOTES 73)
+    return f, cumulative(f)
+
+
+def cumulative(f):
+    """s_t = f_0 + ... + f_{t-1}."""
     s, acc = [], 0
     for ft in f:
         s.append(acc)
         acc += ft
-    return f, s
+    return s
+
+
+def token_bit_length(t):
+    """§7.2.1: B(t), the bit length of the residuals of token t."""
+    return t if t < 2 else (t >> 1) + 1
+
+
+def token_context(blen, i, x, y, z, ex, sy, sz):
+    """§7.2.1 Contexts: the context k (0 .. 11) of voxel i at (x, y, z) of a
+    brick of row length ex (index steps sy along y, sz along z), from blen,
+    the bit lengths B(t) of the tokens of the voxels before it; each
+    neighbour outside the brick counts 0.  Only earlier rows count."""
+    ctx = 2
+    if y:
+        ctx += 2 * blen[i - sy]                   # U at (x, y - 1, z)
+        if x:
+            ctx += blen[i - sy - 1]               # L at (x - 1, y - 1, z)
+        if x + 1 < ex:
+            ctx += blen[i - sy + 1]               # P at (x + 1, y - 1, z)
+    if z:
+        ctx += blen[i - sz]                       # K at (x, y, z - 1)
+    k = ctx // 5
+    return k if k < RANS_CONTEXTS else RANS_CONTEXTS - 1
+
+
+def residuals_from_bits_below(bits, tokens, what, reason=None):
+    """§7.2.1 Bits below (also §7.2.2): the residuals of the tokens from the
+    bytes `bits`, which must be exactly the ceil(E / 8) bytes of the E bits
+    the tokens need, the padding bits 0.  reason: the prefix of the reasons
+    of the two checks (None: none given).  Returns a list of ints."""
+    tok = np.array(tokens, np.int64)
+    e = np.where(tok < 2, 0, (tok >> 1) - 1)       # e = B(t) - 2 for t >= 2
+    E = int(e.sum())
+    if len(bits) != (E + 7) // 8:
+        fail("malformed", "%s: the bits below the tokens take %d bytes, the tokens need %d "
+             "bits (%d bytes)%s" % (what, len(bits), E, (E + 7) // 8, tag(reason, "bits_size")),
+             reason and reason + ".bits_size")
+    if E % 8 and bits[-1] >> (E % 8):   # (SPEC-NOTES 75)
+        fail("malformed", "%s: padding bits %d..7 of the last byte of the bits below the "
+             "tokens are not 0 (byte 0x%02X)%s" % (what, E % 8, bits[-1], tag(reason, "padding")),
+             reason and reason + ".padding")
+    b = np.frombuffer(bytes(bits) + b"\0\0\0", np.uint8).astype(np.int64)
+    at = np.cumsum(e) - e                          # the first bit of every token's bits
+    q = at >> 3
+    window = b[q] | (b[q + 1] << 8) | (b[q + 2] << 16)   # e + (at mod 8) <= 21 bits
+    w = (window >> (at & 7)) & ((np.int64(1) << e) - 1)
+    zz = np.where(tok < 2, tok, ((2 + (tok & 1)) << e) + w)
+    return zz.tolist()
+
+
+def tag(prefix, name):
+    """The reason of a check, to end its message: ' [prefix.name]'; '' where
+    the check has none (prefix None)."""
+    return " [%s.%s]" % (prefix, name) if prefix else ""
 
 
 def decode_rans_residuals(payload, ext, where):
@@ -1055,19 +1120,7 @@ def decode_rans_residuals(payload, ext, where):
     for z in range(ez):
         for y in range(ey):
             for x in range(ex):
-                # the context from the bit lengths of earlier rows, 0 outside the brick
-                ctx = 2
-                if y:
-                    ctx += 2 * blen[i - sy]
-                    if x:
-                        ctx += blen[i - sy - 1]
-                    if x + 1 < ex:
-                        ctx += blen[i - sy + 1]
-                if z:
-                    ctx += blen[i - sz]
-                k = ctx // 5
-                if k > 11:
-                    k = 11
+                k = token_context(blen, i, x, y, z, ex, sy, sz)
                 f, s = freqs[k], cums[k]
                 j = i & 1
                 st = X[j]
@@ -1082,7 +1135,7 @@ def decode_rans_residuals(payload, ext, where):
                     pos += 1
                 X[j] = st
                 tokens[i] = tok
-                blen[i] = tok if tok < 2 else (tok >> 1) + 1
+                blen[i] = token_bit_length(tok)
                 c = counts[k]
                 c[tok] += 16
                 totals[k] += 16
@@ -1098,23 +1151,130 @@ def decode_rans_residuals(payload, ext, where):
         fail("malformed", "%s: %d of the %d bytes of the rANS stream are left over after the "
              "last voxel" % (what, end - pos, R))
     # the bits below the tokens, in voxel order, least significant first
-    tok = np.array(tokens, np.int64)
-    e = np.where(tok < 2, 0, (tok >> 1) - 1)       # e = B(t) - 2 for t >= 2
-    E = int(e.sum())
-    bits = payload[end:]
-    if len(bits) != (E + 7) // 8:
-        fail("malformed", "%s: the bits below the tokens take %d bytes, the tokens need %d "
-             "bits (%d bytes)" % (what, len(bits), E, (E + 7) // 8))
-    if E % 8 and bits[-1] >> (E % 8):   # (SPEC-NOTES 75)
-        fail("malformed", "%s: padding bits %d..7 of the last byte of the bits below the "
-             "tokens are not 0 (byte 0x%02X)" % (what, E % 8, bits[-1]))
-    b = np.frombuffer(bits + b"\0\0\0", np.uint8).astype(np.int64)
-    at = np.cumsum(e) - e                          # the first bit of every token's bits
-    q = at >> 3
-    window = b[q] | (b[q + 1] << 8) | (b[q + 2] << 16)   # e + (at mod 8) <= 21 bits
-    w = (window >> (at & 7)) & ((np.int64(1) << e) - 1)
-    zz = np.where(tok < 2, tok, ((2 + (tok & 1)) << e) + w)
-    return zz.tolist()
+    return residuals_from_bits_below(payload[end:], tokens, what)
+
+
+RANS3_LOW = 1 << 16                 # §7.2.2: the states' lower bound and final value
+RANS3_STATES = 32                   # §7.2.2: voxel i uses state i mod 32
+RANS3_REASON = "codec3.entropy3"    # the prefix of the reasons of §7.2.2's checks
+# §7.2.2 Tables: the longest bit string, 12 contexts of 1 + 32 + 31 x (4 + 11) bits
+RANS3_TABLES_MAX_BYTES = (RANS_CONTEXTS * (1 + 32 + 31 * (4 + 11)) + 7) // 8
+
+
+def read_rans3_tables(payload, start, what):
+    """§7.2.2 Tables: from the bit string at byte `start` of payload, the
+    frequencies and cumulative frequencies of the 12 contexts, and the byte
+    offset after the tables (where the states begin).  Every field of the
+    string, `present` included, is read least significant bit first
+    (SPEC-NOTES 97)."""
+    def bad(reason, message):
+        fail("malformed", "%s: %s%s" % (what, message, tag(RANS3_REASON, reason)),
+             "%s.%s" % (RANS3_REASON, reason))
+    chunk = payload[start:start + RANS3_TABLES_MAX_BYTES]
+    string = int.from_bytes(chunk, "little")   # bit j of the string is bit j of this number
+    have = 8 * len(chunk)
+    pos = 0                                    # the next bit of the string
+
+    def take(nbits, field):
+        nonlocal pos
+        if pos + nbits > have:
+            bad("short", "the payload of %d bytes ends inside the tables (%s of context %d)"
+                % (len(payload), field, k))
+        v = (string >> pos) & ((1 << nbits) - 1)
+        pos += nbits
+        return v
+    freqs, cums = [], []
+    for k in range(RANS_CONTEXTS):
+        if not take(1, "used"):
+            f = [128] * RANS_TOKENS            # (SPEC-NOTES 98)
+        else:
+            present = take(32, "present")
+            if present == 0:
+                bad("present_zero", "context %d is used but its `present` is 0" % k)
+            listed = [t for t in range(RANS_TOKENS) if present >> t & 1]
+            f = [0] * RANS_TOKENS
+            for t in listed[:-1]:
+                a = take(4, "a of token %d" % t)
+                if a > 11:
+                    bad("table_a", "context %d, token %d: a = %d, expected 0 .. 11" % (k, t, a))
+                f[t] = (1 << a) + take(a, "w of token %d" % t)
+            last = (1 << RANS_PROB_BITS) - sum(f)
+            if last < 1:
+                bad("last_freq", "context %d: the frequencies before its last token %d sum "
+                    "to %d, leaving it %d (at least 1 needed)" % (k, listed[-1], sum(f), last))
+            f[listed[-1]] = last
+        freqs.append(f)
+        cums.append(cumulative(f))
+    if pos % 8 and string >> pos & ((1 << (8 - pos % 8)) - 1):
+        bad("table_padding", "bits %d..7 of the last byte of the tables (byte %d) are not 0"
+            % (pos % 8, start + pos // 8))
+    return freqs, cums, start + (pos + 7) // 8
+
+
+def decode_rans3_residuals(payload, ext, where):
+    """§7.2.2 codec 3 entropy coder 3: the residuals z_0 .. z_{n-1} of a brick
+    of extent ext from the bytes after the 24-byte codec header of payload:
+    the 12 contexts' stored tables, 32 rANS states, the word count W and the
+    W 16-bit words, then the bits below the tokens (§7.2.1's tokens, contexts
+    and bits below).  Every check raises `malformed` with a reason
+    "codec3.entropy3.<check>".  Returns the residuals as a list of ints."""
+    ex, ey, ez = ext
+    n = ex * ey * ez
+    what = "%s: codec 3 entropy coder 3" % where
+
+    def bad(reason, message):
+        fail("malformed", "%s: %s%s" % (what, message, tag(RANS3_REASON, reason)),
+             "%s.%s" % (RANS3_REASON, reason))
+    freqs, cums, pos = read_rans3_tables(payload, PREDICTED_HEADER, what)
+    if len(payload) - pos < 4 * RANS3_STATES + 4:
+        bad("short", "%d bytes after the tables (payload of %d bytes), the 32 states and W "
+            "need 132" % (len(payload) - pos, len(payload)))
+    X = list(struct.unpack_from("<32I", payload, pos))
+    for j in range(RANS3_STATES):   # 2^16 .. 2^32 - 1, the upper bound true of a u32 (SPEC-NOTES 102)
+        if X[j] < RANS3_LOW:
+            bad("initial_state", "initial rANS state X_%d = %d is not in 2^16 .. 2^32 - 1"
+                % (j, X[j]))
+    (W,) = struct.unpack_from("<I", payload, pos + 4 * RANS3_STATES)
+    wpos = pos + 4 * RANS3_STATES + 4       # the next word to read
+    wend = wpos + 2 * W                      # one past the last word (exact: SPEC-NOTES 100)
+    if wend > len(payload):
+        bad("words_size", "W = %d words (%d bytes), only %d bytes follow it"
+            % (W, 2 * W, len(payload) - wpos))
+    tokens = [0] * n
+    blen = [0] * n                           # B(t) of every voxel's token
+    sy, sz = ex, ex * ey
+    mask = (1 << RANS_PROB_BITS) - 1
+    find = bisect.bisect_right
+    i = 0
+    for z in range(ez):
+        for y in range(ey):
+            for x in range(ex):
+                k = token_context(blen, i, x, y, z, ex, sy, sz)
+                f, s = freqs[k], cums[k]
+                j = i & (RANS3_STATES - 1)
+                st = X[j]
+                slot = st & mask
+                tok = find(s, slot) - 1          # the last t with s_t <= slot: f_t >= 1
+                st = f[tok] * (st >> RANS_PROB_BITS) + slot - s[tok]
+                if st < RANS3_LOW:               # one word always suffices
+                    if wpos >= wend:
+                        bad("stream_end", "the word stream of %d words ends at voxel %d of %d"
+                            % (W, i, n))
+                    st = (st << 16) | payload[wpos] | (payload[wpos + 1] << 8)
+                    wpos += 2
+                X[j] = st
+                tokens[i] = tok
+                blen[i] = token_bit_length(tok)
+                i += 1
+    # every state, those a brick of fewer than 32 voxels does not use too (SPEC-NOTES 101)
+    wrong = [j for j in range(RANS3_STATES) if X[j] != RANS3_LOW]
+    if wrong:
+        bad("states_end", "final rANS state X_%d = %d (and %d more not 2^16 = %d)"
+            % (wrong[0], X[wrong[0]], len(wrong) - 1, RANS3_LOW))
+    if wpos != wend:
+        bad("words_left", "%d of the %d words of the word stream are left over after the "
+            "last voxel" % ((wend - wpos) // 2, W))
+    return residuals_from_bits_below(payload[wend:], tokens, what, RANS3_REASON)
 
 
 TOP_PROB_BITS = 16                  # §7.4: tables sum to 65536, slots of 16 bits

@@ -316,12 +316,12 @@ def test_corruptions(rng):
     struct.pack_into("<I", st, 4, LOW + 1)
     expect_malformed(struct.pack("<I", 8) + bytes(st), (1, 1, 1), ["final rANS states"], "final X_1")
     # through decode_predicted: the class and the check of the codec header first
-    pl = header(entropy=3) + body()
+    pl = header(entropy=4) + body()
     try:
         ivolref.decode_predicted(pl, ext, "test")
-        check(False, "entropy 3 accepted")
+        check(False, "entropy 4 accepted")
     except ivolref.IvolError as err:
-        check(err.cls == "unsupported-feature", "entropy 3 class %s" % err.cls)
+        check(err.cls == "unsupported-feature", "entropy 4 class %s" % err.cls)
     print("corruptions: checked")
 
 
