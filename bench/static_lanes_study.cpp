@@ -20,7 +20,11 @@
 //   vector    the same tables, 8 or 16 states renormalised by 16-bit words,
 //             decoded with AVX2 where the CPU has it (one or two vectors of
 //             states, a gather of slot words each; the bits below in scalar
-//             code).
+//             code);
+//   coder 3   what these prototypes led to: the library's entropy coder 3
+//             (spec §7.2.2: stored tables, 32 states, the bits below taken
+//             after the tokens), its bytes, decoding and encoding against
+//             coder 2's encoder (printed to stderr).
 // Both decoders are checked against the residuals; printed: bytes and
 // decoding MB/s of 16-bit values per second of the thread's CPU time (best
 // of five passes over every brick), for binary16 and uint16.
@@ -110,18 +114,9 @@ struct StaticCoded {
   std::vector<std::uint8_t> rans, below;
   // The same tokens for 8 states renormalised by 16-bit words (states in
   // [2^16, 2^32)), for a decoder whose states are the lanes of one vector.
-  std::vector<std::uint16_t> words, words16, words32;  // 8 states; 16 (two vectors); 32 (four)
+  std::vector<std::uint16_t> words, words16;  // 8 states; 16 states (two vectors)
   std::array<std::uint32_t, 8> word_states{};
   std::array<std::uint32_t, 16> word_states16{};
-  std::array<std::uint32_t, 32> word_states32{};
-  template <unsigned Vectors>
-  const std::uint32_t* states() const {
-    return Vectors == 1 ? word_states.data() : Vectors == 2 ? word_states16.data() : word_states32.data();
-  }
-  template <unsigned Vectors>
-  const std::uint16_t* stream() const {
-    return Vectors == 1 ? words.data() : Vectors == 2 ? words16.data() : words32.data();
-  }
   Tables tables;
   std::size_t bytes() const {
     return rans.size() + below.size() + static_cast<std::size_t>(std::ceil(tables.table_bits / 8)) +
@@ -210,7 +205,6 @@ StaticCoded encode_static(const std::vector<std::uint16_t>& z, const ivol::Brick
   };
   word_stream(out.word_states, out.words);
   word_stream(out.word_states16, out.words16);
-  if (d[0] % 32 == 0) word_stream(out.word_states32, out.words32);
   return out;
 }
 
@@ -308,8 +302,9 @@ __attribute__((target("avx2"))) void decode_avx2(const StaticCoded& in, const iv
   const int* slots = reinterpret_cast<const int*>(packed.slots.data());
   __m256i xs[Vectors];
   for (unsigned v = 0; v < Vectors; ++v)
-    xs[v] = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(in.states<Vectors>() + 8 * v));
-  const std::uint16_t* p = in.stream<Vectors>();
+    xs[v] = _mm256_loadu_si256(
+        reinterpret_cast<const __m256i*>((Vectors == 1 ? in.word_states.data() : in.word_states16.data()) + 8 * v));
+  const std::uint16_t* p = Vectors == 1 ? in.words.data() : in.words16.data();
   BitsBelow below{in.below.data()};
   const std::uint32_t nx = d[0];
   const __m256i low12 = _mm256_set1_epi32(kTotal - 1), low5 = _mm256_set1_epi32(31),
@@ -351,110 +346,12 @@ __attribute__((target("avx2"))) void decode_avx2(const StaticCoded& in, const iv
       }
     }
 }
-
-// The same decoder with the bits below a row's tokens taken after the
-// row's tokens, 8 voxels a vector: the counts of their bits (e), an
-// exclusive prefix sum of them over the lanes, a gather of the 32-bit
-// words at their bytes, a variable shift and a mask. The tokens' loop then
-// only stores each token.
-__attribute__((target("avx2"))) inline __m256i exclusive_sum(__m256i e, int& total) {
-  __m256i s = _mm256_add_epi32(e, _mm256_slli_si256(e, 4));
-  s = _mm256_add_epi32(s, _mm256_slli_si256(s, 8));
-  // the low half's total into every lane of the high half
-  s = _mm256_add_epi32(s, _mm256_shuffle_epi32(_mm256_permute2x128_si256(s, s, 0x08), 0xFF));
-  total = _mm256_extract_epi32(s, 7);
-  return _mm256_sub_epi32(s, e);
-}
-
-__attribute__((target("avx2"))) void take_row_avx2(const std::uint8_t* tokens, std::uint32_t nx,
-                                                   const std::uint8_t* below, std::uint32_t& position, std::uint16_t* z,
-                                                   std::uint8_t* lengths) {
-  const __m256i one = _mm256_set1_epi32(1), two = _mm256_set1_epi32(2), zero = _mm256_setzero_si256();
-  for (std::uint32_t x = 0; x < nx; x += 8) {
-    std::uint64_t t8;
-    std::memcpy(&t8, tokens + x, 8);
-    const __m256i t = _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(static_cast<long long>(t8)));
-    const __m256i half = _mm256_srli_epi32(t, 1);
-    const __m256i e = _mm256_max_epi32(_mm256_sub_epi32(half, one), zero);
-    const __m256i b = _mm256_add_epi32(half, _mm256_min_epu32(t, one));
-    const __m256i lead = _mm256_sllv_epi32(
-        _mm256_or_si256(_mm256_and_si256(t, one), _mm256_and_si256(_mm256_min_epu32(t, two), two)), e);
-    int total;
-    const __m256i at = _mm256_add_epi32(_mm256_set1_epi32(static_cast<int>(position)), exclusive_sum(e, total));
-    const __m256i words = _mm256_i32gather_epi32(reinterpret_cast<const int*>(below), _mm256_srli_epi32(at, 3), 1);
-    const __m256i mask = _mm256_sub_epi32(_mm256_sllv_epi32(one, e), one);
-    const __m256i bits = _mm256_and_si256(_mm256_srlv_epi32(words, _mm256_and_si256(at, _mm256_set1_epi32(7))), mask);
-    const __m256i values = _mm256_or_si256(lead, bits);
-    // 8 × 32 → 8 × 16 (packus works within 128-bit halves, then the
-    // halves' low quadwords together)
-    const __m256i packed = _mm256_permute4x64_epi64(_mm256_packus_epi32(values, values), 0x08);
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(z + x), _mm256_castsi256_si128(packed));
-    const __m128i b16 = _mm256_castsi256_si128(_mm256_permute4x64_epi64(_mm256_packus_epi32(b, b), 0x08));
-    const __m128i b8 = _mm_packus_epi16(b16, b16);
-    _mm_storel_epi64(reinterpret_cast<__m128i*>(lengths + x), b8);
-    position += static_cast<std::uint32_t>(total);
-  }
-}
-
-template <unsigned Vectors>
-__attribute__((target("avx2"))) void decode_avx2_split(const StaticCoded& in, const ivol::BrickDims& d,
-                                                       std::uint16_t* z, std::vector<std::uint8_t>& lengths,
-                                                       PackedTables& packed) {
-  static const Permutations permutations;
-  constexpr unsigned kLanes = 8 * Vectors;
-  packed.make(in.tables);
-  const int* slots = reinterpret_cast<const int*>(packed.slots.data());
-  __m256i xs[Vectors];
-  for (unsigned v = 0; v < Vectors; ++v)
-    xs[v] = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(in.states<Vectors>() + 8 * v));
-  const std::uint16_t* p = in.stream<Vectors>();
-  std::uint32_t position = 0;
-  const std::uint32_t nx = d[0];
-  const __m256i low12 = _mm256_set1_epi32(kTotal - 1), low5 = _mm256_set1_epi32(31),
-                freq_mask = _mm256_set1_epi32(0x1FFF), zero = _mm256_setzero_si256();
-  const std::size_t sy = d[0], sz = std::size_t{d[0]} * d[1];
-  std::vector<std::uint8_t> zeros(d[0], 0), row_ctx(d[0]), padded(d[0] + 2, 0), tokens(d[0] + 32);
-  std::size_t row = 0;
-  for (std::uint32_t zz = 0; zz < d[2]; ++zz)
-    for (std::uint32_t y = 0; y < d[1]; ++y, row += d[0]) {
-      row_contexts(y ? lengths.data() + row - sy : zeros.data(), zz ? lengths.data() + row - sz : zeros.data(), d[0],
-                   padded.data(), row_ctx.data());
-      const std::uint8_t* contexts = row_ctx.data();
-      for (std::uint32_t x0 = 0; x0 < nx; x0 += kLanes) {
-        __m256i w[Vectors];
-        for (unsigned v = 0; v < Vectors; ++v) {
-          std::uint64_t c8;
-          std::memcpy(&c8, contexts + x0 + 8 * v, 8);
-          const __m256i ctx = _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(static_cast<long long>(c8)));
-          const __m256i slot = _mm256_and_si256(xs[v], low12);
-          w[v] = _mm256_i32gather_epi32(slots, _mm256_add_epi32(_mm256_slli_epi32(ctx, kPrecision), slot), 4);
-        }
-        for (unsigned v = 0; v < Vectors; ++v) {
-          __m256i& x = xs[v];
-          const __m256i t = _mm256_and_si256(w[v], low5);
-          const __m128i t16 = _mm256_castsi256_si128(_mm256_permute4x64_epi64(_mm256_packus_epi32(t, t), 0x08));
-          _mm_storel_epi64(reinterpret_cast<__m128i*>(tokens.data() + x0 + 8 * v), _mm_packus_epi16(t16, t16));
-          x = _mm256_add_epi32(_mm256_mullo_epi32(_mm256_and_si256(_mm256_srli_epi32(w[v], 5), freq_mask),
-                                                  _mm256_srli_epi32(x, kPrecision)),
-                               _mm256_srli_epi32(w[v], 18));
-          const __m256i need = _mm256_cmpeq_epi32(_mm256_srli_epi32(x, 16), zero);
-          const unsigned m = static_cast<unsigned>(_mm256_movemask_ps(_mm256_castsi256_ps(need)));
-          const __m256i next = _mm256_cvtepu16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
-          const __m256i placed = _mm256_permutevar8x32_epi32(
-              next, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(permutations.index[m].data())));
-          x = _mm256_blendv_epi8(x, _mm256_or_si256(_mm256_slli_epi32(x, 16), placed), need);
-          p += __builtin_popcount(m);
-        }
-      }
-      take_row_avx2(tokens.data(), nx, in.below.data(), position, z + row, lengths.data() + row);
-    }
-}
 #endif
 
 struct Brick {
   ivol::BrickDims dims;
   std::vector<std::uint16_t> residuals;
-  std::vector<std::uint8_t> coder2, whole2;  // coder 2's stream; the whole codec 3 payload with it
+  std::vector<std::uint8_t> coder2, coder3;
   StaticCoded coded;
 };
 
@@ -486,10 +383,9 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
           b.residuals[i] = static_cast<std::uint16_t>(planes[i] | planes[values.size() + i] << 8);
         if (!ivol::detail::encode_residual_tokens(b.residuals.data(), b.dims, ~std::size_t{0}, b.coder2))
           throw std::runtime_error("static_lanes_study: coder 2 refused a brick");
-        ivol::PredictedOptions tokens_only;
-        tokens_only.entropy = ivol::PredictedOptions::Entropy::Tokens;
-        b.whole2 = ivol::encode_predicted(values.data(), b.dims, encoding, tokens_only);
         b.coded = encode_static(b.residuals, b.dims, lanes);
+        if (!ivol::detail::encode_residual_lanes(b.residuals.data(), b.dims, ~std::size_t{0}, b.coder3))
+          throw std::runtime_error("static_lanes_study: coder 3 refused a brick");
         coder2_bytes += b.coder2.size() + ivol::kPredictedHeaderSize;
         static_bytes += b.coded.bytes();
         bricks.push_back(std::move(b));
@@ -499,15 +395,13 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
   std::vector<std::uint8_t> lengths(out.size());
   PackedTables packed;
   double best2 = 1e30, best_static = 1e30, best_packed = 1e30, best_avx2 = 1e30, best_avx2_16 = 1e30;
-  double best_whole2 = 1e30, best_split = 1e30, best_split16 = 1e30, best_split32 = 1e30;
-  std::size_t word_bytes = 0, word_bytes16 = 0, word_bytes32 = 0;
+  std::size_t word_bytes = 0, word_bytes16 = 0;
   for (const Brick& b : bricks) {
     const std::size_t rest = b.coded.below.size() - 8 +
                              static_cast<std::size_t>(std::ceil(b.coded.tables.table_bits / 8)) +
                              ivol::kPredictedHeaderSize;
     word_bytes += 2 * (b.coded.words.size() - 16) + 4 * 8 + rest;
     word_bytes16 += 2 * (b.coded.words16.size() - 16) + 4 * 16 + rest;
-    if (!b.coded.words32.empty()) word_bytes32 += 2 * (b.coded.words32.size() - 16) + 4 * 32 + rest;
   }
 #if defined(__x86_64__) && defined(__GNUC__)
   const bool avx2 = __builtin_cpu_supports("avx2");
@@ -541,9 +435,6 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
     }
     best2 = std::min(best2, cpu_now() - t);
     t = cpu_now();
-    for (const Brick& b : bricks) ivol::decode_predicted(b.whole2.data(), b.whole2.size(), b.dims, out.data());
-    best_whole2 = std::min(best_whole2, cpu_now() - t);
-    t = cpu_now();
     for (const bool pack : {false, true}) {
       t = cpu_now();
       for (const Brick& b : bricks) {
@@ -569,35 +460,24 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
         }
         double& best = vectors == 1 ? best_avx2 : best_avx2_16;
         best = std::min(best, cpu_now() - t);
-        t = cpu_now();
-        for (const Brick& b : bricks) {
-          if (vectors == 1)
-            decode_avx2_split<1>(b.coded, b.dims, out.data(), lengths, packed);
-          else
-            decode_avx2_split<2>(b.coded, b.dims, out.data(), lengths, packed);
-          if (pass == 0 && !std::equal(b.residuals.begin(), b.residuals.end(), out.begin()))
-            throw std::runtime_error("static_lanes_study: the split AVX2 decoder did not round-trip");
-        }
-        double& split = vectors == 1 ? best_split : best_split16;
-        split = std::min(split, cpu_now() - t);
       }
-    if (avx2 && bricks.front().dims[0] % 32 == 0) {
-      t = cpu_now();
-      for (const Brick& b : bricks) {
-        decode_avx2_split<4>(b.coded, b.dims, out.data(), lengths, packed);
-        if (pass == 0 && !std::equal(b.residuals.begin(), b.residuals.end(), out.begin()))
-          throw std::runtime_error("static_lanes_study: the split AVX2 decoder (32 states) did not round-trip");
-      }
-      best_split32 = std::min(best_split32, cpu_now() - t);
-    }
 #endif
   }
-  // The library's coder 2 and coder 3 encoders on the same residuals.
-  for (int coder = 2; coder <= 3; ++coder) {
-    double best = 1e30;
-    std::vector<std::uint8_t> sink;
-    for (int pass = 0; pass < 3; ++pass) {
-      const double t = cpu_now();
+  // The library's coder 3 on the same residuals, and both coders' encoders.
+  std::size_t coder3_bytes = 0;
+  for (const Brick& b : bricks) coder3_bytes += b.coder3.size() + ivol::kPredictedHeaderSize;
+  double best3 = 1e30, encode2 = 1e30, encode3 = 1e30;
+  std::vector<std::uint8_t> sink;
+  for (int pass = 0; pass < 5; ++pass) {
+    double t = cpu_now();
+    for (const Brick& b : bricks) {
+      ivol::detail::decode_residual_lanes(b.coder3.data(), b.coder3.size(), b.dims, out.data());
+      if (pass == 0 && !std::equal(b.residuals.begin(), b.residuals.end(), out.begin()))
+        throw std::runtime_error("static_lanes_study: coder 3 did not round-trip");
+    }
+    best3 = std::min(best3, cpu_now() - t);
+    for (const int coder : {2, 3}) {
+      t = cpu_now();
       for (const Brick& b : bricks) {
         sink.clear();
         if (coder == 2)
@@ -605,10 +485,16 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
         else
           ivol::detail::encode_residual_lanes(b.residuals.data(), b.dims, ~std::size_t{0}, sink);
       }
+      double& best = coder == 2 ? encode2 : encode3;
       best = std::min(best, cpu_now() - t);
     }
-    std::fprintf(stderr, "%s: the library's coder %d encoder alone: %.0f MB/s\n", label, coder, mb / best);
   }
+  std::fprintf(stderr,
+               "%s: the library's coder 3: %zu bytes (%+.2f %% of coder 2), decoding %.0f MB/s (coder 2 %.0f); "
+               "encoding %.0f MB/s (coder 2 %.0f)\n",
+               label, coder3_bytes,
+               100.0 * (static_cast<double>(coder3_bytes) / static_cast<double>(coder2_bytes) - 1.0), mb / best3,
+               mb / best2, mb / encode3, mb / encode2);
   // What making the slot words costs alone (every decoder above that
   // uses them makes them for each brick).
   double best_make = 1e30;
@@ -618,17 +504,6 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
     best_make = std::min(best_make, cpu_now() - t);
   }
   std::fprintf(stderr, "%s: making the slot words alone: %.0f MB/s of values\n", label, mb / best_make);
-  // The whole decode with the split AVX2 entropy decoder, estimated: codec
-  // 3's decode with coder 2, less coder 2's entropy decoding, plus the
-  // split decoder's.
-  const double rest = best_whole2 - best2;
-  std::fprintf(stderr, "%s: 32 vector lanes, bytes %zu (%+.2f %%)\n", label, word_bytes32,
-               100.0 * (static_cast<double>(word_bytes32) / static_cast<double>(coder2_bytes) - 1.0));
-  std::fprintf(stderr,
-               "%s: codec 3 whole decode with coder 2 %.0f MB/s (entropy %.0f, the rest %.0f); split AVX2 entropy "
-               "8 / 16 / 32 states %.0f / %.0f / %.0f MB/s, whole estimated %.0f / %.0f / %.0f MB/s\n",
-               label, mb / best_whole2, mb / best2, mb / rest, mb / best_split, mb / best_split16, mb / best_split32,
-               mb / (rest + best_split), mb / (rest + best_split16), mb / (rest + best_split32));
   auto against = [&](std::size_t bytes) {
     return 100.0 * (static_cast<double>(bytes) / static_cast<double>(coder2_bytes) - 1.0);
   };
