@@ -9,7 +9,7 @@ PY
 # auto under a --memory that holds the octree's slabs but not a layer of
 # bricks: an octree, said on stderr with the --memory that
 # writes the bricked grid (only `info` said it). Its output goes outside $out.
-bad structure-octree-for-memory 0 "note: an octree, because a layer of bricks (14 MiB) exceeds the memory budget (--memory), a slab of the octree writer does not; --memory 14 writes a bricked grid" \
+bad structure-octree-for-memory 0 "note: an octree, because a layer of bricks (15 MiB) exceeds the memory budget (--memory), a slab of the octree writer does not; --memory 15 writes a bricked grid" \
     -- "$IVOL" convert "$work/wide.raw" "$work/wide.ivol" --dims 256,256,32 --type u16 --memory 8 -f
 # Options that cannot hold together are a bad command line: exit 1 (README).
 # A keep rule into a bricked grid: one background value outside the kept
@@ -70,6 +70,25 @@ big = peak_mib([folder + '/s.raw', folder + '/s.ivol', '--dims', '256,256,128', 
 kind = subprocess.run([ivol, 'info', folder + '/s.ivol'], capture_output=True, text=True).stdout
 ok = need > 0 and 'bricked, bricks of 128' in kind and (sanitized or big - own <= need)
 print('same' if ok else 'need %d MiB, held %.0f MiB above %.0f; %s' % (need, big - own, own, kind[:200]))"
+# The same for 16-bit values, whose bricks codec 3 encodes (the least-squares
+# fit, residuals, the entropy coder's tokens): 128³ binary16 bricks held
+# 7–23 MiB more than their --memory when counted as float32 bricks are.
+bands_check bricked-memory-held-16 "$peak_py
+import numpy as np
+z, y, x = np.mgrid[0:128, 0:256, 0:256].astype(np.float32)
+(np.sin(x / 9) + np.cos(y / 7) * np.sin(z / 11)).astype(np.float16).tofile(folder + '/h.raw')
+said = subprocess.run([ivol, 'convert', folder + '/h.raw', folder + '/hp.ivol', '--dims', '256,256,128', '--type', 'f16',
+                       '--brick', '128', '--structure', 'bricked', '--memory', '8', '-f'], capture_output=True, text=True)
+import re
+found = re.search(r'--memory ([0-9]+) allows it', said.stderr)
+least = int(found.group(1)) if found else 0
+worst = 0.0
+for memory in (least, 2 * least):
+    held = peak_mib([folder + '/h.raw', folder + '/h.ivol', '--dims', '256,256,128', '--type', 'f16', '--brick', '128',
+                     '--structure', 'bricked', '--memory', str(memory), '-f']) - own
+    worst = max(worst, held - memory)
+ok = least > 0 and (sanitized or worst <= 0)
+print('same' if ok else 'least --memory %d; held up to %.0f MiB more than --memory' % (least, worst))"
 # With room for a second layer the next one is read while one is encoded
 # (bricked_prefetch): within --memory still, and the same values as the
 # layer-at-a-time conversion above.
