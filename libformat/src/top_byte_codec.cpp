@@ -234,7 +234,8 @@ std::uint32_t quotient(std::uint32_t x, std::uint32_t f) {
     for (std::uint64_t g = 1; g < r.size(); ++g) r[g] = ((std::uint64_t{1} << 47) / g) + 1;
     return r;
   }();
-  return static_cast<std::uint32_t>((static_cast<unsigned __int128>(x) * reciprocal[f]) >> 47);
+  __extension__ using Wide = unsigned __int128;  // GCC's and Clang's, without -Wpedantic's warning
+  return static_cast<std::uint32_t>((static_cast<Wide>(x) * reciprocal[f]) >> 47);
 }
 
 // Visits the brick's rows in raster order: visit(i, parts) for the row
