@@ -6,9 +6,9 @@
 // its two states to the next (a table lookup, a multiply, a
 // renormalisation, about ten cycles a voxel), whatever else the loop does.
 // Fixed tables and 32 states let a decoder run 32 such chains at once, 8
-// a vector: the whole codec 3 decode runs 1.4–1.9 times as fast, for
-// 0.4–0.7 % more bytes in 32³ bricks (the tables and states) and almost
-// none in 64³ (bench/RESULTS.md, "Entropy coder 3").
+// a vector: the whole codec 3 decode runs 1.75–1.9 times as fast in 32³
+// bricks, for 0.3–0.5 % more bytes (the tables and states), and twice as
+// fast in 64³ for none (bench/RESULTS.md, "Entropy coder 3").
 #pragma once
 
 #include <array>

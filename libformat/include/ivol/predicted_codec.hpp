@@ -36,7 +36,7 @@ struct PredictedOptions {
   // bytes a file and cost a fifth of the encoding time). ZstdPlanes, Tokens:
   // only that one (Tokens falls back to coder 1 where coder 2 passes the
   // spec's limit). Lanes: coder 3 in every brick, or coder 1 under the same
-  // rule as Smaller (1.7–1.8 times coder 2's decoding speed in 32³ bricks,
+  // rule as Smaller (1.75–1.9 times coder 2's decoding speed in 32³ bricks,
   // for 0.3–0.5 % more bytes).
   enum class Entropy { Smaller, ZstdPlanes, Tokens, Lanes } entropy = Entropy::Smaller;
 };
