@@ -130,7 +130,7 @@ def b16_order(v):
 
 def residuals_of(vals, ext, value_map, shift, taps, level):
     ex, ey, ez = ext
-    U = [b16_order(v) if value_map == 1 else v for v in vals]
+    U = [b16_order(int(v)) if value_map == 1 else int(v) for v in vals]
     out = []
     i = 0
     sy, sz = ex, ex * ey

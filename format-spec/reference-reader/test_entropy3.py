@@ -23,6 +23,9 @@ import zstandard
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import ivolref  # noqa: E402
+# Coder 2's test has the tokens of §7.2.1 and §7.2's predictor on the
+# encoder's side: coder 3 shares them.
+from test_entropy2 import B, b16_order, residuals_of, token_of  # noqa: E402
 
 LOW = 1 << 16                       # §7.2.2: the states start and end at 2^16
 STATES = 32
@@ -32,19 +35,6 @@ REASONS = ("present_zero", "table_a", "last_freq", "table_padding", "short", "in
 
 
 # ------------------------------------------------------------ tokens and contexts (§7.2.1)
-
-def token_of(z):
-    """(token, number of bits below e, the bits w)"""
-    if z < 2:
-        return z, 0, 0
-    b = z.bit_length()               # b(z): highest set bit + 1
-    e = b - 2
-    return 2 * b - 2 + ((z >> e) & 1), e, z & ((1 << e) - 1)
-
-
-def B(t):
-    return t if t < 2 else (t >> 1) + 1
-
 
 def tokens_and_contexts(zz, ext):
     """Per voxel, raster order: (token, e, w, context k)."""
@@ -204,45 +194,7 @@ def encode_residuals(zz, ext, choose=proportional, rng=None):
     return body_of(encode_parts(zz, ext, choose, rng))
 
 
-# ------------------------------------------------------------ §7.2 predictor (encoder side)
-
-def b16_order(v):
-    return v ^ 0xFFFF if v & 0x8000 else v | 0x8000
-
-
-def residuals_of(vals, ext, value_map, shift, taps, level):
-    ex, ey, ez = ext
-    U = [b16_order(int(v)) if value_map == 1 else int(v) for v in vals]
-    out = []
-    i = 0
-    sy, sz = ex, ex * ey
-
-    def clamp(p):
-        return max(0, min(65535, p))
-    for z in range(ez):
-        for y in range(ey):
-            for x in range(ex):
-                if x and y and z:
-                    nb = (U[i - 1], U[i - sy], U[i - sz], U[i - 1 - sy], U[i - 1 - sz],
-                          U[i - sy - sz], U[i - 1 - sy - sz])
-                    S = sum(a * b for a, b in zip(taps, nb))
-                    r = 1 << (shift - 1) if shift else 0
-                    p = clamp((S + r) // (1 << shift) + level)
-                else:
-                    back = [st for c, st in ((x, 1), (y, sy), (z, sz)) if c]
-                    if not back:
-                        p = 0
-                    elif len(back) == 1:
-                        p = U[i - back[0]]
-                    else:
-                        p = clamp(U[i - back[0]] + U[i - back[1]] - U[i - back[0] - back[1]])
-                d = (U[i] - p) % 65536
-                if d >= 32768:
-                    d -= 65536
-                out.append(2 * d if d >= 0 else -2 * d - 1)
-                i += 1
-    return out
-
+# ------------------------------------------------------------ payloads (§7.2)
 
 def header(value_map=0, shift=0, taps=(0,) * 7, level=0, entropy=3, predictor=1):
     return struct.pack("<BBBB7hi", predictor, value_map, shift, entropy, *taps, level) + b"\0\0"

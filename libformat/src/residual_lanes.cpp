@@ -204,7 +204,7 @@ bool encode_residual_lanes(const std::uint16_t* residuals, const BrickDims& dims
                            std::vector<std::uint8_t>& out) {
   const std::size_t n = std::size_t{dims[0]} * dims[1] * dims[2];
   // Kept per thread: every element is written before it is read.
-  thread_local std::vector<std::uint8_t> tokens, lengths, contexts, body;
+  thread_local std::vector<std::uint8_t> tokens, lengths, contexts;
   thread_local std::vector<std::uint16_t> words;
   tokens.resize(n);
   lengths.resize(n);
@@ -217,9 +217,15 @@ bool encode_residual_lanes(const std::uint16_t* residuals, const BrickDims& dims
   });
   Tables tables;
   choose_frequencies(counts, tables);
-  body.clear();
-  write_tables(counts, tables, body);
-  if (body.size() + kFixedHeader > limit) return false;
+  // Written after what `out` holds, and cut off again if over the limit.
+  const std::size_t start = out.size();
+  auto refuse = [&] {
+    out.resize(start);
+    return false;
+  };
+  write_tables(counts, tables, out);
+  const std::size_t tables_size = out.size() - start;
+  if (tables_size + kFixedHeader > limit) return refuse();
 
   // rANS from the last voxel, voxel i on state i mod 32, at most a word a
   // voxel: the words are written from the back of room for n of them.
@@ -248,20 +254,19 @@ bool encode_residual_lanes(const std::uint16_t* residuals, const BrickDims& dims
     x[i % kLanes] = (q << kTableBits) + (state - q * f) + s;
   }
   const std::size_t word_count = static_cast<std::size_t>(words_end - w);
-  const std::size_t tables_size = body.size();
-  if (tables_size + kFixedHeader + 2 * word_count > limit) return false;
+  if (tables_size + kFixedHeader + 2 * word_count > limit) return refuse();
   // The bits below, LSB first, as coder 2 packs them: at most 14 a voxel,
   // written 32 at a time (2n bytes and a word spare).
-  const std::size_t bits_at = tables_size + kFixedHeader + 2 * word_count;
-  body.resize(bits_at + 2 * n + 8);
-  std::uint8_t* const at = body.data() + tables_size;
+  const std::size_t bits_at = start + tables_size + kFixedHeader + 2 * word_count;
+  out.resize(bits_at + 2 * n + 8);
+  std::uint8_t* const at = out.data() + start + tables_size;
   for (unsigned l = 0; l < kLanes; ++l) put_u32(at + 4 * l, x[l]);
   put_u32(at + 4 * kLanes, static_cast<std::uint32_t>(word_count));
   for (std::size_t j = 0; j < word_count; ++j) {
     at[kFixedHeader + 2 * j] = static_cast<std::uint8_t>(w[j]);
     at[kFixedHeader + 2 * j + 1] = static_cast<std::uint8_t>(w[j] >> 8);
   }
-  std::uint8_t* to = body.data() + bits_at;
+  std::uint8_t* to = out.data() + bits_at;
   std::uint64_t pending = 0;
   unsigned pending_bits = 0;
   for (std::size_t i = 0; i < n; ++i) {
@@ -275,9 +280,8 @@ bool encode_residual_lanes(const std::uint16_t* residuals, const BrickDims& dims
   }
   for (; pending_bits > 0; pending_bits = pending_bits > 8 ? pending_bits - 8 : 0, pending >>= 8)
     *to++ = static_cast<std::uint8_t>(pending);
-  body.resize(static_cast<std::size_t>(to - body.data()));
-  if (body.size() > limit) return false;
-  out.insert(out.end(), body.begin(), body.end());
+  out.resize(static_cast<std::size_t>(to - out.data()));
+  if (out.size() - start > limit) return refuse();
   return true;
 }
 
@@ -318,28 +322,25 @@ void decode_residual_lanes(const std::uint8_t* data, std::size_t size, const Bri
   }
   if (row < rows) {
     TokenLookup lookup;
-    const std::size_t sy = nx, sz = std::size_t{nx} * dims[1];
-    std::vector<std::uint8_t> zeros(nx), contexts(nx), padded(std::size_t{nx} + 2);
-    for (; row < rows; ++row) {
-      const std::size_t i = row * nx;
-      const std::uint32_t y = static_cast<std::uint32_t>(row % dims[1]);
-      row_contexts(y ? lengths.data() + i - sy : zeros.data(), row >= dims[1] ? lengths.data() + i - sz : zeros.data(),
-                   nx, padded.data(), contexts.data());
-      for (std::uint32_t x = 0; x < nx; ++x) {
-        const unsigned k = contexts[x];
-        std::uint32_t& xs = state.x[(i + x) % kLanes];
-        const std::uint32_t slot = xs & (kTableTotal - 1);
-        const unsigned t = lookup.of(tables, k)[slot];
-        xs = tables.freq[k][t] * (xs >> kTableBits) + slot - tables.start[k][t];
-        if (xs < kStateLow) {
-          if (state.words == state.words_end) bad("the word stream ends before the brick's last voxel");
-          xs = xs << 16 | std::uint32_t{state.words[0]} | std::uint32_t{state.words[1]} << 8;
-          state.words += 2;
-        }
-        tokens[i + x] = static_cast<std::uint8_t>(t);
-        lengths[i + x] = static_cast<std::uint8_t>(token_bit_length(t));
-      }
-    }
+    walk_rows(
+        dims, lengths.data(),
+        [&](std::size_t i, const std::uint8_t* contexts, std::uint8_t* row_lengths) {
+          for (std::uint32_t x = 0; x < nx; ++x) {
+            const unsigned k = contexts[x];
+            std::uint32_t& xs = state.x[(i + x) % kLanes];
+            const std::uint32_t slot = xs & (kTableTotal - 1);
+            const unsigned t = lookup.of(tables, k)[slot];
+            xs = tables.freq[k][t] * (xs >> kTableBits) + slot - tables.start[k][t];
+            if (xs < kStateLow) {
+              if (state.words == state.words_end) bad("the word stream ends before the brick's last voxel");
+              xs = xs << 16 | std::uint32_t{state.words[0]} | std::uint32_t{state.words[1]} << 8;
+              state.words += 2;
+            }
+            tokens[i + x] = static_cast<std::uint8_t>(t);
+            row_lengths[x] = static_cast<std::uint8_t>(token_bit_length(t));
+          }
+        },
+        row);
   }
   if (state.words != state.words_end)
     bad(std::to_string((state.words_end - state.words) / 2) + " words are left after the brick's last voxel");

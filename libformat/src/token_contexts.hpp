@@ -32,16 +32,17 @@ void tokens_of(const std::uint16_t* z, std::size_t n, std::uint8_t* tokens, std:
 void row_contexts(const std::uint8_t* up, const std::uint8_t* back, std::uint32_t nx, std::uint8_t* padded,
                   std::uint8_t* contexts);
 
-// Visits a brick's rows in raster order with each row's contexts:
-// visit(i, contexts, lengths + i) for the row starting at voxel i, which
-// sets the bit lengths of its tokens before the next row's visit.
+// Visits a brick's rows in raster order from row `first` (y + z·e_y) on,
+// with each row's contexts: visit(i, contexts, lengths + i) for the row
+// starting at voxel i, which sets the bit lengths of its tokens before the
+// next row's visit (the rows before `first` have theirs already).
 template <class Visit>
-void walk_rows(const BrickDims& d, std::uint8_t* lengths, Visit&& visit) {
+void walk_rows(const BrickDims& d, std::uint8_t* lengths, Visit&& visit, std::size_t first = 0) {
   const std::size_t sy = d[0], sz = std::size_t{d[0]} * d[1];
   std::vector<std::uint8_t> zeros(d[0]), contexts(d[0]), padded(std::size_t{d[0]} + 2);
-  std::size_t i = 0;
-  for (std::uint32_t z = 0; z < d[2]; ++z)
-    for (std::uint32_t y = 0; y < d[1]; ++y, i += d[0]) {
+  std::size_t i = first * d[0];
+  for (auto z = static_cast<std::uint32_t>(first / d[1]); z < d[2]; ++z)
+    for (std::uint32_t y = z == first / d[1] ? static_cast<std::uint32_t>(first % d[1]) : 0; y < d[1]; ++y, i += d[0]) {
       row_contexts(y ? lengths + i - sy : zeros.data(), z ? lengths + i - sz : zeros.data(), d[0], padded.data(),
                    contexts.data());
       visit(i, contexts.data(), lengths + i);
