@@ -56,9 +56,10 @@ EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_ele
   // codec 2), so that the slowly varying high bytes of values and node words
   // compress apart from the noisy low ones.
   const bool planes = options.compress && options.byte_planes && stream != Stream::Metadata && width > 1;
-  std::vector<std::uint8_t> regrouped;
+  // Kept per thread, grown only: every byte used is written first.
+  thread_local std::vector<std::uint8_t> regrouped;
   if (planes) {
-    regrouped.resize(raw_size);
+    if (regrouped.size() < raw_size) regrouped.resize(raw_size);
     const std::uint8_t* __restrict in = static_cast<const std::uint8_t*>(data);
     std::uint8_t* __restrict out = regrouped.data();
     const std::size_t n = element_count;
@@ -76,7 +77,6 @@ EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_ele
   }
   if (options.compress) {
     const void* content = planes ? regrouped.data() : data;
-    block.bytes.resize(ZSTD_compressBound(raw_size));
     // One context per thread, reused: creating one costs more than a small block.
     thread_local std::unique_ptr<ZSTD_CCtx, decltype(&ZSTD_freeCCtx)> context(ZSTD_createCCtx(), ZSTD_freeCCtx);
     ZSTD_CCtx* cctx = context.get();
@@ -108,6 +108,7 @@ EncodedBlock encode_block(Stream stream, unsigned level, std::uint64_t first_ele
                  ? detail::compress_parts(cctx, {{r, n}, {r + n, n}}, block.bytes, 0)
                  : detail::compress_parts(cctx, {{r, n}, {r + n, n}, {r + 2 * n, n}, {r + 3 * n, n}}, block.bytes, 0);
     } else {
+      block.bytes.resize(ZSTD_compressBound(raw_size));
       size = ZSTD_compress2(cctx, block.bytes.data(), block.bytes.size(), content, raw_size);
       if (ZSTD_isError(size))
         throw Error(ErrorClass::Io, std::string("zstd compression failed: ") + ZSTD_getErrorName(size));

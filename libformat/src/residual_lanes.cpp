@@ -242,7 +242,10 @@ bool encode_residual_lanes(const std::uint16_t* residuals, const BrickDims& dims
   words.resize(n);
   std::uint16_t* const words_end = words.data() + n;
   std::uint16_t* w = words_end;
-  for (std::size_t i = n; i-- > 0;) {
+  // The voxels after the last whole 32 here, those before in vectors
+  // where the processor has AVX2.
+  const std::size_t vector_chunks = lane_rows_avx2_available() ? n / kLanes : 0;
+  for (std::size_t i = n; i-- > kLanes * vector_chunks;) {
     const unsigned k = contexts[i], t = tokens[i];
     const std::uint32_t f = tables.freq[k][t], s = tables.start[k][t];
     std::uint32_t state = x[i % kLanes];
@@ -253,12 +256,23 @@ bool encode_residual_lanes(const std::uint16_t* residuals, const BrickDims& dims
     const auto q = f > 1 ? static_cast<std::uint32_t>((static_cast<Wide>(state) * reciprocal[k][t]) >> 64) : state;
     x[i % kLanes] = (q << kTableBits) + (state - q * f) + s;
   }
+  if (vector_chunks) {
+    LaneSymbols symbols;
+    for (unsigned k = 0; k < kContexts; ++k)
+      for (unsigned t = 0; t < kTokens; ++t)
+        symbols[k * kTokens + t] = tables.freq[k][t] | std::uint32_t{tables.start[k][t]} << 16;
+    w = encode_lane_chunks_avx2(symbols, contexts.data(), tokens.data(), vector_chunks, x, w);
+  }
   const std::size_t word_count = static_cast<std::size_t>(words_end - w);
   if (tables_size + kFixedHeader + 2 * word_count > limit) return refuse();
-  // The bits below, LSB first, as coder 2 packs them: at most 14 a voxel,
-  // written 32 at a time (2n bytes and a word spare).
+  // The bits below, LSB first, as coder 2 packs them, and the 8 bytes
+  // put_bits_below may write past them: `out` is zero-filled only as far
+  // as it is used (at 2n bytes, that and its page faults were a twentieth
+  // of a conversion's time).
   const std::size_t bits_at = start + tables_size + kFixedHeader + 2 * word_count;
-  out.resize(bits_at + 2 * n + 8);
+  const std::size_t bits_size = static_cast<std::size_t>((count_bits_below(tokens.data(), n) + 7) / 8);
+  if (bits_at - start + bits_size > limit) return refuse();
+  out.resize(bits_at + bits_size + 8);
   std::uint8_t* const at = out.data() + start + tables_size;
   for (unsigned l = 0; l < kLanes; ++l) put_u32(at + 4 * l, x[l]);
   put_u32(at + 4 * kLanes, static_cast<std::uint32_t>(word_count));
@@ -266,20 +280,7 @@ bool encode_residual_lanes(const std::uint16_t* residuals, const BrickDims& dims
     at[kFixedHeader + 2 * j] = static_cast<std::uint8_t>(w[j]);
     at[kFixedHeader + 2 * j + 1] = static_cast<std::uint8_t>(w[j] >> 8);
   }
-  std::uint8_t* to = out.data() + bits_at;
-  std::uint64_t pending = 0;
-  unsigned pending_bits = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const unsigned e = bits_below_token(tokens[i]);
-    pending |= std::uint64_t{residuals[i] & ((1u << e) - 1)} << pending_bits;
-    pending_bits += e;
-    if (pending_bits >= 32) {
-      put_u32(to, static_cast<std::uint32_t>(pending));
-      to += 4, pending >>= 32, pending_bits -= 32;
-    }
-  }
-  for (; pending_bits > 0; pending_bits = pending_bits > 8 ? pending_bits - 8 : 0, pending >>= 8)
-    *to++ = static_cast<std::uint8_t>(pending);
+  std::uint8_t* const to = put_bits_below(tokens.data(), residuals, n, out.data() + bits_at);
   out.resize(static_cast<std::size_t>(to - out.data()));
   if (out.size() - start > limit) return refuse();
   return true;

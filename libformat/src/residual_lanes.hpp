@@ -59,4 +59,18 @@ std::size_t decode_lane_rows_avx2(const LaneSlotWords& slots, const BrickDims& d
                                   LaneDecoderState& state, std::uint8_t* tokens, std::uint8_t* lengths);
 bool lane_rows_avx2_available();
 
+// For the vector encoder: f | s << 16 of token t in context k, at k · 32 + t.
+using LaneSymbols = std::array<std::uint32_t, kTokenContexts * kTokenCount>;
+
+// Codes voxels [0, 32 · chunks) with AVX2, from the last, as the scalar
+// encoder does (voxel i on state i mod 32, a renormalisation's word stored
+// below the ones before it): x holds the states after the voxels above
+// them, `w` points after the room for the words, at least one a voxel
+// still to code (a vector stores 8 words below `w`, those below its own
+// written over later, so it writes nothing below the room of the voxels
+// before it). Returns where the words now begin. Needs AVX2 (lane_rows_avx2_available).
+std::uint16_t* encode_lane_chunks_avx2(const LaneSymbols& symbols, const std::uint8_t* contexts,
+                                       const std::uint8_t* tokens, std::size_t chunks,
+                                       std::array<std::uint32_t, kLaneCount>& x, std::uint16_t* w);
+
 }  // namespace ivol::detail

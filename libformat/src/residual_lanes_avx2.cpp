@@ -1,9 +1,10 @@
-// Entropy coder 3's tokens decoded with AVX2 (spec §7.2.2): the 32 states
-// as four vectors of 8 lanes, a gather of their slot words a vector, and
-// the renormalisation of the lanes below 2^16 from the next words, moved
-// into their lanes by a permutation chosen by the lanes' mask. Four
-// gathers are in flight at once: on the cores measured a gather's result
-// is otherwise waited for.
+// Entropy coder 3's tokens decoded and coded with AVX2 (spec §7.2.2), the
+// 32 states as four vectors of 8 lanes. The decoder: a gather of their slot
+// words a vector, and the renormalisation of the lanes below 2^16 from the
+// next words, moved into their lanes by a permutation chosen by the lanes'
+// mask. Four gathers are in flight at once: on the cores measured a
+// gather's result is otherwise waited for. The encoder: the same steps
+// backwards, its words moved out of their lanes by such a permutation.
 #include <array>
 #include <cstring>
 
@@ -95,6 +96,85 @@ __attribute__((target("avx2"))) std::size_t decode_lane_rows_avx2(const LaneSlot
   return row;
 }
 
+namespace {
+
+// For each mask of lanes that give a word: where each of the words ends up
+// when they are moved to the top of 8 in lane order (the lanes whose word
+// is not kept fill the bottom).
+struct TopPermutations {
+  std::array<std::array<std::uint32_t, 8>, 256> index{};
+  TopPermutations() {
+    for (unsigned m = 0; m < 256; ++m) {
+      const unsigned count = static_cast<unsigned>(__builtin_popcount(m));
+      for (unsigned l = 0, k = 8 - count; l < 8; ++l)
+        if (m >> l & 1) index[m][k++] = l;
+    }
+  }
+};
+
+}  // namespace
+
+// One vector's step, as the scalar encoder's: a state at or above f · 2^20
+// gives its low word; then x ← ⌊x / f⌋ · 2^12 + x mod f + s. The quotient
+// is below 2^20 and is the division's in binary64 truncated: x and f are
+// exact there, and a quotient's fraction, when not 0, is at least 1/f
+// below the next integer, far more than the division's rounding.
+__attribute__((target("avx2"))) std::uint16_t* encode_lane_chunks_avx2(const LaneSymbols& symbols,
+                                                                       const std::uint8_t* contexts,
+                                                                       const std::uint8_t* tokens, std::size_t chunks,
+                                                                       std::array<std::uint32_t, kLaneCount>& x_lanes,
+                                                                       std::uint16_t* w) {
+  static const TopPermutations permutations;
+  const int* const table = reinterpret_cast<const int*>(symbols.data());
+  __m256i xs[kVectors];
+  for (unsigned v = 0; v < kVectors; ++v)
+    xs[v] = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(x_lanes.data() + 8 * v));
+  const __m256i low16 = _mm256_set1_epi32(0xFFFF), sign = _mm256_set1_epi32(INT32_MIN), one = _mm256_set1_epi32(1),
+                total = _mm256_set1_epi32(kTableTotal);
+  const __m256d two31 = _mm256_set1_pd(2147483648.0);
+  for (std::size_t c = chunks; c-- > 0;) {
+    const std::size_t base = 32 * c;
+    for (unsigned v = kVectors; v-- > 0;) {
+      std::uint64_t k8, t8;
+      std::memcpy(&k8, contexts + base + 8 * v, 8);
+      std::memcpy(&t8, tokens + base + 8 * v, 8);
+      const __m256i k = _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(static_cast<long long>(k8)));
+      const __m256i t = _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(static_cast<long long>(t8)));
+      const __m256i fs = _mm256_i32gather_epi32(table, _mm256_add_epi32(_mm256_slli_epi32(k, 5), t), 4);
+      const __m256i f = _mm256_and_si256(fs, low16), s = _mm256_srli_epi32(fs, 16);
+      __m256i x = xs[v];
+      // x ≥ f · 2^20, unsigned: x > f · 2^20 − 1, which for f = 4096
+      // wraps to 2^32 − 1, above every state (such a token never gives one).
+      const __m256i limit = _mm256_sub_epi32(_mm256_slli_epi32(f, 20), one);
+      const __m256i out = _mm256_cmpgt_epi32(_mm256_xor_si256(x, sign), _mm256_xor_si256(limit, sign));
+      const unsigned m = static_cast<unsigned>(_mm256_movemask_ps(_mm256_castsi256_ps(out)));
+      {  // stored whatever m, a branch the data would decide costing more
+        const __m256i moved = _mm256_permutevar8x32_epi32(
+            _mm256_and_si256(x, low16),
+            _mm256_loadu_si256(reinterpret_cast<const __m256i*>(permutations.index[m].data())));
+        const __m256i packed = _mm256_permute4x64_epi64(_mm256_packus_epi32(moved, moved), 0x08);
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(w - 8), _mm256_castsi256_si128(packed));
+        w -= __builtin_popcount(m);
+        x = _mm256_blendv_epi8(x, _mm256_srli_epi32(x, 16), out);
+      }
+      // x as binary64: its bits less 2^31 as a signed integer, plus 2^31.
+      const __m256i xb = _mm256_xor_si256(x, sign);
+      const __m256d x_low = _mm256_add_pd(_mm256_cvtepi32_pd(_mm256_castsi256_si128(xb)), two31);
+      const __m256d x_high = _mm256_add_pd(_mm256_cvtepi32_pd(_mm256_extracti128_si256(xb, 1)), two31);
+      const __m256d f_low = _mm256_cvtepi32_pd(_mm256_castsi256_si128(f));
+      const __m256d f_high = _mm256_cvtepi32_pd(_mm256_extracti128_si256(f, 1));
+      const __m256i q = _mm256_set_m128i(_mm256_cvttpd_epi32(_mm256_div_pd(x_high, f_high)),
+                                         _mm256_cvttpd_epi32(_mm256_div_pd(x_low, f_low)));
+      // q · 2^12 + (x − q · f) + s = x + q · (2^12 − f) + s.
+      xs[v] = _mm256_add_epi32(_mm256_add_epi32(x, s), _mm256_mullo_epi32(q, _mm256_sub_epi32(total, f)));
+    }
+  }
+  for (unsigned v = 0; v < kVectors; ++v)
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(x_lanes.data() + 8 * v), xs[v]);
+  _mm256_zeroupper();
+  return w;
+}
+
 bool lane_rows_avx2_available() {
   static const bool has = __builtin_cpu_supports("avx2");
   return has;
@@ -105,6 +185,10 @@ std::size_t decode_lane_rows_avx2(const LaneSlotWords&, const BrickDims&, std::s
   return row;
 }
 bool lane_rows_avx2_available() { return false; }
+std::uint16_t* encode_lane_chunks_avx2(const LaneSymbols&, const std::uint8_t*, const std::uint8_t*, std::size_t,
+                                       std::array<std::uint32_t, kLaneCount>&, std::uint16_t* w) {
+  return w;
+}
 #endif
 
 }  // namespace ivol::detail

@@ -52,6 +52,14 @@ void walk_rows(const BrickDims& d, std::uint8_t* lengths, Visit&& visit, std::si
 // The sum of bits_below_token over tokens[0 .. n) (each below 32).
 std::uint64_t count_bits_below(const std::uint8_t* tokens, std::size_t n);
 
+// Writes the bits below tokens[0 .. n) of residuals[0 .. n), LSB first, the
+// last byte's unused high bits 0, from `to`; returns the end of those
+// bytes. Writes up to 8 bytes past that end: `to` has room for
+// (count_bits_below(tokens, n) + 7) / 8 + 8 bytes. Eight voxels a step with AVX2
+// where the processor has it.
+std::uint8_t* put_bits_below(const std::uint8_t* tokens, const std::uint16_t* residuals, std::size_t n,
+                             std::uint8_t* to);
+
 // residuals[i] for i in [0, n) from tokens[i] (each below 32) and the bits
 // below them, LSB first, in bits[0 .. size). The caller has checked that
 // the stream holds count_bits_below(tokens, n) bits: nothing is read past

@@ -15,6 +15,17 @@ void check(std::size_t code) {
 
 }  // namespace
 
+std::uint8_t* frame_scratch(std::size_t size) {
+  thread_local std::unique_ptr<std::uint8_t[]> buffer;
+  thread_local std::size_t capacity = 0;
+  if (capacity < size) {
+    buffer.reset();
+    buffer.reset(new std::uint8_t[size]);  // not zero-filled: zstd writes what is read back
+    capacity = size;
+  }
+  return buffer.get();
+}
+
 std::size_t compress_parts(ZSTD_CCtx* cctx, std::initializer_list<ZstdPart> parts, std::vector<std::uint8_t>& out,
                            std::size_t offset) {
   std::size_t total = 0;
@@ -22,9 +33,10 @@ std::size_t compress_parts(ZSTD_CCtx* cctx, std::initializer_list<ZstdPart> part
   const std::size_t bound = ZSTD_compressBound(total);
   // Room for a block header per flush beyond the bound, so that the
   // flushed frame never runs out of room before it can be compared.
-  out.resize(offset + bound + 8 * parts.size() + 64);
+  const std::size_t room = bound + 8 * parts.size() + 64;
+  std::uint8_t* const frame = frame_scratch(room);
   check(ZSTD_CCtx_setPledgedSrcSize(cctx, total));
-  ZSTD_outBuffer dst{out.data() + offset, out.size() - offset, 0};
+  ZSTD_outBuffer dst{frame, room, 0};
   std::size_t left = parts.size();
   for (const ZstdPart& p : parts) {
     const ZSTD_EndDirective mode = --left == 0 ? ZSTD_e_end : ZSTD_e_flush;
@@ -37,18 +49,18 @@ std::size_t compress_parts(ZSTD_CCtx* cctx, std::initializer_list<ZstdPart> part
       if (remaining != 0 && dst.pos == dst.size) throw Error(ErrorClass::Io, "zstd: the frame outgrew its buffer");
     } while (remaining != 0 || src.pos < src.size);
   }
-  if (dst.pos <= bound) {
-    out.resize(offset + dst.pos);
-    return dst.pos;
+  std::size_t size = dst.pos;
+  if (size > bound) {
+    // The flushes' block headers took it past the bound: one run instead.
+    std::vector<std::uint8_t> whole;
+    whole.reserve(total);
+    for (const ZstdPart& p : parts) whole.insert(whole.end(), p.data, p.data + p.size);
+    ZSTD_CCtx_reset(cctx, ZSTD_reset_session_only);
+    size = ZSTD_compress2(cctx, frame, bound, whole.data(), whole.size());
+    check(size);
   }
-  // The flushes' block headers took it past the bound: one run instead.
-  std::vector<std::uint8_t> whole;
-  whole.reserve(total);
-  for (const ZstdPart& p : parts) whole.insert(whole.end(), p.data, p.data + p.size);
-  ZSTD_CCtx_reset(cctx, ZSTD_reset_session_only);
-  const std::size_t size = ZSTD_compress2(cctx, out.data() + offset, bound, whole.data(), whole.size());
-  check(size);
-  out.resize(offset + size);
+  out.resize(offset);
+  out.insert(out.end(), frame, frame + size);
   return size;
 }
 

@@ -1,0 +1,188 @@
+// When may the bricked writer skip its trial of codec 2 (zstd over the byte
+// planes) on a 16-bit brick? The trial is a tenth of a binary16
+// conversion's CPU time, and codec 2 wins only bricks where prediction does
+// not pay (noise). This study codes every brick of a real volume as the
+// writer does at the default zstd level 3 (codec 3; codec 2 tried at
+// level 1 and made again at 3 where it wins; codec 6 where codec 2 comes
+// within 5 % of codec 3 and the best spends over a quarter of the bits) and
+// prints, for each threshold a, the bytes and the trials left when the
+// trial (and with it codec 6's) is skipped wherever codec 3's bytes are
+// below a times the order-0 entropy of the brick's two byte planes:
+//
+//   plane_trial_study VOLUME.f32 N [BRICK_LOG2]
+//
+// VOLUME.f32: N^3 float32, x fastest (as codec_bench reads it), coded as
+// binary16 and as uint16. Also printed: the least ratio of codec 2's bytes
+// to that estimate, over all bricks and over those where codec 2 or 6 won.
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <string>
+#include <vector>
+
+#include "ivol/bricked_writer.hpp"
+#include "ivol/predicted_codec.hpp"
+#include "ivol/top_byte_codec.hpp"
+#include "ivol/writer.hpp"
+#include "sixteen_bit_volume.hpp"
+
+namespace bench {
+// The thread's CPU seconds (the machine is shared).
+inline double thread_seconds() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+}  // namespace bench
+
+namespace {
+
+// The order-0 entropy of the low and the high bytes, in bytes, each plane
+// at most its n bytes.
+double plane_entropy_bytes(const std::vector<std::uint16_t>& v) {
+  std::array<std::uint32_t, 256> low{}, high{};
+  for (const std::uint16_t x : v) ++low[x & 0xFF], ++high[x >> 8];
+  const double n = static_cast<double>(v.size());
+  double total = 0;
+  for (const auto* h : {&low, &high}) {
+    double bits = 0;
+    for (const std::uint32_t c : *h)
+      if (c) bits += c * std::log2(n / c);
+    total += std::min(n, bits / 8);
+  }
+  return total;
+}
+
+// zstd over the two byte planes of v[0 .. count), as codec 2 makes them
+// (each plane ends a zstd block), at `level`: its bytes and CPU seconds.
+std::size_t planes_bytes(const std::uint16_t* v, std::size_t count, int level, double& seconds) {
+  const double t = bench::thread_seconds();
+  ivol::WriteOptions w;
+  w.zstd_level = level;
+  const std::size_t size =
+      ivol::encode_block(ivol::Stream::Values, 0, 0, static_cast<std::uint32_t>(count), 2, v, w).bytes.size();
+  seconds += bench::thread_seconds() - t;
+  return size;
+}
+
+struct BrickResult {
+  std::size_t n, predicted, level1, level3, top_byte;
+  double entropy;                            // order-0 estimate
+  std::size_t quarter, fast1, fast3, fast5;  // cheaper trials: a quarter at level 1 (times 4), levels −1, −3, −5
+};
+
+// The writer's choice (bricked_writer.cpp) given the trial `trial` that
+// stands in for codec 2 at level 1: codec 3; codec 2 where it wins; codec 6
+// where the trial comes within 5 % of codec 3; stored at most.
+std::size_t writer_choice(const BrickResult& r, std::size_t trial) {
+  std::size_t best = r.predicted;
+  if (trial < r.predicted) best = std::min({r.predicted, r.level1, r.level3});
+  if (100 * trial < 105 * r.predicted && best > 2 * r.n / 4) best = std::min(best, r.top_byte);
+  return std::min(best, 2 * r.n);
+}
+
+struct Seconds {
+  double predicted = 0, level1 = 0, level3 = 0, quarter = 0, fast1 = 0, fast3 = 0, fast5 = 0;
+};
+
+BrickResult code_brick(const std::vector<std::uint16_t>& v, const ivol::BrickDims& e, ivol::ValueEncoding encoding,
+                       Seconds& s) {
+  const std::size_t n = v.size();
+  BrickResult r{};
+  r.n = n;
+  ivol::PredictedOptions p;
+  p.zstd_level = ivol::residual_zstd_level(3);
+  double t = bench::thread_seconds();
+  r.predicted = ivol::encode_predicted(v.data(), e, encoding, p).size();
+  s.predicted += bench::thread_seconds() - t;
+  r.level1 = planes_bytes(v.data(), n, 1, s.level1);
+  r.level3 = planes_bytes(v.data(), n, 3, s.level3);
+  r.quarter = 4 * planes_bytes(v.data(), n / 4, 1, s.quarter);
+  r.fast1 = planes_bytes(v.data(), n, -1, s.fast1);
+  r.fast3 = planes_bytes(v.data(), n, -3, s.fast3);
+  r.fast5 = planes_bytes(v.data(), n, -5, s.fast5);
+  std::vector<std::uint8_t> bytes(2 * n);
+  for (std::size_t i = 0; i < n; ++i)
+    bytes[2 * i] = v[i] & 0xFF, bytes[2 * i + 1] = static_cast<std::uint8_t>(v[i] >> 8);
+  const auto top = ivol::encode_top_byte(bytes.data(), e, 2, 2 * n + 1);
+  r.top_byte = top.empty() ? 2 * n + 1 : top.size();
+  r.entropy = plane_entropy_bytes(v);
+  return r;
+}
+
+void study(const char* label, const std::vector<std::uint16_t>& volume, std::uint32_t n, unsigned log2,
+           ivol::ValueEncoding encoding) {
+  const std::uint32_t b = 1u << log2;
+  std::vector<BrickResult> results;
+  Seconds s;
+  for (std::uint32_t z0 = 0; z0 < n; z0 += b)
+    for (std::uint32_t y0 = 0; y0 < n; y0 += b)
+      for (std::uint32_t x0 = 0; x0 < n; x0 += b) {
+        const ivol::BrickDims e{std::min(b, n - x0), std::min(b, n - y0), std::min(b, n - z0)};
+        std::vector<std::uint16_t> v;
+        for (std::uint32_t z = z0; z < z0 + e[2]; ++z)
+          for (std::uint32_t y = y0; y < y0 + e[1]; ++y)
+            for (std::uint32_t x = x0; x < x0 + e[0]; ++x) v.push_back(volume[(std::size_t{z} * n + y) * n + x]);
+        results.push_back(code_brick(v, e, encoding, s));
+      }
+  std::uint64_t full = 0;
+  std::size_t won = 0;
+  for (const auto& r : results) {
+    const std::size_t best = writer_choice(r, r.level1);
+    full += best;
+    won += best < r.predicted;
+  }
+  std::printf(
+      "%-8s bricks %u^3: %zu bricks, codec 2 or 6 won %zu; %llu bytes with every trial; CPU s: codec 3 "
+      "%.3f, trial at level 1 %.3f (3: %.3f), a quarter %.3f, level -1 %.3f, -3 %.3f, -5 %.3f\n",
+      label, b, results.size(), won, static_cast<unsigned long long>(full), s.predicted, s.level1, s.level3, s.quarter,
+      s.fast1, s.fast3, s.fast5);
+  struct Rule {
+    const char* name;
+    std::size_t BrickResult::*cheap;  // nullptr: the order-0 estimate
+    double cost;                      // the cheap trial's seconds
+  };
+  for (const Rule& rule :
+       {Rule{"entropy", nullptr, 0}, Rule{"quarter", &BrickResult::quarter, s.quarter},
+        Rule{"level -1", &BrickResult::fast1, s.fast1}, Rule{"level -3", &BrickResult::fast3, s.fast3},
+        Rule{"level -5", &BrickResult::fast5, s.fast5}})
+    for (const double margin : {0.0, 0.05, 0.10, 0.20}) {
+      // The level-1 trial only where the cheap one comes within the margin of codec 3.
+      std::uint64_t bytes = 0;
+      std::size_t trials = 0;
+      for (const auto& r : results) {
+        const double cheap = rule.cheap ? static_cast<double>(r.*rule.cheap) : r.entropy;
+        const bool trial = cheap < (1 + margin) * static_cast<double>(r.predicted);
+        trials += trial;
+        bytes += trial ? writer_choice(r, r.level1) : r.predicted;
+      }
+      const double fraction = static_cast<double>(trials) / results.size();
+      std::printf("  %-8s margin %.2f: level-1 trials %5.1f %%, trial CPU %5.1f %% of now, bytes %+.4f %%\n", rule.name,
+                  margin, 100 * fraction, 100 * (rule.cost + fraction * s.level1) / s.level1,
+                  100.0 * (static_cast<double>(bytes) / full - 1));
+    }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 3) {
+    std::fprintf(stderr, "usage: plane_trial_study VOLUME.f32 N [BRICK_LOG2]\n");
+    return 2;
+  }
+  const auto n = static_cast<std::uint32_t>(std::stoul(argv[2]));
+  const unsigned log2 = argc > 3 ? static_cast<unsigned>(std::stoul(argv[3])) : 5;
+  bench::SixteenBitVolume volume;
+  try {
+    volume = bench::read_sixteen_bit(argv[1], n);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
+    return 2;
+  }
+  study("binary16", volume.binary16, n, log2, ivol::ValueEncoding::Binary16);
+  study("uint16", volume.codes, n, log2, ivol::ValueEncoding::UInt16);
+  return 0;
+}
