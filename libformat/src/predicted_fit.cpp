@@ -8,6 +8,8 @@
 #include <utility>
 #include <vector>
 
+#include "vector_clones.hpp"
+
 namespace ivol::detail {
 namespace {
 
@@ -51,7 +53,7 @@ std::uint64_t sampled_voxels(const BrickDims& d, RowSample sample) {
 
 // Σ a[x]·b[x] (or Σ a[x]) over x < len, in four independent sums (which
 // the compiler may keep in vector lanes): exact for integers below 2^53.
-double exact_sum(const double* a, const double* b, std::uint32_t len, bool products) {
+IVOL_VECTOR_CLONES double exact_sum(const double* a, const double* b, std::uint32_t len, bool products) {
   double s[4] = {};
   std::uint32_t x = 0;
   if (products)

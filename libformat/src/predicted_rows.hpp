@@ -15,6 +15,8 @@
 #include <cstdint>
 #include <cstdlib>
 
+#include "vector_clones.hpp"
+
 namespace ivol::detail {
 
 struct PredictorTaps {
@@ -89,8 +91,8 @@ inline std::uint32_t first_x(const std::uint16_t* brick, const RowNeighbours& n)
 // all known (the encoder): independent voxels, one vectorisable loop;
 // first = first_x(), z[0] of no meaning when it is 0.
 template <class Acc>
-void residual_row(const RowPredictor& p, const std::uint16_t* c, const RowNeighbours& n, std::uint32_t first,
-                  std::uint32_t len, std::uint16_t* z) {
+IVOL_VECTOR_CLONES void residual_row(const RowPredictor& p, const std::uint16_t* c, const RowNeighbours& n,
+                                     std::uint32_t first, std::uint32_t len, std::uint16_t* z) {
   const Acc t0 = p.t[0], t1 = p.t[1], t2 = p.t[2], t3 = p.t[3], t4 = p.t[4], t5 = p.t[5], t6 = p.t[6];
   const Acc round = p.round, level = static_cast<Acc>(p.level);
   const unsigned shift = p.shift;
@@ -134,8 +136,8 @@ std::int64_t level_row(const RowPredictor& p, const std::uint16_t* c, const RowN
 // The sums of voxels first .. len (first_x(); partial[0] and delta[0]
 // unused) and their residuals' differences.
 template <class Acc>
-void row_partials(const RowPredictor& p, const RowNeighbours& n, std::uint32_t first, std::uint32_t len,
-                  const std::uint16_t* z, Acc* partial, std::uint16_t* delta) {
+IVOL_VECTOR_CLONES void row_partials(const RowPredictor& p, const RowNeighbours& n, std::uint32_t first,
+                                     std::uint32_t len, const std::uint16_t* z, Acc* partial, std::uint16_t* delta) {
   const Acc t0 = p.t[0], t1 = p.t[1], t2 = p.t[2], t3 = p.t[3], t4 = p.t[4], t5 = p.t[5], t6 = p.t[6];
   const Acc constant = p.round + static_cast<Acc>(p.level * (std::int64_t{1} << p.shift)) - 32768 * t0;
   const std::uint16_t *up = n.up, *back = n.back, *ub = n.up_back;

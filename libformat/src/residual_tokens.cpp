@@ -150,6 +150,18 @@ void put_u32(std::uint8_t* p, std::uint32_t v) {
   for (int k = 0; k < 4; ++k) p[k] = static_cast<std::uint8_t>(v >> (8 * k));
 }
 
+__extension__ using Wide = unsigned __int128;
+
+// ceil(2^64 / f) for every frequency f from 2 to 2^12: floor(x / f) is then
+// the high word of x times it, for every x below 2^32.
+struct Reciprocals {
+  std::array<std::uint64_t, kTotal + 1> of{};
+  Reciprocals() {
+    for (std::uint64_t f = 2; f <= kTotal; ++f) of[f] = ~std::uint64_t{0} / f + 1;
+  }
+};
+const Reciprocals reciprocals;
+
 }  // namespace
 
 bool encode_residual_tokens(const std::uint16_t* residuals, const BrickDims& dims, std::size_t limit,
@@ -165,38 +177,19 @@ bool encode_residual_tokens(const std::uint16_t* residuals, const BrickDims& dim
   lengths.resize(n);
   coded.resize(n);
   tokens_of(residuals, n, tokens.data(), lengths.data());
-  // The bits below the tokens, LSB first: at most 14 a voxel, written 32 at
-  // a time, so 2n bytes and one word spare.
-  below.resize(2 * n + 8);
-  std::uint8_t* below_at = below.data();
-  std::uint64_t pending = 0;
-  unsigned pending_bits = 0;
   // The lengths are all known: the walk only reads them.
   walk_rows(dims, lengths.data(), [&](std::size_t row, const std::uint8_t* contexts, std::uint8_t*) {
-    std::uint64_t bits = pending;
-    unsigned bit_count = pending_bits;
-    std::uint8_t* to = below_at;
     for (std::uint32_t x = 0; x < dims[0]; ++x) {
-      const unsigned z = residuals[row + x], t = tokens[row + x];
-      const TokenBits tb = kTokenBits[t];
+      const unsigned t = tokens[row + x];
       ContextModel& m = models[contexts[x]];
       coded[row + x] = std::uint32_t{m.freq[t]} << 16 | m.start[t];
       m.note(t);
-      bits |= std::uint64_t{z & ((1u << tb.below) - 1)} << bit_count;
-      bit_count += tb.below;
-      if (bit_count >= 32) {
-        const std::uint32_t word = static_cast<std::uint32_t>(bits);
-        put_u32(to, word);
-        to += 4;
-        bits >>= 32;
-        bit_count -= 32;
-      }
     }
-    pending = bits, pending_bits = bit_count, below_at = to;
   });
-  for (; pending_bits > 0; pending_bits = pending_bits > 8 ? pending_bits - 8 : 0, pending >>= 8)
-    *below_at++ = static_cast<std::uint8_t>(pending);
-  const std::size_t below_size = static_cast<std::size_t>(below_at - below.data());
+  // The bits below the tokens, LSB first (at most 14 a voxel).
+  below.resize(static_cast<std::size_t>((count_bits_below(tokens.data(), n) + 7) / 8) + 8);
+  const std::size_t below_size =
+      static_cast<std::size_t>(put_bits_below(tokens.data(), residuals, n, below.data()) - below.data());
 
   // rANS, two states taking the voxels in turn, written from the back.
   const std::size_t room = 8 + 2 * n;
@@ -231,7 +224,10 @@ bool encode_residual_tokens(const std::uint16_t* residuals, const BrickDims& dim
         x >>= 8;
       }
     }
-    x = ((x / f) << kPrecision) + x % f + s;
+    // x / f as a multiply (exact for x < 2^32, the division was a sixth of
+    // the encoder's time); f = 1, whose reciprocal does not fit, is x itself.
+    const auto q = f > 1 ? static_cast<std::uint32_t>((static_cast<Wide>(x) * reciprocals.of[f]) >> 64) : x;
+    x = (q << kPrecision) + (x - q * f) + s;
   };
   // Voxel i on state i mod 2, from the last; the two states as locals, not
   // an array indexed by i (whose loads and stores chained each step to the
