@@ -1,5 +1,7 @@
 #include "cube_writers.hpp"
 
+#include "cpu_features.hpp"
+
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 #include <cpuid.h>
 #include <immintrin.h>
@@ -39,8 +41,7 @@ __attribute__((target("avx2"))) void uint16_cube(const std::uint8_t* values, flo
                                                  std::uint64_t plane) {
   for (unsigned pair = 0; pair < 4; ++pair) {
     const std::uint8_t* v = values + 32 * pair;
-    const __m256 a =
-        _mm256_cvtepi32_ps(_mm256_cvtepu16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(v))));
+    const __m256 a = _mm256_cvtepi32_ps(_mm256_cvtepu16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(v))));
     const __m256 b =
         _mm256_cvtepi32_ps(_mm256_cvtepu16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(v + 16))));
     put_pair(a, b, out + (pair & 1u) * 2 * nx + (pair >> 1) * 2 * plane, nx, plane);
@@ -57,12 +58,12 @@ static bool cpu_has_f16c() {
 }
 
 CubeWriter binary16_cube_writer() {
-  static const bool has = __builtin_cpu_supports("avx2") && cpu_has_f16c();
+  static const bool has = use_avx2() && cpu_has_f16c();
   return has ? binary16_cube : nullptr;
 }
 
 CubeWriter uint16_cube_writer() {
-  static const bool has = __builtin_cpu_supports("avx2");
+  static const bool has = use_avx2();
   return has ? uint16_cube : nullptr;
 }
 #else

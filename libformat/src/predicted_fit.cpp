@@ -8,7 +8,7 @@
 #include <utility>
 #include <vector>
 
-#include "vector_clones.hpp"
+#include "cpu_features.hpp"
 
 namespace ivol::detail {
 namespace {

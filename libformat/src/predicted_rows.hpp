@@ -15,7 +15,7 @@
 #include <cstdint>
 #include <cstdlib>
 
-#include "vector_clones.hpp"
+#include "cpu_features.hpp"
 
 namespace ivol::detail {
 

@@ -8,6 +8,7 @@
 #include <array>
 #include <cstring>
 
+#include "cpu_features.hpp"
 #include "residual_lanes.hpp"
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
@@ -175,10 +176,7 @@ __attribute__((target("avx2"))) std::uint16_t* encode_lane_chunks_avx2(const Lan
   return w;
 }
 
-bool lane_rows_avx2_available() {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
-}
+bool lane_rows_avx2_available() { return use_avx2(); }
 #else
 std::size_t decode_lane_rows_avx2(const LaneSlotWords&, const BrickDims&, std::size_t row, LaneDecoderState&,
                                   std::uint8_t*, std::uint8_t*) {

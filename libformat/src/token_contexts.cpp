@@ -4,6 +4,8 @@
 
 #include <cstring>
 
+#include "cpu_features.hpp"
+
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 #include <immintrin.h>
 #define IVOL_HAVE_AVX2_TOKENS 1
@@ -222,17 +224,13 @@ __attribute__((target("avx2"))) void take_avx2(const std::uint8_t* tokens, std::
   take_scalar(tokens, i, n, bits, size, position, residuals);
 }
 
-bool have_avx2() {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
-}
 #endif
 
 }  // namespace
 
 void tokens_of(const std::uint16_t* z, std::size_t n, std::uint8_t* tokens, std::uint8_t* lengths) {
 #ifdef IVOL_HAVE_AVX2_TOKENS
-  if (have_avx2()) return tokens_avx2(z, n, tokens, lengths);
+  if (use_avx2()) return tokens_avx2(z, n, tokens, lengths);
 #endif
   tokens_scalar(z, 0, n, tokens, lengths);
 }
@@ -253,7 +251,7 @@ std::uint64_t count_bits_below(const std::uint8_t* tokens, std::size_t n) {
 std::uint8_t* put_bits_below(const std::uint8_t* tokens, const std::uint16_t* residuals, std::size_t n,
                              std::uint8_t* to) {
 #ifdef IVOL_HAVE_AVX2_TOKENS
-  if (have_avx2()) return put_avx2(tokens, residuals, n, to);
+  if (use_avx2()) return put_avx2(tokens, residuals, n, to);
 #endif
   return put_scalar(tokens, residuals, 0, n, BitSink{to});
 }
@@ -261,7 +259,7 @@ std::uint8_t* put_bits_below(const std::uint8_t* tokens, const std::uint16_t* re
 void take_bits_below(const std::uint8_t* tokens, std::size_t n, const std::uint8_t* bits, std::size_t size,
                      std::uint16_t* residuals) {
 #ifdef IVOL_HAVE_AVX2_TOKENS
-  if (have_avx2()) return take_avx2(tokens, n, bits, size, residuals);
+  if (use_avx2()) return take_avx2(tokens, n, bits, size, residuals);
 #endif
   take_scalar(tokens, 0, n, bits, size, 0, residuals);
 }
