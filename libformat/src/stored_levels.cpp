@@ -10,6 +10,7 @@
 
 #include "ivol/encoding.hpp"
 #include "ivol/error.hpp"
+#include "stored_levels_avx2.hpp"
 
 namespace ivol::detail {
 
@@ -318,7 +319,17 @@ template <class Units, bool Magnitudes>
 void sum_runs_exact(const std::uint16_t* row, std::uint64_t width, unsigned k, std::int64_t* sums,
                     std::uint64_t* magnitudes, std::uint8_t* specials) {
   const std::uint64_t run = std::uint64_t{1} << k;
-  for (std::uint64_t x0 = 0, c = 0; x0 < width; x0 += run, ++c) {
+  std::uint64_t done = 0;
+  if constexpr (std::is_same_v<Units, Binary16Units>) {
+    done = binary16_runs_avx2(row, width >> k, k, sums, Magnitudes ? magnitudes : nullptr, specials);
+    for (std::uint64_t c = 0; c < done; ++c)
+      if (specials[c]) {  // rare: the run's flags voxel by voxel
+        std::uint8_t flags = 0;
+        for (std::uint64_t x = c * run; x < (c + 1) * run; ++x) flags |= Units::flags(row[x]);
+        specials[c] = flags;
+      }
+  }
+  for (std::uint64_t x0 = done * run, c = done; x0 < width; x0 += run, ++c) {
     const std::uint64_t end = std::min(width, x0 + run);
     std::int64_t sum = 0;
     std::uint64_t magnitude = 0;
