@@ -1,19 +1,21 @@
 // When may the bricked writer skip its trial of codec 2 (zstd over the byte
-// planes) on a 16-bit brick? The trial is a tenth of a binary16
+// planes) on a 16-bit brick? The trial was a tenth of a binary16
 // conversion's CPU time, and codec 2 wins only bricks where prediction does
-// not pay (noise). This study codes every brick of a real volume as the
-// writer does at the default zstd level 3 (codec 3; codec 2 tried at
-// level 1 and made again at 3 where it wins; codec 6 where codec 2 comes
-// within 5 % of codec 3 and the best spends over a quarter of the bits) and
-// prints, for each threshold a, the bytes and the trials left when the
-// trial (and with it codec 6's) is skipped wherever codec 3's bytes are
-// below a times the order-0 entropy of the brick's two byte planes:
+// not pay. This study codes every brick of a real volume as the writer
+// does at the default zstd level 3 (codec 3; codec 2 tried at level 1 and
+// made again at 3 where it wins; codec 6 where codec 2 comes within 5 % of
+// codec 3 and the best spends over a quarter of the bits) and prints, for
+// cheaper stand-ins for the trial (the byte planes' order-0 entropy, zstd
+// on a quarter of the brick, zstd at levels -1, -3, -5) and margins, the
+// share of trials left and the bytes against trying every brick:
 //
 //   plane_trial_study VOLUME.f32 N [BRICK_LOG2]
 //
 // VOLUME.f32: N^3 float32, x fastest (as codec_bench reads it), coded as
-// binary16 and as uint16. Also printed: the least ratio of codec 2's bytes
-// to that estimate, over all bricks and over those where codec 2 or 6 won.
+// binary16 and as uint16. With PLANE_TRIAL_CSV=FILE every brick's sizes are
+// appended to FILE (label, brick edge, voxels, codec 3, codec 2 at levels 1
+// and 3, codec 6, order-0 estimate, the writer's choice, zstd -5), for
+// rules the printout does not try (the writer's came from those files).
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -140,6 +142,14 @@ void study(const char* label, const std::vector<std::uint16_t>& volume, std::uin
       "%.3f, trial at level 1 %.3f (3: %.3f), a quarter %.3f, level -1 %.3f, -3 %.3f, -5 %.3f\n",
       label, b, results.size(), won, static_cast<unsigned long long>(full), s.predicted, s.level1, s.level3, s.quarter,
       s.fast1, s.fast3, s.fast5);
+  if (const char* csv = std::getenv("PLANE_TRIAL_CSV")) {
+    if (FILE* f = std::fopen(csv, "a")) {
+      for (const auto& r : results)
+        std::fprintf(f, "%s,%u,%zu,%zu,%zu,%zu,%zu,%.1f,%zu,%zu\n", label, b, r.n, r.predicted, r.level1, r.level3,
+                     r.top_byte, r.entropy, writer_choice(r, r.level1), r.fast5);
+      std::fclose(f);
+    }
+  }
   struct Rule {
     const char* name;
     std::size_t BrickResult::*cheap;  // nullptr: the order-0 estimate

@@ -1,8 +1,10 @@
 #include "ivol/bricked_writer.hpp"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <mutex>
 #include <thread>
 
@@ -39,6 +41,30 @@ std::vector<std::uint8_t> encode_top_byte_of(const T* values, const Dims& e, std
       if (!finer.empty()) best = std::move(finer);
     }
   return best;
+}
+
+// The order-0 entropy of a brick's low and high bytes, in bytes: about
+// what codec 2 spends where zstd finds no matches.
+double byte_plane_entropy(const std::uint16_t* values, std::size_t n) {
+  std::array<std::uint32_t, 256> low{}, high{};
+  for (std::size_t i = 0; i < n; ++i) ++low[values[i] & 0xFF], ++high[values[i] >> 8];
+  double bits = 0;
+  for (const auto* counts : {&low, &high})
+    for (const std::uint32_t c : *counts)
+      if (c) bits += c * std::log2(static_cast<double>(n) / c);
+  return bits / 8;
+}
+
+// Whether codec 2's trial (and with it codec 6's) can be skipped: where
+// codec 3 spends 6 bits a voxel or more and is under 0.9 of the byte
+// planes' order-0 entropy. Codec 2 beats that entropy only with zstd's
+// matches, which such busy bricks do not have: on the six 256³ phantoms
+// (noise-free and noisy, binary16 and uint16, 32³ and 64³ bricks) this
+// skips a quarter of the trials and no brick that codec 2 or 6 won
+// (bench/RESULTS.md, "Skipping codec 2's trial"; bench/plane_trial_study).
+bool planes_cannot_win(const std::uint16_t* values, std::size_t n, std::size_t predicted_bytes) {
+  if (8 * predicted_bytes < 6 * n) return false;
+  return static_cast<double>(predicted_bytes) < 0.9 * byte_plane_entropy(values, n);
 }
 
 }  // namespace
@@ -120,24 +146,29 @@ struct BrickedGridWriter::Impl {
       // (bench/RESULTS.md, issue 22).
       WriteOptions trial = w;
       if (w.zstd_level <= 3) trial.zstd_level = 1;
-      EncodedBlock planes =
-          encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), trial);
-      // Codec 6 wins where prediction does not help: up to level 3 it is
-      // tried only where zstd's byte planes come within 5 % of codec 3. On
-      // the six 256³ phantoms that kept 94-100 % of what trying every brick
-      // saved, and skipped 80 % of the trials on the noise-free pencil
-      // holder, where codec 6 wins none (bench/RESULTS.md, "Codec 6").
-      if (w.zstd_level <= 3) try_top_byte = 100 * planes.bytes.size() < 105 * block.bytes.size();
+      if (w.zstd_level <= 3 && planes_cannot_win(brick.data(), n, block.bytes.size())) {
+        try_top_byte = false;
+      } else {
+        EncodedBlock planes =
+            encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), trial);
+        // Codec 6 wins where prediction does not help: up to level 3 it is
+        // tried only where zstd's byte planes come within 5 % of codec 3. On
+        // the six 256³ phantoms that kept 94-100 % of what trying every brick
+        // saved, and skipped 80 % of the trials on the noise-free pencil
+        // holder, where codec 6 wins none (bench/RESULTS.md, "Codec 6").
+        if (w.zstd_level <= 3) try_top_byte = 100 * planes.bytes.size() < 105 * block.bytes.size();
+        if (trial.zstd_level != w.zstd_level && planes.bytes.size() < block.bytes.size()) {
+          EncodedBlock asked =
+              encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), w);
+          if (asked.bytes.size() <= planes.bytes.size()) planes = std::move(asked);
+        }
+        if (planes.bytes.size() < block.bytes.size()) block = std::move(planes);
+      }
       // Who asked for zstd's entropy coding or coder 3 asked for their
       // decoding speed, which codec 6 does not have.
       if (options.entropy == PredictedOptions::Entropy::ZstdPlanes ||
           options.entropy == PredictedOptions::Entropy::Lanes)
         try_top_byte = false;
-      if (trial.zstd_level != w.zstd_level && planes.bytes.size() < block.bytes.size()) {
-        EncodedBlock asked = encode_block(Stream::Values, 0, first, static_cast<std::uint32_t>(n), 2, brick.data(), w);
-        if (asked.bytes.size() <= planes.bytes.size()) planes = std::move(asked);
-      }
-      if (planes.bytes.size() < block.bytes.size()) block = std::move(planes);
       // Where one value (an object-fidelity file's background) fills an eighth
       // of the brick or more, codec 4 stores only the others, behind a mask;
       // a brick of that value alone is 4 bytes (bench/RESULTS.md, issue 22).
