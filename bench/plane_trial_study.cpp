@@ -42,20 +42,17 @@ inline double thread_seconds() {
 
 namespace {
 
-// The order-0 entropy of the low and the high bytes, in bytes, each plane
-// at most its n bytes.
+// The order-0 entropy of the low and the high bytes, in bytes, from every
+// fourth value, as the writer estimates it (bricked_writer.cpp).
 double plane_entropy_bytes(const std::vector<std::uint16_t>& v) {
   std::array<std::uint32_t, 256> low{}, high{};
-  for (const std::uint16_t x : v) ++low[x & 0xFF], ++high[x >> 8];
-  const double n = static_cast<double>(v.size());
-  double total = 0;
-  for (const auto* h : {&low, &high}) {
-    double bits = 0;
+  std::size_t sampled = 0;
+  for (std::size_t i = 0; i < v.size(); i += 4, ++sampled) ++low[v[i] & 0xFF], ++high[v[i] >> 8];
+  double bits = 0;
+  for (const auto* h : {&low, &high})
     for (const std::uint32_t c : *h)
-      if (c) bits += c * std::log2(n / c);
-    total += std::min(n, bits / 8);
-  }
-  return total;
+      if (c) bits += c * std::log2(static_cast<double>(sampled) / c);
+  return bits / 8 * (static_cast<double>(v.size()) / static_cast<double>(sampled));
 }
 
 // zstd over the two byte planes of v[0 .. count), as codec 2 makes them

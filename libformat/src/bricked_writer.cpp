@@ -43,16 +43,23 @@ std::vector<std::uint8_t> encode_top_byte_of(const T* values, const Dims& e, std
   return best;
 }
 
-// The order-0 entropy of a brick's low and high bytes, in bytes: about
-// what codec 2 spends where zstd finds no matches.
+// The order-0 entropy of a brick's low and high bytes, in bytes, estimated
+// from every fourth value: about what codec 2 spends where zstd finds no
+// matches. (Counting every value was 4 % of a binary16 conversion; the
+// estimate needs no such precision, its threshold below has 10 % to spare.)
 double byte_plane_entropy(const std::uint16_t* values, std::size_t n) {
-  std::array<std::uint32_t, 256> low{}, high{};
-  for (std::size_t i = 0; i < n; ++i) ++low[values[i] & 0xFF], ++high[values[i] >> 8];
+  // Two counts per byte value, taken in turn: with one, a run of equal
+  // high bytes chained each increment to the last.
+  std::array<std::array<std::uint32_t, 256>, 2> low{}, high{};
+  std::size_t sampled = 0;
+  for (std::size_t i = 0; i < n; i += 4, ++sampled) ++low[sampled & 1][values[i] & 0xFF], ++high[sampled & 1][values[i] >> 8];
   double bits = 0;
   for (const auto* counts : {&low, &high})
-    for (const std::uint32_t c : *counts)
-      if (c) bits += c * std::log2(static_cast<double>(n) / c);
-  return bits / 8;
+    for (unsigned b = 0; b < 256; ++b) {
+      const std::uint32_t c = (*counts)[0][b] + (*counts)[1][b];
+      if (c) bits += c * std::log2(static_cast<double>(sampled) / c);
+    }
+  return bits / 8 * (static_cast<double>(n) / static_cast<double>(sampled));
 }
 
 // Whether codec 2's trial (and with it codec 6's) can be skipped: where
