@@ -7,10 +7,11 @@
 // as such under WORK/cache). Each brick is encoded as binary16 and as uint16
 // (the volume's range scaled to 0 .. 65535), with codec 3 and with codec 2 at
 // zstd level ZSTD_LEVEL (default 3) for both, codec 3 with the entropy coder
-// ENTROPY (smaller: the smaller of the two per brick, the default; zstd:
-// coder 1 only; tokens: coder 2 only, where the spec allows it; lanes: coder 3, coder 1 where Smaller
-// would try it); prints bytes, and encode and decode (best of three
-// passes) MB/s of 16-bit values per second of the thread's CPU time.
+// ENTROPY (auto: the library's default, coder 3 at zstd levels up to 3;
+// smaller: coder 2 in bricks under 64³, the smaller of it and coder 1 where
+// the encoder tries both; zstd: coder 1 only; tokens: coder 2 only, where
+// the spec allows it; lanes: coder 3, coder 1 where Smaller would try it); prints bytes, and encode and decode (best of
+// three passes) MB/s of 16-bit values per second of the thread's CPU time.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -115,18 +116,20 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: codec_bench VOLUME.f32 N [BRICK_LOG2 [ZSTD_LEVEL [smaller|zstd|tokens|lanes]]]\n");
+    std::fprintf(stderr,
+                 "usage: codec_bench VOLUME.f32 N [BRICK_LOG2 [ZSTD_LEVEL [auto|smaller|zstd|tokens|lanes]]]\n");
     return 2;
   }
   const std::uint32_t n = static_cast<std::uint32_t>(std::stoul(argv[2]));
   const unsigned log2 = argc > 3 ? static_cast<unsigned>(std::stoul(argv[3])) : 5;
   const int zstd_level = argc > 4 ? std::stoi(argv[4]) : 3;
-  const std::string coder = argc > 5 ? argv[5] : "smaller";
+  const std::string coder = argc > 5 ? argv[5] : "auto";
   using Entropy = ivol::PredictedOptions::Entropy;
-  const Entropy entropy = coder == "zstd"     ? Entropy::ZstdPlanes
-                          : coder == "tokens" ? Entropy::Tokens
-                          : coder == "lanes"  ? Entropy::Lanes
-                                              : Entropy::Smaller;
+  const Entropy entropy = coder == "zstd"      ? Entropy::ZstdPlanes
+                          : coder == "tokens"  ? Entropy::Tokens
+                          : coder == "lanes"   ? Entropy::Lanes
+                          : coder == "smaller" ? Entropy::Smaller
+                                               : Entropy::Auto;
   bench::SixteenBitVolume volume;
   try {
     volume = bench::read_sixteen_bit(argv[1], n);

@@ -12,6 +12,7 @@
 #include "ivol/error.hpp"
 #include "ivol/predicted_codec.hpp"
 #include "residual_tokens.hpp"
+#include "spec_coder3.hpp"
 
 namespace {
 
@@ -114,6 +115,10 @@ std::vector<std::uint16_t> reference_decode(const std::vector<std::uint8_t>& pay
   std::vector<std::uint8_t> planes(2 * n);
   if (payload[3] == 2) {
     planes = spec_token_planes(payload.data() + 24, payload.size() - 24, d);
+  } else if (payload[3] == 3) {
+    const auto z = ivol::test::spec_coder3_decode(payload.data() + 24, payload.size() - 24, d);
+    for (std::size_t i = 0; i < n; ++i)
+      planes[i] = static_cast<std::uint8_t>(z[i]), planes[n + i] = static_cast<std::uint8_t>(z[i] >> 8);
   } else {
     const std::size_t got = ZSTD_decompress(planes.data(), planes.size(), payload.data() + 24, payload.size() - 24);
     EXPECT_EQ(got, planes.size());
@@ -433,6 +438,28 @@ TEST(PredictedCodec, TheWriterTriesZstdWhereTokensSpendUnderABitAVoxel) {
             encode_with(v, d, ValueEncoding::UInt16, Entropy::ZstdPlanes).size());
   EXPECT_EQ(encode_with(v, d, ValueEncoding::UInt16, Entropy::Smaller),
             encode_with(v, d, ValueEncoding::UInt16, Entropy::Tokens));
+}
+
+// Auto, the writers' default: coder 3 (header byte 3 = 3) at zstd levels up
+// to 3, whatever the brick's size; above, Smaller's choice (coder 2 in a
+// 32³ brick, coder 3 in a 64³ one).
+TEST(PredictedCodec, AutoTakesCoderThreeAtTheDefaultLevels) {
+  for (ValueEncoding e : {ValueEncoding::Binary16, ValueEncoding::UInt16})
+    for (const BrickDims& d : {BrickDims{32, 32, 32}, BrickDims{64, 64, 64}}) {
+      const auto v = smooth_brick(d, e, 8);
+      const bool large = d[0] == 64;
+      for (const int level : {1, 3, 4, 19}) {
+        ivol::PredictedOptions o;
+        o.zstd_level = level;
+        ASSERT_EQ(o.entropy, Entropy::Auto);  // the default
+        const auto payload = ivol::encode_predicted(v.data(), d, e, o);
+        EXPECT_EQ(payload[3], level <= 3 || large ? 3 : 2) << d[0] << " at level " << level;
+        o.entropy = Entropy::Smaller;
+        EXPECT_EQ(ivol::encode_predicted(v.data(), d, e, o)[3], large ? 3 : 2) << d[0] << " at level " << level;
+        EXPECT_EQ(decode(payload, d), v);
+        EXPECT_EQ(reference_decode(payload, d), v);
+      }
+    }
 }
 
 // Residuals of every bit length (tokens 0 .. 31) and context tables made

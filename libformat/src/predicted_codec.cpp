@@ -256,10 +256,12 @@ std::vector<std::uint8_t> encode_predicted(const std::uint16_t* values, const Br
   // Coder 3 in bricks of 2^18 voxels (64³) or more unless coder 2 was asked
   // for: there its stored tables and states weigh nothing (−0.05 to +0.04 %
   // of coder 2's bytes on the 256³ phantoms) and it decodes twice as fast;
-  // in 32³ bricks they cost 0.3–0.5 % (bench/RESULTS.md, "Entropy coder 3").
+  // in 32³ bricks they cost 0.3–0.5 % (bench/RESULTS.md, "Entropy coder 3"),
+  // which Auto pays at the default levels for coder 3's speed.
   constexpr std::size_t kLanesFromVoxels = std::size_t{1} << 18;
   const bool lanes = options.entropy == PredictedOptions::Entropy::Lanes ||
-                     (options.entropy == PredictedOptions::Entropy::Smaller && n >= kLanesFromVoxels);
+                     (options.entropy == PredictedOptions::Entropy::Auto && options.zstd_level <= 3) ||
+                     (options.entropy != PredictedOptions::Entropy::Tokens && n >= kLanesFromVoxels);
   tokens[3] = lanes ? kEntropyLanes : kEntropyTokens;
   const bool coded = lanes ? detail::encode_residual_lanes(best_z.data(), dims, limit, tokens)
                            : detail::encode_residual_tokens(best_z.data(), dims, limit, tokens);

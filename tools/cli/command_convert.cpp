@@ -163,14 +163,15 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       ->capture_default_str();
   into->add_option(
           "--entropy-coder", s->entropy_coder,
-          "Bricked grid: how a predicted brick's residuals are coded (codec 3). auto: rANS over tokens with "
-          "adaptive contexts (spec 7.2.1; in bricks of 64^3, where it is as small, the same tokens under stored "
-          "tables with 32 rANS states, spec 7.2.2), zstd over byte planes where a brick is nearly flat or small "
-          "and that is smaller, and codec 6 where noise dominates (predicted bricks decode at about 220 MB/s a "
-          "core in 32^3 bricks, 480 in 64^3; codec 6 at about 120); zstd: byte planes only (about 500 MB/s, "
-          "files 1-6 % larger), no codec 6; lanes: stored tables and 32 states in every brick (files 0.3-0.5 % "
-          "larger in 32^3 bricks, decoding at about 380 MB/s a core with AVX2), no codec 6")
-      ->check(CLI::IsMember({"auto", "zstd", "lanes"}))
+          "Bricked grid: how a predicted brick's residuals are coded (codec 3). auto: at --zstd-level 3 and "
+          "below, the tokens under stored tables with 32 rANS states (spec 7.2.2; predicted bricks decode at "
+          "about 430 MB/s a core in 32^3 bricks, 530 in 64^3, with AVX2), above that as smaller; zstd over byte "
+          "planes where a brick is nearly flat or small and that is smaller, and codec 6 where noise dominates "
+          "(about 120 MB/s); smaller: rANS over tokens with adaptive contexts in bricks under 64^3 (spec 7.2.1: "
+          "files 0.3-0.5 % smaller in 32^3 bricks, decoding at about 240 MB/s); zstd: byte planes only (about "
+          "500 MB/s, files 1-6 % larger), no codec 6; lanes: stored tables and 32 states in every brick, no "
+          "codec 6")
+      ->check(CLI::IsMember({"auto", "smaller", "zstd", "lanes"}))
       ->capture_default_str();
   into->add_option("--format-version", s->format_version,
                    "1.3: framed blocks, salvageable when cut; 1.2: for readers older than 1.3 (with --codec zstd, "
@@ -297,9 +298,10 @@ Runner add_convert_command(CLI::App& app, const GlobalOptions& global) {
       while ((1u << options.brick_log2) < s->brick) ++options.brick_log2;
       options.zstd_level = s->zstd_level;
       options.byte_planes = s->codec == "zstd-planes";
-      options.residual_coder = s->entropy_coder == "zstd"    ? ivol::PredictedOptions::Entropy::ZstdPlanes
-                               : s->entropy_coder == "lanes" ? ivol::PredictedOptions::Entropy::Lanes
-                                                             : ivol::PredictedOptions::Entropy::Smaller;
+      options.residual_coder = s->entropy_coder == "zstd"      ? ivol::PredictedOptions::Entropy::ZstdPlanes
+                               : s->entropy_coder == "lanes"   ? ivol::PredictedOptions::Entropy::Lanes
+                               : s->entropy_coder == "smaller" ? ivol::PredictedOptions::Entropy::Smaller
+                                                               : ivol::PredictedOptions::Entropy::Auto;
       options.framed_blocks = s->format_version == "1.3";
       options.structure = s->structure == "octree"    ? convert::StructureChoice::Octree
                           : s->structure == "bricked" ? convert::StructureChoice::Bricked

@@ -49,9 +49,10 @@ struct ImportOptions {
   std::optional<KeepRule> keep;           // default: lossless (equal leaves merge)
   std::uint32_t block_bytes = 0;          // 0: the library's default
   bool byte_planes = true;                // values over byte planes (codec 2, format 1.2)
-  // How codec 3 codes residuals: Smaller (coder 2, §7.2.1, or zstd where
-  // smaller), ZstdPlanes (zstd only), Lanes (coder 3, §7.2.2).
-  PredictedOptions::Entropy residual_coder = PredictedOptions::Entropy::Smaller;
+  // How codec 3 codes residuals (PredictedOptions::Entropy): Auto (coder 3,
+  // §7.2.2, at the default levels), Smaller (coder 2, §7.2.1, in bricks
+  // under 64³), ZstdPlanes (zstd only), Lanes (coder 3 and no codec 6).
+  PredictedOptions::Entropy residual_coder = PredictedOptions::Entropy::Auto;
   bool framed_blocks = true;              // format 1.3 framing (salvageable); false: format 1.2
   std::uint64_t slab_budget_bytes = 0;    // 0: the library's default
   std::uint64_t memory_bytes = 0;         // all the conversion may hold (--memory); 0: kDefaultMemoryBytes

@@ -29,14 +29,15 @@ struct BrickedOptions {
   ValueEncoding encoding = ValueEncoding::UInt16;  // binary16, uint16 or float32
   double value_scale = 1.0;
   double value_offset = 0.0;
-  int zstd_level = 3;  // codecs 2 and 4; codec 3 at residual_zstd_level(zstd_level)
+  int zstd_level = 3;     // codecs 2 and 4; codec 3 at residual_zstd_level(zstd_level)
   bool predicted = true;  // false: zstd over byte planes (codec 2), for comparison
-  // Codec 3's entropy coder (spec §7.2): Smaller takes rANS over tokens
-  // (§7.2.1), or zstd over byte planes where that brick is nearly flat and
-  // zstd is smaller (PredictedOptions); ZstdPlanes only zstd, which decodes
-  // about 2.5 times as fast (bench/RESULTS.md), and no codec 6 either.
-  PredictedOptions::Entropy entropy = PredictedOptions::Entropy::Smaller;
-  unsigned threads = 0;   // 0: all hardware threads
+  // Codec 3's entropy coder (spec §7.2; PredictedOptions says which each
+  // value takes): Auto takes coder 3 at zstd levels up to 3 and coder 2 in
+  // bricks under 64³ above; ZstdPlanes only zstd, which decodes about 2.5
+  // times as fast (bench/RESULTS.md), and no codec 6 either; Lanes coder 3
+  // and no codec 6, for decoding speed.
+  PredictedOptions::Entropy entropy = PredictedOptions::Entropy::Auto;
+  unsigned threads = 0;  // 0: all hardware threads
   // Levels of detail stored (spec §8A.5): every level from this one to the
   // coarsest (0: none). From 3, 1/448 more values, and a 1/8 preview reads
   // them instead of the whole file (bench/RESULTS.md, issue 20).

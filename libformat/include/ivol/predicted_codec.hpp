@@ -27,7 +27,12 @@ struct PredictedOptions {
   // the fits only.
   enum class Taps { Best, Lorenzo, LeastSquares } taps = Taps::Best;
   // Which entropy coder (§7.2, header byte 3) the encoder may use.
-  // Smaller: coder 2 (rANS over tokens with adaptive contexts, §7.2.1), or
+  // Auto (the default): Lanes where zstd_level is 3 or below, Smaller above
+  // (the bricked writer's levels 1-3 code residuals at level 1): the
+  // default files decode 1.8-1.9 times as fast and encode about twice as
+  // fast as Smaller's, for 0.3-0.5 % more bytes in 32³ bricks; a higher
+  // level asks for the smaller file (bench/RESULTS.md, "Coder 3 by
+  // default"). Smaller: coder 2 (rANS over tokens with adaptive contexts, §7.2.1), or
   // in bricks of 2^18 voxels (64³) or more coder 3 (the same tokens under
   // stored tables with 32 states, §7.2.2: as small there, and decoding
   // twice as fast); and coder 1 (zstd over byte planes) where that coder
@@ -38,7 +43,7 @@ struct PredictedOptions {
   // spec's limit). Lanes: coder 3 in every brick, or coder 1 under the same
   // rule as Smaller (1.75–1.9 times coder 2's decoding speed in 32³ bricks,
   // for 0.3–0.5 % more bytes).
-  enum class Entropy { Smaller, ZstdPlanes, Tokens, Lanes } entropy = Entropy::Smaller;
+  enum class Entropy { Auto, Smaller, ZstdPlanes, Tokens, Lanes } entropy = Entropy::Auto;
 };
 
 // Size of the codec header in front of the zstd frame (spec §7.2).
