@@ -196,6 +196,18 @@ bool choose_bricked(const DenseVolume& shape, const ImportOptions& options, Valu
   return true;
 }
 
+bool stored_as_read(const DenseVolume& shape, const BuildOptions& build) {
+  switch (build.encoding) {
+    case ValueEncoding::Binary16:
+      return shape.type == SampleType::Float16;
+    case ValueEncoding::Float32:
+      return shape.type == SampleType::Float32;
+    case ValueEncoding::UInt16:
+      return shape.type == SampleType::UInt16 && build.value_offset == 0.0;
+  }
+  return false;
+}
+
 void samples_to_stored(const DenseVolume& shape, const BuildOptions& build, const std::uint8_t* samples,
                        std::uint64_t count, std::vector<float>& scratch, std::uint16_t* stored, LossTally& loss) {
   if (build.encoding == ValueEncoding::UInt16) {

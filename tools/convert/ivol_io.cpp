@@ -294,22 +294,29 @@ void import_bricked(SlabReader& source, const std::string& path, const ImportOpt
     std::vector<float> scratch;
     std::vector<T> stored;
   };
+  const bool as_read = stored_as_read(shape, build);
   auto allocate = [&](Buffers& b) {
-    checked_resize(b.samples, checked_mul(checked_mul(read, slice, what), sample_size(shape.type), what),
-                   what + " (samples)");
+    if (!as_read)
+      checked_resize(b.samples, checked_mul(checked_mul(read, slice, what), sample_size(shape.type), what),
+                     what + " (samples)");
     checked_resize(b.stored, checked_mul(std::max(layer, read), slice, what), what + " (as stored values)");
   };
   Buffers current;
   allocate(current);
   LossTally loss;
+  // Read into b.stored itself where its bytes are the samples'.
+  auto read_into = [&](Buffers& b, std::uint32_t z0, std::uint32_t count, std::uint64_t at) {
+    if (as_read) return source.read(z0, count, reinterpret_cast<std::uint8_t*>(b.stored.data() + at));
+    source.read(z0, count, b.samples.data());
+    samples_to_stored(shape, build, b.samples.data(), std::uint64_t{count} * slice, b.scratch, b.stored.data() + at,
+                      loss);
+  };
   ProgressTicker ticker(options.progress, shape.dims[2]);
   if (read > layer) {  // whole layers at a time
     while (writer.next_layer_count() > 0) {
       const std::uint32_t z0 = writer.next_layer_first();
       const std::uint32_t count = std::min(read, shape.dims[2] - z0);
-      source.read(z0, count, current.samples.data());
-      samples_to_stored(shape, build, current.samples.data(), std::uint64_t{count} * slice, current.scratch,
-                        current.stored.data(), loss);
+      read_into(current, z0, count, 0);
       for (std::uint32_t done = 0; done < count;) {
         const std::uint32_t next = writer.next_layer_count();
         writer.add_layer(current.stored.data() + std::uint64_t{done} * slice);
@@ -324,9 +331,7 @@ void import_bricked(SlabReader& source, const std::string& path, const ImportOpt
   auto fill = [&](Buffers& b, std::uint32_t z0, std::uint32_t n) {
     for (std::uint32_t z = 0; z < n; z += read) {
       const std::uint32_t count = std::min(read, n - z);
-      source.read(z0 + z, count, b.samples.data());
-      samples_to_stored(shape, build, b.samples.data(), std::uint64_t{count} * slice, b.scratch,
-                        b.stored.data() + std::uint64_t{z} * slice, loss);
+      read_into(b, z0 + z, count, std::uint64_t{z} * slice);
     }
   };
   const bool prefetch = bricked_prefetch(shape, options, build.encoding, read);
