@@ -155,6 +155,18 @@ void FileWriter::write_all(const void* data, std::size_t size, const char* what)
     size -= static_cast<std::size_t>(n);
     offset_ += static_cast<std::uint64_t>(n);
   }
+#ifdef __linux__
+  // Every 8 MiB, the kernel is asked to start writing them out (no wait):
+  // finish()'s fsync then waits for the last few MiB only, not for the
+  // whole file (it was a tenth of a 512³ conversion's wall time, the
+  // cores idle). Advisory: the fsync reports any error.
+  constexpr std::uint64_t kWritebackEvery = std::uint64_t{8} << 20;
+  if (offset_ - writeback_from_ >= kWritebackEvery) {
+    ::sync_file_range(fd_, static_cast<off_t>(writeback_from_), static_cast<off_t>(offset_ - writeback_from_),
+                      SYNC_FILE_RANGE_WRITE);
+    writeback_from_ = offset_;
+  }
+#endif
 }
 
 void FileWriter::append(const EncodedBlock& block) {

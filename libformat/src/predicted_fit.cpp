@@ -55,56 +55,63 @@ std::uint64_t sampled_voxels(const BrickDims& d, RowSample sample) {
   return rows * (d[0] - 1);
 }
 
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-// exact_sum in two vectors of four sums (GCC 12 does not vectorise the
-// loop below, for any target: it was a tenth of a binary16 conversion's
-// time).
-__attribute__((target("avx2"))) double exact_sum_avx2(const double* a, const double* b, std::uint32_t len,
-                                                      bool products) {
-  __m256d s0 = _mm256_setzero_pd(), s1 = _mm256_setzero_pd();
-  std::uint32_t x = 0;
-  if (products)
-    for (; x + 8 <= len; x += 8) {
-      s0 = _mm256_add_pd(s0, _mm256_mul_pd(_mm256_loadu_pd(a + x), _mm256_loadu_pd(b + x)));
-      s1 = _mm256_add_pd(s1, _mm256_mul_pd(_mm256_loadu_pd(a + x + 4), _mm256_loadu_pd(b + x + 4)));
-    }
-  else
-    for (; x + 8 <= len; x += 8) {
-      s0 = _mm256_add_pd(s0, _mm256_loadu_pd(a + x));
-      s1 = _mm256_add_pd(s1, _mm256_loadu_pd(a + x + 4));
-    }
-  double lanes[4];
-  _mm256_storeu_pd(lanes, _mm256_add_pd(s0, s1));
-  _mm256_zeroupper();
-  double sum = (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]);
-  for (; x < len; ++x) sum += products ? a[x] * b[x] : a[x];
-  return sum;
-}
-#endif
-
-// Σ a[x]·b[x] (or Σ a[x]) over x < len, in four independent sums: exact
-// for integers below 2^53, so in any order, and the same with AVX2.
-double exact_sum(const double* a, const double* b, std::uint32_t len, bool products) {
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-  if (use_avx2()) return exact_sum_avx2(a, b, len, products);
-#endif
-  double s[4] = {};
-  std::uint32_t x = 0;
-  if (products)
-    for (; x + 4 <= len; x += 4)
-      for (int k = 0; k < 4; ++k) s[k] += a[x + k] * b[x + k];
-  else
-    for (; x + 4 <= len; x += 4)
-      for (int k = 0; k < 4; ++k) s[k] += a[x + k];
-  for (; x < len; ++x) s[0] += products ? a[x] * b[x] : a[x];
-  return (s[0] + s[1]) + (s[2] + s[3]);
-}
-
 // Two rows' product and their products at a lag of one voxel:
-// lag_ab = Σ_{x ≥ 1} a(x)·b(x − 1), lag_ba = Σ_{x ≥ 1} a(x − 1)·b(x).
+// lag_ab = Σ_{x ≥ 1} a(x)·b(x − 1), lag_ba = Σ_{x ≥ 1} a(x − 1)·b(x);
+// and Σ a. Integers below 2^53 as doubles, so exact in any order: the AVX2
+// path's sums are the scalar path's.
 struct RowPair {
-  std::int64_t full = 0, lag_ab = 0, lag_ba = 0;
+  std::int64_t full = 0, lag_ab = 0, lag_ba = 0, sum_a = 0;
 };
+
+RowPair pair_scalar(const double* a, const double* b, std::uint32_t len) {
+  double full = 0, lag_ab = 0, lag_ba = 0, sum_a = 0;
+  for (std::uint32_t x = 0; x < len; ++x) {
+    full += a[x] * b[x], sum_a += a[x];
+    if (x > 0) lag_ab += a[x] * b[x - 1], lag_ba += a[x - 1] * b[x];
+  }
+  return {static_cast<std::int64_t>(full), static_cast<std::int64_t>(lag_ab), static_cast<std::int64_t>(lag_ba),
+          static_cast<std::int64_t>(sum_a)};
+}
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+// All four sums in one pass, four voxels a step, the lags from loads one
+// voxel on: a step reads a(x + 4) and b(x + 4), so each row is followed by
+// at least one readable value (whose products the last whole step took
+// for x = len − 1 and are taken back). As many separate sums, a call each,
+// were a tenth of a binary16 conversion's time.
+__attribute__((target("avx2"))) RowPair pair_avx2(const double* a, const double* b, std::uint32_t len) {
+  __m256d full = _mm256_setzero_pd(), ab = _mm256_setzero_pd(), ba = _mm256_setzero_pd(), sa = _mm256_setzero_pd();
+  std::uint32_t x = 0;
+  for (; x + 4 <= len; x += 4) {
+    const __m256d va = _mm256_loadu_pd(a + x), vb = _mm256_loadu_pd(b + x);
+    full = _mm256_add_pd(full, _mm256_mul_pd(va, vb));
+    ab = _mm256_add_pd(ab, _mm256_mul_pd(_mm256_loadu_pd(a + x + 1), vb));  // a(x + 1)·b(x)
+    ba = _mm256_add_pd(ba, _mm256_mul_pd(va, _mm256_loadu_pd(b + x + 1)));  // a(x)·b(x + 1)
+    sa = _mm256_add_pd(sa, va);
+  }
+  // Each vector's lanes added as (0 + 1) + (2 + 3), in registers.
+  const __m256d pairs_fa = _mm256_hadd_pd(full, ab), pairs_bs = _mm256_hadd_pd(ba, sa);
+  const __m128d fa = _mm_add_pd(_mm256_castpd256_pd128(pairs_fa), _mm256_extractf128_pd(pairs_fa, 1));
+  const __m128d bs = _mm_add_pd(_mm256_castpd256_pd128(pairs_bs), _mm256_extractf128_pd(pairs_bs, 1));
+  double f = _mm_cvtsd_f64(fa), lab = _mm_cvtsd_f64(_mm_unpackhi_pd(fa, fa));
+  double lba = _mm_cvtsd_f64(bs), s = _mm_cvtsd_f64(_mm_unpackhi_pd(bs, bs));
+  _mm256_zeroupper();
+  if (x == len && len > 0) lab -= a[len] * b[len - 1], lba -= a[len - 1] * b[len];
+  for (; x < len; ++x) {
+    f += a[x] * b[x], s += a[x];
+    if (x + 1 < len) lab += a[x + 1] * b[x], lba += a[x] * b[x + 1];
+  }
+  return {static_cast<std::int64_t>(f), static_cast<std::int64_t>(lab), static_cast<std::int64_t>(lba),
+          static_cast<std::int64_t>(s)};
+}
+#endif
+
+RowPair row_pair(const double* a, const double* b, std::uint32_t len) {
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+  if (use_avx2()) return pair_avx2(a, b, len);
+#endif
+  return pair_scalar(a, b, len);
+}
 
 }  // namespace
 
@@ -134,20 +141,12 @@ bool brick_moments(const BrickDims& d, const std::uint16_t* u, BrickMoments& out
   // Kept per thread: a 32^3 brick's 256 KiB, allocated anew for every
   // brick, would be mapped and faulted in anew every time.
   thread_local std::vector<double> values;
-  values.resize(sz * ez);
+  values.resize(sz * ez + 4);  // and values after the last row for row_pair's loads
   double* const v = values.data();
   for (std::size_t i = 0; i < sz * ez; ++i) v[i] = static_cast<double>(std::int32_t{u[i]} - ref);
+  for (std::size_t i = sz * ez; i < values.size(); ++i) v[i] = 0;
   auto row = [&](std::uint32_t y, std::uint32_t z) { return v + z * sz + y * sy; };
-  auto pair = [&](const double* a, const double* b) {
-    return RowPair{static_cast<std::int64_t>(exact_sum(a, b, e, true)),
-                   static_cast<std::int64_t>(exact_sum(a + 1, b, e - 1, true)),
-                   static_cast<std::int64_t>(exact_sum(a, b + 1, e - 1, true))};
-  };
-  // A row with itself: both lags are Σ a(x)·a(x − 1).
-  auto self_pair = [&](const double* a) {
-    const auto lag = static_cast<std::int64_t>(exact_sum(a + 1, a, e - 1, true));
-    return RowPair{static_cast<std::int64_t>(exact_sum(a, a, e, true)), lag, lag};
-  };
+  auto pair = [&](const double* a, const double* b) { return row_pair(a, b, e); };
   // Per brick row (index z * ey + y): its sum and ends, its product with
   // itself, with the row before it along y, along z, along both, and of the
   // rows (y − 1, z) and (y, z − 1); each only where a sampled row needs it
@@ -159,8 +158,8 @@ bool brick_moments(const BrickDims& d, const std::uint16_t* u, BrickMoments& out
       const std::size_t r = std::size_t{z} * ey + y;
       const double* c = row(y, z);
       const bool odd_y = sample.all() || (y & 1), odd_z = sample.all() || (z & 1);
-      sum[r] = static_cast<std::int64_t>(exact_sum(c, c, e, false));
-      self[r] = self_pair(c);
+      self[r] = pair(c, c);  // both lags Σ a(x)·a(x − 1)
+      sum[r] = self[r].sum_a;
       if (y > 0 && odd_y) along_y[r] = pair(c, row(y - 1, z));
       if (z > 0 && odd_z) along_z[r] = pair(c, row(y, z - 1));
       if (y > 0 && z > 0 && odd_y && odd_z)

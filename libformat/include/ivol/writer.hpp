@@ -145,6 +145,7 @@ class FileWriter {
   std::string metadata_json_;  // as written by write_metadata(); empty until then
   int fd_ = -1;
   std::uint64_t offset_ = 0;
+  std::uint64_t writeback_from_ = 0;  // bytes before it were handed to the disk early (write_all)
   std::vector<Entry> entries_;
   bool finished_ = false;
 };
