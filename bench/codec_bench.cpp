@@ -25,48 +25,15 @@
 
 namespace {
 
-// The thread's CPU time, not the wall clock: on a machine shared with other
-// work the wall clock measures the neighbours; one thread's CPU seconds are
-// what "MB/s per core" means.
-struct Clock {
-  using time_point = double;
-  static double now() {
-    timespec t{};
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-    return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-  }
-};
-double since(double t) { return Clock::now() - t; }
-
-struct Brick {
-  ivol::BrickDims dims;
-  std::vector<std::uint16_t> values;
-};
-
-std::vector<Brick> cut(const std::vector<std::uint16_t>& v, std::uint32_t n, unsigned log2) {
-  const std::uint32_t b = 1u << log2;
-  std::vector<Brick> out;
-  for (std::uint32_t z0 = 0; z0 < n; z0 += b)
-    for (std::uint32_t y0 = 0; y0 < n; y0 += b)
-      for (std::uint32_t x0 = 0; x0 < n; x0 += b) {
-        Brick brick;
-        brick.dims = {std::min(b, n - x0), std::min(b, n - y0), std::min(b, n - z0)};
-        for (std::uint32_t z = z0; z < z0 + brick.dims[2]; ++z)
-          for (std::uint32_t y = y0; y < y0 + brick.dims[1]; ++y)
-            for (std::uint32_t x = x0; x < x0 + brick.dims[0]; ++x)
-              brick.values.push_back(v[(std::size_t{z} * n + y) * n + x]);
-        out.push_back(std::move(brick));
-      }
-  return out;
-}
+double since(double t) { return bench::thread_seconds() - t; }
 
 void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint32_t n, unsigned log2,
          ivol::ValueEncoding encoding, int zstd_level, ivol::PredictedOptions::Entropy entropy) {
-  const std::vector<Brick> bricks = cut(volume, n, log2);
+  const std::vector<bench::Brick> bricks = bench::cut_bricks(volume, n, log2);
   const double mb = 2.0 * volume.size() / 1e6;
   std::uint64_t predicted_bytes = 0, planes_bytes = 0, best_bytes = 0;
   std::vector<std::vector<std::uint8_t>> payloads(bricks.size());
-  auto t = Clock::now();
+  auto t = bench::thread_seconds();
   for (std::size_t b = 0; b < bricks.size(); ++b) {
     ivol::PredictedOptions p;
     p.zstd_level = zstd_level;
@@ -86,7 +53,7 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
   }
   double decode3 = 0;
   for (int pass = 0; pass < 3; ++pass) {
-    t = Clock::now();
+    t = bench::thread_seconds();
     for (std::size_t b = 0; b < bricks.size(); ++b) {
       out.resize(bricks[b].values.size());
       ivol::decode_predicted(payloads[b].data(), payloads[b].size(), bricks[b].dims, out.data());
@@ -96,7 +63,7 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
   }
   ivol::WriteOptions w;
   w.zstd_level = zstd_level;
-  t = Clock::now();
+  t = bench::thread_seconds();
   for (std::size_t b = 0; b < bricks.size(); ++b) {
     const auto block = ivol::encode_block(ivol::Stream::Values, 0, 0, static_cast<std::uint32_t>(out.size()), 2,
                                           bricks[b].values.data(), w);
@@ -115,13 +82,13 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 3) {
-    std::fprintf(stderr,
-                 "usage: codec_bench VOLUME.f32 N [BRICK_LOG2 [ZSTD_LEVEL [auto|smaller|zstd|tokens|lanes]]]\n");
+  bench::VolumeArgs args;
+  if (!bench::read_volume_args(
+          argc, argv, "codec_bench VOLUME.f32 N [BRICK_LOG2 [ZSTD_LEVEL [auto|smaller|zstd|tokens|lanes]]]", args))
     return 2;
-  }
-  const std::uint32_t n = static_cast<std::uint32_t>(std::stoul(argv[2]));
-  const unsigned log2 = argc > 3 ? static_cast<unsigned>(std::stoul(argv[3])) : 5;
+  const std::uint32_t n = args.n;
+  const unsigned log2 = args.log2;
+  const bench::SixteenBitVolume& volume = args.volume;
   const int zstd_level = argc > 4 ? std::stoi(argv[4]) : 3;
   const std::string coder = argc > 5 ? argv[5] : "auto";
   using Entropy = ivol::PredictedOptions::Entropy;
@@ -130,13 +97,6 @@ int main(int argc, char** argv) {
                           : coder == "lanes"   ? Entropy::Lanes
                           : coder == "smaller" ? Entropy::Smaller
                                                : Entropy::Auto;
-  bench::SixteenBitVolume volume;
-  try {
-    volume = bench::read_sixteen_bit(argv[1], n);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
-    return 2;
-  }
   run("binary16", volume.binary16, n, log2, ivol::ValueEncoding::Binary16, zstd_level, entropy);
   run("uint16", volume.codes, n, log2, ivol::ValueEncoding::UInt16, zstd_level, entropy);
   return 0;

@@ -244,19 +244,11 @@ void run(const char* label, const std::vector<std::uint16_t>& volume, std::uint3
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 3) {
-    std::fprintf(stderr, "usage: entropy_study VOLUME.f32 N [BRICK_LOG2]\n");
-    return 2;
-  }
-  const auto n = static_cast<std::uint32_t>(std::stoul(argv[2]));
-  const unsigned log2 = argc > 3 ? static_cast<unsigned>(std::stoul(argv[3])) : 5;
-  bench::SixteenBitVolume volume;
-  try {
-    volume = bench::read_sixteen_bit(argv[1], n);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
-    return 2;
-  }
+  bench::VolumeArgs args;
+  if (!bench::read_volume_args(argc, argv, "entropy_study VOLUME.f32 N [BRICK_LOG2]", args)) return 2;
+  const std::uint32_t n = args.n;
+  const unsigned log2 = args.log2;
+  const bench::SixteenBitVolume& volume = args.volume;
   std::printf(
       "| %s | codec 3, coder 1 | order-0 | contexts, static | adaptive | split | coder 2 | static 12 |\n"
       "|---|---:|---:|---:|---:|---:|---:|---:|\n",

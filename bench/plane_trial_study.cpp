@@ -21,7 +21,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <ctime>
 #include <string>
 #include <vector>
 
@@ -30,15 +29,6 @@
 #include "ivol/top_byte_codec.hpp"
 #include "ivol/writer.hpp"
 #include "sixteen_bit_volume.hpp"
-
-namespace bench {
-// The thread's CPU seconds (the machine is shared).
-inline double thread_seconds() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
-}  // namespace bench
 
 namespace {
 
@@ -117,16 +107,8 @@ void study(const char* label, const std::vector<std::uint16_t>& volume, std::uin
   const std::uint32_t b = 1u << log2;
   std::vector<BrickResult> results;
   Seconds s;
-  for (std::uint32_t z0 = 0; z0 < n; z0 += b)
-    for (std::uint32_t y0 = 0; y0 < n; y0 += b)
-      for (std::uint32_t x0 = 0; x0 < n; x0 += b) {
-        const ivol::BrickDims e{std::min(b, n - x0), std::min(b, n - y0), std::min(b, n - z0)};
-        std::vector<std::uint16_t> v;
-        for (std::uint32_t z = z0; z < z0 + e[2]; ++z)
-          for (std::uint32_t y = y0; y < y0 + e[1]; ++y)
-            for (std::uint32_t x = x0; x < x0 + e[0]; ++x) v.push_back(volume[(std::size_t{z} * n + y) * n + x]);
-        results.push_back(code_brick(v, e, encoding, s));
-      }
+  for (const bench::Brick& brick : bench::cut_bricks(volume, n, log2))
+    results.push_back(code_brick(brick.values, brick.dims, encoding, s));
   std::uint64_t full = 0;
   std::size_t won = 0;
   for (const auto& r : results) {
@@ -176,19 +158,11 @@ void study(const char* label, const std::vector<std::uint16_t>& volume, std::uin
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 3) {
-    std::fprintf(stderr, "usage: plane_trial_study VOLUME.f32 N [BRICK_LOG2]\n");
-    return 2;
-  }
-  const auto n = static_cast<std::uint32_t>(std::stoul(argv[2]));
-  const unsigned log2 = argc > 3 ? static_cast<unsigned>(std::stoul(argv[3])) : 5;
-  bench::SixteenBitVolume volume;
-  try {
-    volume = bench::read_sixteen_bit(argv[1], n);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
-    return 2;
-  }
+  bench::VolumeArgs args;
+  if (!bench::read_volume_args(argc, argv, "plane_trial_study VOLUME.f32 N [BRICK_LOG2]", args)) return 2;
+  const std::uint32_t n = args.n;
+  const unsigned log2 = args.log2;
+  const bench::SixteenBitVolume& volume = args.volume;
   study("binary16", volume.binary16, n, log2, ivol::ValueEncoding::Binary16);
   study("uint16", volume.codes, n, log2, ivol::ValueEncoding::UInt16);
   return 0;
