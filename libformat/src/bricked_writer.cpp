@@ -52,7 +52,8 @@ double byte_plane_entropy(const std::uint16_t* values, std::size_t n) {
   // high bytes chained each increment to the last.
   std::array<std::array<std::uint32_t, 256>, 2> low{}, high{};
   std::size_t sampled = 0;
-  for (std::size_t i = 0; i < n; i += 4, ++sampled) ++low[sampled & 1][values[i] & 0xFF], ++high[sampled & 1][values[i] >> 8];
+  for (std::size_t i = 0; i < n; i += 4, ++sampled)
+    ++low[sampled & 1][values[i] & 0xFF], ++high[sampled & 1][values[i] >> 8];
   double bits = 0;
   for (const auto* counts : {&low, &high})
     for (unsigned b = 0; b < 256; ++b) {

@@ -20,7 +20,6 @@ constexpr unsigned kTokens = kTokenCount;
 constexpr unsigned kLanes = kLaneCount;
 constexpr std::uint32_t kStateLow = kLaneStateLow;
 constexpr unsigned kFixedHeader = 4 * kLanes + 4;  // the states and W
-__extension__ using Wide = unsigned __int128;      // floor(X / f) as a multiply (the encoder)
 
 [[noreturn]] void bad(const std::string& what) {
   throw Error(ErrorClass::Malformed, "codec 3, entropy coder 3: " + what);
@@ -229,14 +228,6 @@ bool encode_residual_lanes(const std::uint16_t* residuals, const BrickDims& dims
 
   // rANS from the last voxel, voxel i on state i mod 32, at most a word a
   // voxel: the words are written from the back of room for n of them.
-  // floor(X / f) as a multiply by ceil(2^64 / f) (exact for X < 2^32; f =
-  // 1, whose reciprocal does not fit, divides by itself).
-  std::array<std::array<std::uint64_t, kTokens>, kContexts> reciprocal;
-  for (unsigned k = 0; k < kContexts; ++k)
-    for (unsigned t = 0; t < kTokens; ++t) {
-      const std::uint64_t f = tables.freq[k][t];
-      reciprocal[k][t] = f > 1 ? ~std::uint64_t{0} / f + 1 : 0;
-    }
   std::array<std::uint32_t, kLanes> x;
   x.fill(kStateLow);
   words.resize(n);
@@ -253,7 +244,7 @@ bool encode_residual_lanes(const std::uint16_t* residuals, const BrickDims& dims
     w[-1] = static_cast<std::uint16_t>(state);  // kept only when out: w moves over it
     w -= out;
     state >>= 16 * out;
-    const auto q = f > 1 ? static_cast<std::uint32_t>((static_cast<Wide>(state) * reciprocal[k][t]) >> 64) : state;
+    const std::uint32_t q = divide_by_frequency(state, f);
     x[i % kLanes] = (q << kTableBits) + (state - q * f) + s;
   }
   if (vector_chunks) {

@@ -150,18 +150,6 @@ void put_u32(std::uint8_t* p, std::uint32_t v) {
   for (int k = 0; k < 4; ++k) p[k] = static_cast<std::uint8_t>(v >> (8 * k));
 }
 
-__extension__ using Wide = unsigned __int128;
-
-// ceil(2^64 / f) for every frequency f from 2 to 2^12: floor(x / f) is then
-// the high word of x times it, for every x below 2^32.
-struct Reciprocals {
-  std::array<std::uint64_t, kTotal + 1> of{};
-  Reciprocals() {
-    for (std::uint64_t f = 2; f <= kTotal; ++f) of[f] = ~std::uint64_t{0} / f + 1;
-  }
-};
-const Reciprocals reciprocals;
-
 }  // namespace
 
 bool encode_residual_tokens(const std::uint16_t* residuals, const BrickDims& dims, std::size_t limit,
@@ -224,9 +212,7 @@ bool encode_residual_tokens(const std::uint16_t* residuals, const BrickDims& dim
         x >>= 8;
       }
     }
-    // x / f as a multiply (exact for x < 2^32, the division was a sixth of
-    // the encoder's time); f = 1, whose reciprocal does not fit, is x itself.
-    const auto q = f > 1 ? static_cast<std::uint32_t>((static_cast<Wide>(x) * reciprocals.of[f]) >> 64) : x;
+    const std::uint32_t q = divide_by_frequency(x, f);
     x = (q << kPrecision) + (x - q * f) + s;
   };
   // Voxel i on state i mod 2, from the last; the two states as locals, not

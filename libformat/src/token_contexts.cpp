@@ -2,6 +2,7 @@
 // (spec §7.2.1, §7.2.2).
 #include "token_contexts.hpp"
 
+#include <array>
 #include <cstring>
 
 #include "cpu_features.hpp"
@@ -233,6 +234,22 @@ void tokens_of(const std::uint16_t* z, std::size_t n, std::uint8_t* tokens, std:
   if (use_avx2()) return tokens_avx2(z, n, tokens, lengths);
 #endif
   tokens_scalar(z, 0, n, tokens, lengths);
+}
+
+namespace {
+
+// ceil(2^64 / f) for f from 2 to 2^12, made by the compiler.
+constexpr std::array<std::uint64_t, kTableTotal + 1> kReciprocals = [] {
+  std::array<std::uint64_t, kTableTotal + 1> of{};
+  for (std::uint64_t f = 2; f <= kTableTotal; ++f) of[f] = ~std::uint64_t{0} / f + 1;
+  return of;
+}();
+
+}  // namespace
+
+std::uint32_t divide_by_frequency(std::uint32_t x, std::uint32_t f) {
+  __extension__ using Wide = unsigned __int128;
+  return f > 1 ? static_cast<std::uint32_t>((static_cast<Wide>(x) * kReciprocals[f]) >> 64) : x;
 }
 
 std::uint64_t count_bits_below(const std::uint8_t* tokens, std::size_t n) {
